@@ -1,0 +1,194 @@
+"""The one-step frictional contact problem, and the Coulomb law (paper eq. 2.6) in one place.
+
+Per Moreau-Jean step, the local velocities of the k active contacts are affine in their impulses,
+
+    u = W p + q,    p = (p_N,1..p_N,k, p_T,1..p_T,k),   u = (u_N, u_T) in the same order,
+
+with the Delassus operator W = H S H' (bilateral constraints eliminated in S) and q the free local
+velocity (its normal part shifted by e u_N- for Newton restitution). The discrete Coulomb law per
+contact j is
+
+    0 <= p_N,j  perp  u_N,j >= 0,
+    |p_T,j| <= mu_j p_N,j,    p_T,j = -mu_j p_N,j sign(u_T,j)  if u_T,j != 0.
+
+In 2D this is exactly a linear complementarity problem (:meth:`ContactProblem.to_lcp`); it is not a
+convex QP, because the friction law is non-associated (physics.md section 3).
+
+Each contact's solution is in one of four modes (:data:`OPEN`, :data:`STICK`, :data:`SLIDE_POS`,
+:data:`SLIDE_NEG`); once the modes are known the problem is linear (:meth:`solve_branch`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["OPEN", "STICK", "SLIDE_POS", "SLIDE_NEG", "MODE_NAMES", "ContactProblem"]
+
+OPEN, STICK, SLIDE_POS, SLIDE_NEG = 0, 1, 2, 3
+MODE_NAMES = {OPEN: "open", STICK: "stick", SLIDE_POS: "slide+", SLIDE_NEG: "slide-"}
+
+
+@dataclass
+class ContactProblem:
+    """The discrete Coulomb problem  u = W p + q  for k planar contacts.
+
+    Find p such that, for every contact j, 0 <= p_N,j perp u_N,j >= 0, |p_T,j| <= mu_j p_N,j and
+    p_T,j = -mu_j p_N,j sign(u_T,j) when u_T,j != 0.
+
+    Parameters
+    ----------
+    W : ndarray, shape (2k, 2k)
+        Delassus operator, symmetric positive semi-definite, ordered [normals, tangents].
+    q : ndarray, shape (2k,)
+        Free local velocity (normal part including the restitution shift e u_N-).
+    mu : ndarray, shape (k,)
+        Friction coefficients.
+    key : hashable, optional
+        Set by the caller when the same W recurs across steps (e.g. the active-contact indices of a
+        system with constant W); solvers cache factorizations and OSQP workspaces on it.
+
+    Examples
+    --------
+    A unit block pushed sideways at 2 m/s, pressed down at 1 m/s, friction 0.5: it slides.
+
+    >>> import numpy as np
+    >>> from lcp.contact_problem import ContactProblem, MODE_NAMES
+    >>> pb = ContactProblem(np.eye(2), np.array([-1.0, 2.0]), np.array([0.5]))
+    >>> p = pb.solve_branch([2]); p, MODE_NAMES[pb.modes(p)[0]], pb.residual(p)
+    (array([ 1. , -0.5]), 'slide+', 0.0)
+    """
+
+    W: np.ndarray
+    q: np.ndarray
+    mu: np.ndarray
+    key: object = None
+
+    def __post_init__(self):
+        self.W = np.asarray(self.W, dtype=float)
+        self.q = np.asarray(self.q, dtype=float)
+        self.mu = np.atleast_1d(np.asarray(self.mu, dtype=float))
+        self.k = k = self.mu.size
+        if self.W.shape != (2 * k, 2 * k) or self.q.shape != (2 * k,):
+            raise ValueError(f"W must be ({2 * k}, {2 * k}) and q ({2 * k},) for {k} contacts, "
+                             f"got {self.W.shape} and {self.q.shape}")
+        d = np.diag(self.W)
+        # natural-map weights rho = 1/W_ii make the residual an impulse; guard empty/zero diagonals
+        self.rho = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 1.0)
+        # impulse scale of this problem: the impulse that cancels the free velocity contact by contact
+        self.scale = max(float(np.max(np.abs(self.q) * self.rho)) if k else 0.0, 1e-300)
+
+    # ----------------------------------------------------------------- the Coulomb law
+    def velocity(self, p: np.ndarray) -> np.ndarray:
+        """Local post-step velocity u = W p + q."""
+        return self.W @ p + self.q
+
+    def residual(self, p: np.ndarray) -> float:
+        """Coulomb-law residual of p (impulse units), independent of any solver's own flags.
+
+        The natural map: max over contacts of |min(p_N, rho_N u_N)| and
+        |p_T - proj_[-mu p_N+, mu p_N+](p_T - rho_T u_T)|, with rho = 1/diag(W). It is zero exactly
+        at solutions of the discrete Coulomb law (2.6).
+        """
+        if self.k == 0:
+            return 0.0
+        k = self.k
+        u = self.velocity(p)
+        pN, pT = p[:k], p[k:]
+        rN = np.minimum(pN, self.rho[:k] * u[:k])
+        s = self.mu * np.maximum(pN, 0.0)
+        rT = pT - np.clip(pT - self.rho[k:] * u[k:], -s, s)
+        return float(max(np.max(np.abs(rN)), np.max(np.abs(rT))))
+
+    def modes(self, p: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
+        """Mode of each contact in the solution p (OPEN, STICK, SLIDE_POS, SLIDE_NEG)."""
+        k = self.k
+        u = self.velocity(p)
+        tol_p = rtol * self.scale
+        out = np.full(k, STICK, dtype=np.int8)
+        uT = u[k:] * self.rho[k:]  # impulse units, comparable with tol_p
+        out[uT > tol_p] = SLIDE_POS
+        out[uT < -tol_p] = SLIDE_NEG
+        out[p[:k] <= tol_p] = OPEN
+        return out
+
+    # ----------------------------------------------------------------- branches
+    def solve_branch(self, modes) -> np.ndarray | None:
+        """Solve the linear system of one branch (modes per contact); None if it is singular.
+
+        open: p_N = p_T = 0; closed: u_N = 0; stick: u_T = 0; slide+: p_T = -mu p_N;
+        slide-: p_T = +mu p_N. The result satisfies the Coulomb law iff :meth:`admissible`.
+        """
+        k = self.k
+        E = np.zeros((2 * k, 2 * k))
+        r = np.zeros(2 * k)
+        for j, md in enumerate(modes):
+            if md == OPEN:
+                E[j, j] = 1.0
+                E[k + j, k + j] = 1.0
+                continue
+            E[j] = self.W[j]
+            r[j] = -self.q[j]
+            if md == STICK:
+                E[k + j] = self.W[k + j]
+                r[k + j] = -self.q[k + j]
+            else:
+                E[k + j, k + j] = 1.0
+                E[k + j, j] = self.mu[j] if md == SLIDE_POS else -self.mu[j]
+        try:
+            p = np.linalg.solve(E, r)
+        except np.linalg.LinAlgError:
+            return None
+        if not np.all(np.isfinite(p)):
+            return None
+        return p
+
+    def admissible(self, p: np.ndarray, modes, rtol: float = 1e-11) -> bool:
+        """Whether a branch solution p satisfies the inequalities of its modes (within rtol * scale)."""
+        k = self.k
+        tol = rtol * max(self.scale, float(np.max(np.abs(p))) if k else 0.0)
+        u = self.velocity(p)
+        for j, md in enumerate(modes):
+            pN, pT = p[j], p[k + j]
+            if md == OPEN:
+                if u[j] * self.rho[j] < -tol:
+                    return False
+                continue
+            if pN < -tol:
+                return False
+            uT = u[k + j] * self.rho[k + j]
+            if md == STICK and abs(pT) > self.mu[j] * pN + tol:
+                return False
+            if md == SLIDE_POS and uT < -tol:
+                return False
+            if md == SLIDE_NEG and uT > tol:
+                return False
+        return True
+
+    # ----------------------------------------------------------------- LCP form
+    def to_lcp(self) -> tuple[np.ndarray, np.ndarray]:
+        """The equivalent LCP(M, b): 0 <= z perp M z + b >= 0, z = (p_N, beta+, beta-, lambda).
+
+        p_T = beta+ - beta-; the rows are u_N, u_T + lambda, -u_T + lambda, mu p_N - beta+ - beta-
+        (Stewart-Trinkle / Anitescu-Potra form with the two tangent directions +-t).
+        """
+        k = self.k
+        W = self.W
+        WN, WT = W[:k], W[k:]  # rows of u_N and u_T in p = (p_N, p_T)
+        I = np.eye(k)
+        M = np.zeros((4 * k, 4 * k))
+        M[:k, :k], M[:k, k:2 * k], M[:k, 2 * k:3 * k] = WN[:, :k], WN[:, k:], -WN[:, k:]
+        M[k:2 * k, :k], M[k:2 * k, k:2 * k], M[k:2 * k, 2 * k:3 * k] = WT[:, :k], WT[:, k:], -WT[:, k:]
+        M[2 * k:3 * k, :3 * k] = -M[k:2 * k, :3 * k]
+        M[k:2 * k, 3 * k:] = I
+        M[2 * k:3 * k, 3 * k:] = I
+        M[3 * k:, :k] = np.diag(self.mu)
+        M[3 * k:, k:2 * k] = -I
+        M[3 * k:, 2 * k:3 * k] = -I
+        b = np.concatenate([self.q[:k], self.q[k:], -self.q[k:], np.zeros(k)])
+        return M, b
+
+    def from_lcp(self, z: np.ndarray) -> np.ndarray:
+        """Impulses p from an LCP solution z of :meth:`to_lcp`."""
+        k = self.k
+        return np.concatenate([z[:k], z[k:2 * k] - z[2 * k:3 * k]])

@@ -1,0 +1,119 @@
+"""Result objects of ``lcp.simulate`` (one table of status codes and messages)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["STATUS_MESSAGES", "SolverStats", "SimulationResult"]
+
+#: status code -> meaning; success is ``status >= 0``.
+STATUS_MESSAGES = {
+    0: "The integration reached t_end.",
+    -1: "The one-step contact solver failed.",
+    -2: "The state became non-finite.",
+    -3: "No consistent contact mode exists (Painleve inconsistency).",
+}
+
+
+@dataclass
+class SolverStats:
+    """Counters of a simulation.
+
+    Attributes
+    ----------
+    steps : int
+        Time steps taken.
+    free_steps : int
+        Steps with no active contact (no solver call).
+    solver_calls : int
+        One-step contact problems solved.
+    iterations : int
+        Total solver iterations (pivots, fixed-point iterations, cases).
+    max_iterations : int
+        Most iterations in one step.
+    qp_solves : int
+        OSQP solves in total.
+    max_residual : float
+        Worst Coulomb (complementarity) residual over all steps, impulse units.
+    mode_counts : dict
+        Contact-steps per mode: ``open``, ``stick``, ``slide+``, ``slide-`` (active contacts only).
+    ambiguous_steps : int
+        Steps where the one-step problem had more than one solution.
+    fallbacks : int
+        Steps solved by a fallback solver after the chosen one failed.
+    """
+
+    steps: int = 0
+    free_steps: int = 0
+    solver_calls: int = 0
+    iterations: int = 0
+    max_iterations: int = 0
+    qp_solves: int = 0
+    max_residual: float = 0.0
+    mode_counts: dict = field(default_factory=lambda: {"open": 0, "stick": 0, "slide+": 0, "slide-": 0})
+    ambiguous_steps: int = 0
+    fallbacks: int = 0
+
+
+@dataclass
+class SimulationResult:
+    """Trajectory and diagnostics, in the style of ``scipy.integrate.solve_ivp``.
+
+    Attributes
+    ----------
+    t : ndarray, shape (n_points,)
+        Time grid (t[0] = 0).
+    q, v : ndarray, shape (n_points, n)
+        Coordinates and velocities (v is the right limit v+ at each time).
+    p_N, p_T : ndarray, shape (n_points - 1, m)
+        Normal and tangential contact impulses over each step (zero for inactive contacts). The
+        mean contact forces over a step are ``p_N / h`` and ``p_T / h`` (:attr:`N`, :attr:`f`).
+    modes : ndarray of int8, shape (n_points - 1, m)
+        Contact mode per step: -1 inactive, 0 open, 1 stick, 2 slide+, 3 slide- (see
+        :mod:`lcp.contact_problem`).
+    status : int
+        0 success; negative values are failures (:data:`STATUS_MESSAGES`).
+    message : str
+        Human-readable reason; on failure it names the step, the time and the cause.
+    success : bool
+        ``status >= 0``.
+    stats : SolverStats
+    method, solver : str
+    h, theta : float
+    t_events : list
+        Event times (empty for time stepping).
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    p_N: np.ndarray
+    p_T: np.ndarray
+    modes: np.ndarray
+    status: int
+    message: str
+    stats: SolverStats
+    method: str = "moreau-jean"
+    solver: str = ""
+    h: float = float("nan")
+    theta: float = float("nan")
+    t_events: list = field(default_factory=list)
+
+    @property
+    def success(self) -> bool:
+        return self.status >= 0
+
+    @property
+    def N(self) -> np.ndarray:
+        """Mean normal force over each step, p_N / h, shape (n_points - 1, m)."""
+        return self.p_N / self.h
+
+    @property
+    def f(self) -> np.ndarray:
+        """Mean tangential (friction) force over each step, p_T / h, shape (n_points - 1, m)."""
+        return self.p_T / self.h
+
+    def __repr__(self) -> str:
+        return (f"SimulationResult(method={self.method!r}, solver={self.solver!r}, h={self.h:g}, "
+                f"steps={self.stats.steps}, status={self.status}, message={self.message!r})")

@@ -1,0 +1,353 @@
+"""One-step contact solvers, by name: ``"enum"``, ``"lemke"``, ``"osqp"`` (and ``"auto"``).
+
+Each solver takes a :class:`~lcp.contact_problem.ContactProblem` and returns a :class:`StepSolution`.
+The base class owns the bookkeeping (the independent Coulomb residual check, the status); each
+solver implements one method, ``_solve``.
+
+- ``"enum"``: closed-form case analysis of a single planar contact (open, stick, slide+, slide-).
+- ``"lemke"``: the exact LCP form (:meth:`ContactProblem.to_lcp`) by Lemke's pivoting method.
+- ``"osqp"``: the Tresca fixed point. For a friction bound s the problem is the convex QP
+  min 1/2 p'W p + q'p  s.t.  p_N >= 0, |p_T| <= s, solved by OSQP; its active set names the branch
+  (stick, slide+, slide-, open) and the branch's linear system then gives the exact Coulomb
+  fixed point s = mu p_N directly (physics.md section 3: the map is piecewise affine). A single QP
+  would be a convex relaxation, not Coulomb's law.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .contact_problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem
+from .lemke import lemke
+
+__all__ = ["StepSolution", "OneStepSolver", "EnumSolver", "LemkeSolver", "OsqpSolver",
+           "SOLVERS", "make_solver"]
+
+
+@dataclass
+class StepSolution:
+    """What a one-step solver returns.
+
+    Attributes
+    ----------
+    p : ndarray, shape (2k,)
+        Impulses (p_N, p_T).
+    status : int
+        0 success, < 0 failure (see ``message``).
+    message : str
+    iterations : int
+        Solver iterations (pivots for Lemke, fixed-point iterations for OSQP, cases tried for enum).
+    qp_solves : int
+        OSQP solves (0 for the other solvers).
+    residual : float
+        Coulomb residual :meth:`ContactProblem.residual`, recomputed independently of the solver.
+    ambiguous : bool
+        More than one solution was found (enumeration only): the first admissible case is used.
+    """
+
+    p: np.ndarray
+    status: int = 0
+    message: str = "solved"
+    iterations: int = 0
+    qp_solves: int = 0
+    residual: float = 0.0
+    ambiguous: bool = False
+
+    @property
+    def success(self) -> bool:
+        return self.status >= 0
+
+
+class OneStepSolver:
+    """Base class: solve a ContactProblem, then check the Coulomb law independently.
+
+    Parameters
+    ----------
+    residual_tol : float
+        Largest accepted Coulomb residual, relative to the problem's impulse scale (absolute below
+        an impulse scale of 1).
+    """
+
+    name = "base"
+    exact = True
+
+    def __init__(self, residual_tol: float = 1e-10):
+        if not (np.isfinite(residual_tol) and residual_tol > 0):
+            raise ValueError(f"residual_tol must be finite and > 0, got {residual_tol!r}")
+        self.residual_tol = residual_tol
+
+    def applicable(self, problem: ContactProblem) -> bool:
+        return True
+
+    def solve(self, problem: ContactProblem) -> StepSolution:
+        if problem.k == 0:
+            return StepSolution(np.zeros(0))
+        if not self.applicable(problem):
+            return StepSolution(np.full(2 * problem.k, np.nan), -3,
+                                f"solver '{self.name}' does not apply to {problem.k} contacts")
+        sol = self._solve(problem)
+        if sol.success:
+            sol.residual = problem.residual(sol.p)
+            if not np.isfinite(sol.residual) or sol.residual > self.residual_tol * max(1.0, problem.scale):
+                sol.status = -2
+                sol.message = (f"solver '{self.name}' returned an impulse violating the Coulomb law "
+                               f"(residual {sol.residual:.3g})")
+        return sol
+
+    def _solve(self, problem: ContactProblem) -> StepSolution:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+class EnumSolver(OneStepSolver):
+    """Closed-form case analysis for one planar contact: open, stick, slide+, slide-, in that order."""
+
+    name = "enum"
+
+    def applicable(self, problem):
+        return problem.k == 1
+
+    def _solve(self, pb):
+        W, q, mu = pb.W, pb.q, pb.mu[0]
+        scale = pb.scale
+        tol = 1e-12 * scale
+        found = []
+        # open: no impulse, the free motion does not penetrate
+        if q[0] * pb.rho[0] >= -tol:
+            found.append(np.zeros(2))
+        det = W[0, 0] * W[1, 1] - W[0, 1] * W[1, 0]
+        if det > 0:  # stick: u = 0
+            pN = (-q[0] * W[1, 1] + q[1] * W[0, 1]) / det
+            pT = (-q[1] * W[0, 0] + q[0] * W[1, 0]) / det
+            if pN >= -tol and abs(pT) <= mu * pN + tol:
+                found.append(np.array([pN, pT]))
+        for sgn in (1.0, -1.0):  # slide+ (u_T > 0, p_T = -mu p_N), slide- (u_T < 0, p_T = mu p_N)
+            a = W[0, 0] - sgn * mu * W[0, 1]
+            if a <= 0:
+                continue  # the Painleve branch: no sliding solution with p_N >= 0 pressing down
+            pN = -q[0] / a
+            if pN < -tol:
+                continue
+            uT = (W[1, 0] - sgn * mu * W[1, 1]) * pN + q[1]
+            if sgn * uT * pb.rho[1] > -tol:
+                found.append(np.array([pN, -sgn * mu * pN]))
+        if not found:
+            return StepSolution(np.full(2, np.nan), -1, "enumeration found no admissible case", 4)
+        distinct = [found[0]] + [f for f in found[1:] if np.max(np.abs(f - found[0])) > 1e-9 * max(scale, 1e-300)]
+        return StepSolution(found[0], 0, "solved", 4, ambiguous=len(distinct) > 1)
+
+
+class LemkeSolver(OneStepSolver):
+    """Exact LCP form of the Coulomb problem solved by Lemke's method (:func:`lcp.lemke.lemke`)."""
+
+    name = "lemke"
+
+    def __init__(self, residual_tol: float = 1e-10, max_pivots: int | None = None):
+        super().__init__(residual_tol)
+        self.max_pivots = max_pivots
+
+    def _solve(self, pb):
+        M, b = pb.to_lcp()
+        res = lemke(M, b, max_pivots=self.max_pivots)
+        if not res.success:
+            return StepSolution(np.full(2 * pb.k, np.nan), -1, f"Lemke: {res.message}", res.pivots)
+        p = pb.from_lcp(res.z)
+        # Polish on the branch Lemke found: one linear solve removes pivoting round-off.
+        modes = pb.modes(p)
+        pb_ = pb.solve_branch(modes)
+        if pb_ is not None and pb.admissible(pb_, modes) and pb.residual(pb_) <= pb.residual(p):
+            p = pb_
+        return StepSolution(p, 0, "solved", res.pivots)
+
+
+class OsqpSolver(OneStepSolver):
+    """Tresca fixed point on the friction bound, each QP solved by OSQP, with exact branch solves.
+
+    Parameters
+    ----------
+    eps_abs, eps_rel : float
+        OSQP tolerances (passed explicitly: OSQP's defaults, 1e-3, are too loose to read an
+        active set from).
+    max_iter : int
+        Largest number of fixed-point iterations (QP solves) per step.
+    osqp_max_iter : int
+        OSQP's own ADMM iteration limit per QP.
+    residual_tol : float
+        See :class:`OneStepSolver`.
+
+    Notes
+    -----
+    QP(s): min 1/2 p'W p + q'p subject to p_N >= 0, -s <= p_T <= s. Its KKT conditions are Tresca's
+    law with bound s; Coulomb's law is the fixed point s = mu p_N(s). While a contact slides the map
+    is affine with slope kappa (physics.md section 3), so plain iteration crawls as kappa -> 1 and
+    has no fixed point for kappa >= 1. Instead each QP only names the branch; the branch's linear
+    system gives the exact fixed point of that branch, which is accepted when it satisfies the
+    branch's inequalities. When a sliding branch has no admissible fixed point (the Painleve
+    case), the bound is grown geometrically until the QP sticks. The OSQP workspace is set up once
+    per W (cached on ``problem.key``) and only ``q``, ``l`` and ``u`` are updated, with warm start.
+    """
+
+    name = "osqp"
+
+    def __init__(self, eps_abs: float = 1e-10, eps_rel: float = 1e-10, max_iter: int = 200,
+                 osqp_max_iter: int = 20000, residual_tol: float = 1e-10):
+        super().__init__(residual_tol)
+        for nm, val in (("eps_abs", eps_abs), ("eps_rel", eps_rel)):
+            if not (np.isfinite(val) and val > 0):
+                raise ValueError(f"{nm} must be finite and > 0, got {val!r}")
+        if int(max_iter) < 1 or int(osqp_max_iter) < 1:
+            raise ValueError("max_iter and osqp_max_iter must be >= 1")
+        self.settings = dict(eps_abs=eps_abs, eps_rel=eps_rel, max_iter=int(osqp_max_iter),
+                             polishing=False, verbose=False, warm_starting=True,
+                             eps_prim_inf=1e-12, eps_dual_inf=1e-12)
+        self.max_iter = int(max_iter)
+        self._cache: dict = {}
+        self._last_s: dict = {}
+
+    def _workspace(self, pb: ContactProblem):
+        """The OSQP solver for this W: set up once, then only updated.
+
+        With ``pb.key`` set, W is known to be the same as last time under that key and nothing is
+        updated; without it, one workspace per problem size has its P values replaced.
+        """
+        import osqp
+
+        n = 2 * pb.k
+        rows, cols = np.triu_indices(n)
+        order = np.lexsort((rows, cols))  # CSC order of the full upper triangle
+        rows, cols = rows[order], cols[order]
+        key = pb.key if pb.key is not None else ("size", n)
+        solver = self._cache.get(key)
+        if solver is not None:
+            if pb.key is None:
+                solver.update(Px=pb.W[rows, cols])
+            return solver
+        # the full triangle is kept as the pattern, explicit zeros included, so that later
+        # Px updates stay valid whatever W's zeros are
+        P = sp.csc_matrix((np.arange(1.0, rows.size + 1), (rows, cols)), shape=(n, n))
+        P.data[:] = pb.W[rows, cols]
+        solver = osqp.OSQP()
+        l, u = self._bounds(pb, np.zeros(pb.k))
+        solver.setup(P, pb.q, sp.identity(n, format="csc"), l, u, **self.settings)
+        self._cache[key] = solver
+        return solver
+
+    @staticmethod
+    def _bounds(pb, s):
+        k = pb.k
+        return (np.concatenate([np.zeros(k), -s]), np.concatenate([np.full(k, np.inf), s]))
+
+    def _solve(self, pb):
+        import osqp
+
+        k = pb.k
+        solver = self._workspace(pb)
+        # first bound: the previous step's (same W) or the frictionless normal impulse
+        s = self._last_s.get((pb.key, k))
+        if s is None or s.shape != (k,):
+            s = np.zeros(k)
+        qp_solves = 0
+        seen = []
+        for it in range(1, self.max_iter + 1):
+            l, u = self._bounds(pb, s)
+            solver.update(q=pb.q, l=l, u=u)
+            res = solver.solve()
+            qp_solves += 1
+            if res.info.status_val != osqp.SolverStatus.OSQP_SOLVED:
+                return StepSolution(np.full(2 * k, np.nan), -1,
+                                    f"OSQP status '{res.info.status}' at fixed-point iteration {it} "
+                                    f"(bound s = {s})", it, qp_solves)
+            x = res.x
+            modes = self._branch(pb, x, s)
+            p = pb.solve_branch(modes)
+            if p is not None and pb.admissible(p, modes):
+                self._last_s[(pb.key, k)] = pb.mu * np.maximum(p[:k], 0.0)
+                return StepSolution(p, 0, "solved", it, qp_solves)
+            s_plain = pb.mu * np.maximum(x[:k], 0.0)
+            sliding = np.isin(modes, (SLIDE_POS, SLIDE_NEG))
+            if p is not None and np.all(p[:k] >= 0) and not any(np.allclose(p[:k], o) for o in seen):
+                # jump to this branch's own fixed point: one Newton step of the piecewise-affine map
+                s_new = pb.mu * p[:k]
+                seen.append(p[:k].copy())
+            elif sliding.any():
+                # no admissible fixed point on the sliding branch (Painleve / kappa >= 1): grow the
+                # bound until the QP sticks
+                s_new = np.where(sliding, np.maximum(s_plain, 2.0 * np.maximum(s, 1e-300)
+                                                     + (s == 0) * pb.mu * pb.scale), s_plain)
+            else:
+                s_new = s_plain
+            if np.allclose(s_new, s, rtol=1e-15, atol=0):
+                s_new = s_plain if not np.allclose(s_plain, s, rtol=1e-15, atol=0) else s_new
+                if np.allclose(s_new, s, rtol=1e-15, atol=0):
+                    break
+            s = s_new
+        return StepSolution(np.full(2 * k, np.nan), -1,
+                            f"Tresca fixed point did not converge in {self.max_iter} iterations "
+                            f"(last bound s = {s})", self.max_iter, qp_solves)
+
+    @staticmethod
+    def _branch(pb: ContactProblem, x: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Read the branch from a QP solution: open, stick (bound inactive) or the bound's side."""
+        k = pb.k
+        tol = 1e-7 * max(pb.scale, float(np.max(np.abs(x))))
+        modes = np.full(k, STICK, dtype=np.int8)
+        pN, pT = x[:k], x[k:]
+        at_upper = pT >= s - tol  # p_T = +s opposes u_T < 0
+        at_lower = pT <= -s + tol
+        modes[at_upper & (s > tol)] = SLIDE_NEG
+        modes[at_lower & (s > tol)] = SLIDE_POS
+        modes[pN <= tol] = OPEN
+        return modes
+
+
+class AutoSolver(OneStepSolver):
+    """The fastest exact solver for the problem at hand: enumeration for one contact, else Lemke,
+    each falling back on the other exact method when it fails."""
+
+    name = "auto"
+
+    def __init__(self, residual_tol: float = 1e-10):
+        super().__init__(residual_tol)
+        self.enum = EnumSolver(residual_tol)
+        self.lemke = LemkeSolver(residual_tol)
+        self.fallbacks = 0
+
+    def _solve(self, pb):
+        first = self.enum if pb.k == 1 else self.lemke
+        sol = first.solve(pb)
+        if sol.success:
+            return sol
+        second = self.lemke if first is self.enum else None
+        if second is not None:
+            sol2 = second.solve(pb)
+            if sol2.success:
+                self.fallbacks += 1
+                sol2.message = f"fallback to lemke after: {sol.message}"
+                return sol2
+        return sol
+
+
+SOLVERS = {"auto": AutoSolver, "enum": EnumSolver, "lemke": LemkeSolver, "osqp": OsqpSolver}
+
+
+def make_solver(name: str | OneStepSolver, **options) -> OneStepSolver:
+    """A one-step solver by name (``"auto"``, ``"enum"``, ``"lemke"``, ``"osqp"``) or instance.
+
+    Examples
+    --------
+    >>> from lcp.solvers import make_solver
+    >>> make_solver("lemke").name
+    'lemke'
+    """
+    if isinstance(name, OneStepSolver):
+        if options:
+            raise ValueError("solver_options cannot be given with a solver instance")
+        return name
+    if not isinstance(name, str) or name not in SOLVERS:
+        raise ValueError(f"unknown solver {name!r}; known solvers: {sorted(SOLVERS)}")
+    try:
+        return SOLVERS[name](**options)
+    except TypeError as exc:
+        raise ValueError(f"invalid solver_options for '{name}': {exc}") from exc
+

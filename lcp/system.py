@@ -1,0 +1,274 @@
+"""The mechanical system: generalized coordinates, mass matrix, forces, bilateral constraints and contacts.
+
+Everything is written with CasADi symbols, so that every Jacobian (contact normals and tangents,
+bilateral constraints, force derivatives for the implicit step) comes from automatic
+differentiation. The model follows physics.md section 1:
+
+    A(t, q) qdd = F(t, q, v) + G(t, q)' lambda + H_N(q)' N + H_T(q)' f,
+    phi(t, q) = 0 (bilateral, frictionless),
+    0 <= N_j  perp  g_j(q) >= 0,   |f_j| <= mu_j N_j,  f_j = -mu_j N_j sign(u_T,j) if u_T,j != 0.
+
+Contacts are planar point contacts: one normal and one tangent direction each (the 2D Coulomb law,
+which is exactly a linear complementarity problem).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import casadi as ca
+import numpy as np
+
+__all__ = ["Contact", "System"]
+
+
+def _finite_nonneg(name: str, value) -> float:
+    value = float(value)
+    if not np.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    if value < 0:
+        raise ValueError(f"{name} must be >= 0, got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A planar point contact with Coulomb friction.
+
+    Parameters
+    ----------
+    gap : casadi.SX
+        Scalar expression g(q) >= 0 of the system's coordinates; its gradient is the normal
+        Jacobian row H_N.
+    tangent : casadi.SX, optional
+        Scalar tangent coordinate s(q) whose rate is the sliding velocity (H_T = ds/dq).
+    tangent_jacobian : casadi.SX, optional
+        Or the tangent Jacobian row itself (1 x n or n x 1), possibly depending on q. Give exactly
+        one of ``tangent`` and ``tangent_jacobian``.
+    mu : float
+        Coulomb friction coefficient (the paper's R), >= 0.
+    e : float
+        Newton restitution coefficient in [0, 1].
+    name : str
+        Label used in messages.
+    """
+
+    gap: ca.SX
+    tangent: ca.SX | None = None
+    tangent_jacobian: ca.SX | None = None
+    mu: float = 0.0
+    e: float = 0.0
+    name: str = "contact"
+
+    def __post_init__(self):
+        object.__setattr__(self, "mu", _finite_nonneg(f"mu of {self.name}", self.mu))
+        object.__setattr__(self, "e", _finite_nonneg(f"e of {self.name}", self.e))
+        if self.e > 1:
+            raise ValueError(f"e of {self.name} must lie in [0, 1], got {self.e!r}")
+        if (self.tangent is None) == (self.tangent_jacobian is None):
+            raise ValueError(f"{self.name}: give exactly one of 'tangent' and 'tangent_jacobian'")
+        if ca.SX(self.gap).numel() != 1:
+            raise ValueError(f"gap of {self.name} must be a scalar expression")
+
+
+def _sx(expr, shape_name: str, shape: tuple[int, int]) -> ca.SX:
+    """Turn numbers or expressions into an SX of the expected shape, or raise naming it."""
+    try:
+        x = ca.SX(expr) if not isinstance(expr, ca.SX) else expr
+    except Exception as exc:  # noqa: BLE001 - CasADi raises NotImplementedError/RuntimeError variously
+        raise ValueError(f"{shape_name} must be a CasADi SX expression or numeric array") from exc
+    if x.shape != shape:
+        if x.numel() == shape[0] * shape[1]:
+            x = ca.reshape(x, *shape)
+        else:
+            raise ValueError(f"{shape_name} must have shape {shape}, got {x.shape}")
+    if not x.is_symbolic() and x.is_constant():
+        vals = np.array(ca.DM(x), dtype=float)
+        if not np.all(np.isfinite(vals)):
+            raise ValueError(f"{shape_name} must be finite")
+    return x
+
+
+class System:
+    """A rigid-body system with bilateral constraints and planar frictional contacts.
+
+    Parameters
+    ----------
+    q, v : casadi.SX
+        Column symbols (n x 1) for the coordinates and the velocities.
+    mass : casadi.SX or array_like
+        Mass matrix A(t, q), n x n, symmetric positive definite (on the constraint manifold).
+    force : casadi.SX or array_like
+        Generalized forces F(t, q, v), n x 1.
+    contacts : sequence of Contact
+        The unilateral contacts (may be empty).
+    constraints : casadi.SX, optional
+        Bilateral holonomic constraints phi(t, q) = 0, n_b x 1.
+    t : casadi.SX, optional
+        Time symbol, if any expression depends on time.
+    names : sequence of str, optional
+        Names of the coordinates.
+
+    Notes
+    -----
+    On construction the system compiles CasADi Functions for everything a time stepper needs, and
+    finds out which parts are constant (mass matrix, Jacobians, forces), so that a stepper can
+    assemble them once and never call CasADi inside its loop when nothing varies.
+
+    Examples
+    --------
+    A block of mass 2 on a frictional floor (coordinates x, y; gap y):
+
+    >>> import casadi as ca
+    >>> from lcp.system import System, Contact
+    >>> q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
+    >>> s = System(q, v, mass=2 * ca.SX.eye(2), force=ca.vertcat(0, -2 * 9.81),
+    ...            contacts=[Contact(gap=q[1], tangent=q[0], mu=0.3)])
+    >>> s.n, s.n_contacts, s.is_constant
+    (2, 1, True)
+    """
+
+    def __init__(self, q, v, mass, force, contacts: Sequence[Contact] = (), constraints=None,
+                 t=None, names: Sequence[str] | None = None):
+        if not isinstance(q, ca.SX) or not q.is_symbolic() or q.shape[1] != 1:
+            raise ValueError("q must be a column of CasADi SX symbols (casadi.SX.sym('q', n))")
+        if not isinstance(v, ca.SX) or not v.is_symbolic() or v.shape != q.shape:
+            raise ValueError("v must be a column of CasADi SX symbols with the shape of q")
+        self.n = n = q.shape[0]
+        self.t_sym = t if t is not None else ca.SX.sym("t")
+        if not isinstance(self.t_sym, ca.SX) or not self.t_sym.is_symbolic() or self.t_sym.numel() != 1:
+            raise ValueError("t must be a scalar CasADi SX symbol")
+        self.q_sym, self.v_sym = q, v
+        self.mass_expr = _sx(mass, "mass", (n, n))
+        self.force_expr = _sx(force, "force", (n, 1))
+        self.contacts = tuple(contacts)
+        for c in self.contacts:
+            if not isinstance(c, Contact):
+                raise ValueError(f"contacts must be Contact objects, got {type(c).__name__}")
+        self.names = tuple(names) if names is not None else tuple(f"q{i}" for i in range(n))
+        if len(self.names) != n:
+            raise ValueError(f"names must have {n} entries, got {len(self.names)}")
+        tq = ca.vertcat(self.t_sym, q)
+        if ca.depends_on(self.mass_expr, v):
+            raise ValueError("mass may depend on t and q only, not on v")
+
+        # bilateral constraints phi(t, q) = 0
+        if constraints is None:
+            self.constraints_expr = ca.SX.zeros(0, 1)
+        else:
+            c = ca.SX(constraints)
+            self.constraints_expr = ca.reshape(c, c.numel(), 1)
+            if ca.depends_on(self.constraints_expr, v):
+                raise ValueError("constraints must depend on t and q only")
+        self.n_bilateral = self.constraints_expr.shape[0]
+        G = ca.jacobian(self.constraints_expr, q)
+        phi_t = ca.jacobian(self.constraints_expr, self.t_sym)
+
+        # contact kinematics: normal and tangent Jacobian rows
+        m = len(self.contacts)
+        self.n_contacts = m
+        gaps, HN, HT = [], [], []
+        for c in self.contacts:
+            g = _sx(c.gap, f"gap of {c.name}", (1, 1))
+            if ca.depends_on(g, v) or ca.depends_on(g, self.t_sym):
+                raise ValueError(f"gap of {c.name} must depend on q only")
+            gaps.append(g)
+            HN.append(ca.jacobian(g, q))
+            if c.tangent is not None:
+                s = _sx(c.tangent, f"tangent of {c.name}", (1, 1))
+                HT.append(ca.jacobian(s, q))
+            else:
+                HT.append(_sx(c.tangent_jacobian, f"tangent_jacobian of {c.name}", (1, n)))
+        self.mu = np.array([c.mu for c in self.contacts], dtype=float)
+        self.e = np.array([c.e for c in self.contacts], dtype=float)
+        gap = ca.vertcat(*gaps) if m else ca.SX.zeros(0, 1)
+        H = ca.vertcat(*(HN + HT)) if m else ca.SX.zeros(0, n)
+        self.gap_expr, self.H_expr = gap, H
+
+        # -dF/dq and -dF/dv: the implicit (theta) step linearizes the forces with them
+        K = -ca.jacobian(self.force_expr, q)
+        C = -ca.jacobian(self.force_expr, v)
+        self.force_is_affine = not ca.depends_on(ca.vertcat(ca.vec(K), ca.vec(C)), ca.vertcat(self.t_sym, q, v))
+        self.force_depends_on_t = ca.depends_on(self.force_expr, self.t_sym)
+        self.force_depends_on_state = ca.depends_on(self.force_expr, ca.vertcat(q, v))
+
+        # constancy: decides whether a stepper may assemble once and skip CasADi in its loop
+        self.mass_is_constant = not ca.depends_on(self.mass_expr, tq)
+        self.kinematics_is_constant = not ca.depends_on(ca.vertcat(ca.vec(H), ca.vec(G), ca.vec(phi_t)), tq)
+        self.gap_is_affine = self.kinematics_is_constant
+        self.is_constant = (self.mass_is_constant and self.kinematics_is_constant
+                            and self.force_is_affine and not self.force_depends_on_t)
+
+        args = [self.t_sym, q, v]
+        self.mass_fn = ca.Function("mass", [self.t_sym, q], [self.mass_expr])
+        self.force_fn = ca.Function("force", args, [self.force_expr])
+        self.force_jac_fn = ca.Function("force_jac", args, [K, C])
+        self.constraints_fn = ca.Function("constraints", [self.t_sym, q], [self.constraints_expr, G, phi_t])
+        self.gap_fn = ca.Function("gap", [q], [gap])
+        self.H_fn = ca.Function("H", [q], [H])
+        # everything one Moreau-Jean step needs at (t, q, v), in one call
+        self.step_data_fn = ca.Function(
+            "step_data", [self.t_sym, q, v],
+            [self.mass_expr, self.force_expr, K, C, G, phi_t, gap, H])
+        # energy bookkeeping needs a potential only when the user gives one; kinetic energy is general
+        self.kinetic_fn = ca.Function("kinetic", [self.t_sym, q, v], [0.5 * ca.mtimes([v.T, self.mass_expr, v])])
+
+    # ------------------------------------------------------------------ numeric helpers
+    def mass(self, q, t: float = 0.0) -> np.ndarray:
+        """Mass matrix A(t, q) as an n x n array."""
+        return np.array(self.mass_fn(t, q), dtype=float)
+
+    def force(self, q, v, t: float = 0.0) -> np.ndarray:
+        """Generalized forces F(t, q, v) as an n-vector."""
+        return np.array(self.force_fn(t, q, v), dtype=float).ravel()
+
+    def gaps(self, q) -> np.ndarray:
+        """Contact gaps g(q), one per contact."""
+        return np.array(self.gap_fn(q), dtype=float).ravel()
+
+    def contact_jacobian(self, q) -> np.ndarray:
+        """H(q): rows [H_N,1..H_N,m, H_T,1..H_T,m], shape (2m, n)."""
+        return np.array(self.H_fn(q), dtype=float).reshape(2 * self.n_contacts, self.n)
+
+    def constraint_residual(self, q, t: float = 0.0) -> np.ndarray:
+        """phi(t, q), the bilateral constraint values (zero on the manifold)."""
+        return np.array(self.constraints_fn(t, q)[0], dtype=float).ravel()
+
+    def kinetic_energy(self, q, v, t: float = 0.0) -> float:
+        """1/2 v' A(t, q) v."""
+        return float(self.kinetic_fn(t, q, v))
+
+    def check_state(self, q0, v0, t0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Validate an initial state: finite, right shape, mass matrix positive definite there."""
+        q0 = np.asarray(q0, dtype=float)
+        v0 = np.asarray(v0, dtype=float)
+        for name, x in (("q0", q0), ("v0", v0)):
+            if x.shape != (self.n,):
+                raise ValueError(f"{name} must have shape ({self.n},), got {x.shape}")
+            if not np.all(np.isfinite(x)):
+                raise ValueError(f"{name} must be finite, got {x}")
+        A = self.mass(q0, t0)
+        if not np.all(np.isfinite(A)):
+            raise ValueError("mass matrix is not finite at q0")
+        if np.max(np.abs(A - A.T)) > 1e-12 * max(1.0, np.max(np.abs(A))):
+            raise ValueError("mass matrix must be symmetric")
+        if self.n_bilateral:
+            _, G, _ = (np.array(x, dtype=float) for x in self.constraints_fn(t0, q0))
+            Z = _null_space(G.reshape(self.n_bilateral, self.n))
+            A = Z.T @ A @ Z
+        eig = np.linalg.eigvalsh(0.5 * (A + A.T)) if A.size else np.array([1.0])
+        if eig.min() <= 1e-14 * max(1.0, abs(eig).max()):
+            raise ValueError("mass matrix is singular or not positive definite (on the constraint manifold) "
+                             f"at q0: eigenvalues {eig}")
+        return q0, v0
+
+
+def _null_space(G: np.ndarray) -> np.ndarray:
+    """Orthonormal basis of the null space of G (for the bilateral constraints)."""
+    if G.shape[0] == 0:
+        return np.eye(G.shape[1])
+    u, s, vt = np.linalg.svd(G)
+    rank = int(np.sum(s > 1e-12 * max(1.0, s.max())))
+    if rank < G.shape[0]:
+        raise ValueError("bilateral constraints are redundant (their Jacobian G is rank deficient)")
+    return vt[rank:].T
