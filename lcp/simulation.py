@@ -8,12 +8,21 @@ from .timestepping import MoreauJeanOptions, moreau_jean
 
 __all__ = ["METHODS", "simulate"]
 
-METHODS = {"moreau-jean": moreau_jean}
+
+def _event(system, q0, v0, t_end, scene=None, **options):
+    # imported lazily: the event-driven branch is optional for users who only time-step
+    from .events import event_driven
+
+    return event_driven(system, q0, v0, t_end, scene=scene, **options)
+
+
+#: integration methods by name
+METHODS = {"moreau-jean": moreau_jean, "event": _event}
 
 
 def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 0.5,
              solver: str = "auto", method: str = "moreau-jean", q0=None, v0=None,
-             solver_options: dict | None = None) -> SimulationResult:
+             solver_options: dict | None = None, **method_options) -> SimulationResult:
     """Simulate a scene (or a bare :class:`~lcp.system.System` with ``q0`` and ``v0``).
 
     Parameters
@@ -29,12 +38,15 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
     solver : {"auto", "enum", "lemke", "osqp"}
         One-step contact solver. ``"auto"`` picks the fastest exact one (closed-form enumeration
         for a single contact, Lemke otherwise, each falling back on the other).
-    method : {"moreau-jean"}
-        Integration method.
+    method : {"moreau-jean", "event"}
+        Integration method: Moreau-Jean time stepping, or event-driven integration with exact
+        mode switches (:mod:`lcp.events`; ``h``, ``theta`` and ``solver`` are then ignored).
     q0, v0 : array_like, optional
         Initial state (required for a bare System, overriding the scene's otherwise).
     solver_options : dict, optional
         Keyword arguments of the solver class (e.g. ``eps_abs`` for OSQP).
+    **method_options
+        Options of the chosen method other than Moreau-Jean's (see :mod:`lcp.events`).
 
     Returns
     -------
@@ -68,5 +80,10 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
         raise ValueError(f"unknown method {method!r}; known methods: {sorted(METHODS)}")
     if not isinstance(t_end, (int, float, np.floating)) or not np.isfinite(t_end) or t_end <= 0:
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
-    opts = MoreauJeanOptions(h=h, theta=theta, solver=solver, solver_options=solver_options)
-    return METHODS[method](system, q0, v0, float(t_end), opts)
+    if method == "moreau-jean":
+        if method_options:
+            raise ValueError(f"unknown options for method 'moreau-jean': {sorted(method_options)}")
+        opts = MoreauJeanOptions(h=h, theta=theta, solver=solver, solver_options=solver_options)
+        return moreau_jean(system, q0, v0, float(t_end), opts)
+    return METHODS[method](system, q0, v0, float(t_end), scene=scene if isinstance(scene, Scene) else None,
+                           **method_options)
