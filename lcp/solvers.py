@@ -252,7 +252,7 @@ class OsqpSolver(OneStepSolver):
         for it in range(1, self.max_iter + 1):
             l, u = self._bounds(pb, s)
             solver.update(q=pb.q, l=l, u=u)
-            res = solver.solve()
+            res = solver.solve(raise_error=False)  # the status is checked below, every time
             qp_solves += 1
             if res.info.status_val != osqp.SolverStatus.OSQP_SOLVED:
                 return StepSolution(np.full(2 * k, np.nan), -1,
