@@ -165,6 +165,45 @@ class ContactProblem:
                 return False
         return True
 
+    def refine_branch(self, modes, max_changes: int | None = None):
+        """Starting from a guess of the modes, correct them until the branch solution is admissible.
+
+        A primal active-set iteration on the four modes: a closed contact pulling (p_N < 0)
+        opens; an open contact penetrating (u_N < 0) closes; a stick outside the cone slides
+        against its impulse; a slide whose velocity has the wrong sign sticks. Returns
+        (p, modes) or (None, modes) when no admissible branch is reached within ``max_changes``
+        corrections (default 2k + 2) or a cycle appears.
+        """
+        k = self.k
+        modes = np.array(modes, dtype=np.int8)
+        seen = set()
+        for _ in range((2 * k + 2) if max_changes is None else max_changes):
+            key = modes.tobytes()
+            if key in seen:
+                break
+            seen.add(key)
+            p = self.solve_branch(modes)
+            if p is None:
+                break
+            if self.admissible(p, modes):
+                return p, modes
+            u = self.velocity(p)
+            tol = 1e-11 * max(self.scale, float(np.max(np.abs(p))))
+            new = modes.copy()
+            for j in range(k):
+                pN, pT, uT = p[j], p[k + j], u[k + j] * self.rho[k + j]
+                if modes[j] == OPEN:
+                    if u[j] * self.rho[j] < -tol:
+                        new[j] = STICK
+                elif pN < -tol:
+                    new[j] = OPEN
+                elif modes[j] == STICK and abs(pT) > self.mu[j] * pN + tol:
+                    new[j] = SLIDE_POS if pT < 0 else SLIDE_NEG
+                elif (modes[j] == SLIDE_POS and uT < -tol) or (modes[j] == SLIDE_NEG and uT > tol):
+                    new[j] = STICK
+            modes = new
+        return None, modes
+
     # ----------------------------------------------------------------- LCP form
     def to_lcp(self) -> tuple[np.ndarray, np.ndarray]:
         """The equivalent LCP(M, b): 0 <= z perp M z + b >= 0, z = (p_N, beta+, beta-, lambda).

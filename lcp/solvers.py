@@ -248,7 +248,6 @@ class OsqpSolver(OneStepSolver):
         if s is None or s.shape != (k,):
             s = np.zeros(k)
         qp_solves = 0
-        seen = []
         for it in range(1, self.max_iter + 1):
             l, u = self._bounds(pb, s)
             solver.update(q=pb.q, l=l, u=u)
@@ -259,32 +258,28 @@ class OsqpSolver(OneStepSolver):
                                     f"OSQP status '{res.info.status}' at fixed-point iteration {it} "
                                     f"(bound s = {s})", it, qp_solves)
             x = res.x
-            modes = self._branch(pb, x, s)
-            p = pb.solve_branch(modes)
-            if p is not None and pb.admissible(p, modes):
+            # the QP names a branch; a few exact active-set corrections finish it
+            p, modes = pb.refine_branch(self._branch(pb, x, s))
+            if p is not None:
                 self._last_s[(pb.key, k)] = pb.mu * np.maximum(p[:k], 0.0)
                 return StepSolution(p, 0, "solved", it, qp_solves)
             s_plain = pb.mu * np.maximum(x[:k], 0.0)
             sliding = np.isin(modes, (SLIDE_POS, SLIDE_NEG))
-            if p is not None and np.all(p[:k] >= 0) and not any(np.allclose(p[:k], o) for o in seen):
-                # jump to this branch's own fixed point: one Newton step of the piecewise-affine map
-                s_new = pb.mu * p[:k]
-                seen.append(p[:k].copy())
-            elif sliding.any():
+            if it > 10:
+                # heuristics exhausted: damped plain fixed point, which cannot run away
+                s_new = 0.5 * (s + s_plain)
+            elif sliding.any() and np.all(s_plain >= s):
                 # no admissible fixed point on the sliding branch (Painleve / kappa >= 1): grow the
-                # bound until the QP sticks
-                s_new = np.where(sliding, np.maximum(s_plain, 2.0 * np.maximum(s, 1e-300)
-                                                     + (s == 0) * pb.mu * pb.scale), s_plain)
+                # bound geometrically until the QP sticks
+                s_new = np.where(sliding, np.maximum(s_plain, 2.0 * s + (s == 0) * pb.mu * pb.scale), s_plain)
             else:
                 s_new = s_plain
             if np.allclose(s_new, s, rtol=1e-15, atol=0):
-                s_new = s_plain if not np.allclose(s_plain, s, rtol=1e-15, atol=0) else s_new
-                if np.allclose(s_new, s, rtol=1e-15, atol=0):
-                    break
+                break  # the bound no longer moves, yet its QP names no admissible branch
             s = s_new
         return StepSolution(np.full(2 * k, np.nan), -1,
-                            f"Tresca fixed point did not converge in {self.max_iter} iterations "
-                            f"(last bound s = {s})", self.max_iter, qp_solves)
+                            f"Tresca fixed point did not converge ({it} iterations, last bound s = {s})",
+                            it, qp_solves)
 
     @staticmethod
     def _branch(pb: ContactProblem, x: np.ndarray, s: np.ndarray) -> np.ndarray:
