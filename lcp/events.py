@@ -332,28 +332,31 @@ def _accel_function(system) -> ca.Function:
 class _Data:
     """Everything the contact problems need at one state, with the KKT matrix factorized once."""
 
-    def __init__(self, A, F, G, zeta, H, Hdv, gap):
+    def __init__(self, A, F, G, zeta, H, Hdv, gap, check: bool = False):
         self.A, self.F, self.G, self.zeta, self.H, self.Hdv, self.gap = A, F, G, zeta, H, Hdv, gap
         n, nb = A.shape[0], G.shape[0]
         self.n, self.nb = n, nb
-        K = np.block([[A, G.T], [G, np.zeros((nb, nb))]]) if nb else A
-        self.lu = sla.lu_factor(K, check_finite=False)
-        if np.any(np.abs(np.diag(self.lu[0])) <= 1e-14 * max(1.0, float(np.max(np.abs(K))))):
-            raise ValueError("the mass matrix is singular on the constraint manifold")
+        self.K = K = np.block([[A, G.T], [G, np.zeros((nb, nb))]]) if nb else A
+        # LU with partial pivoting per solve (LAPACK gesv): for these tiny systems it is faster than
+        # reusing a factorization through scipy.linalg.lu_solve, whose multi-column path is slow
+        if check:
+            d = np.abs(sla.lu_factor(K, check_finite=False)[0].diagonal())
+            if not np.all(np.isfinite(d)) or np.any(d <= 1e-14 * max(1.0, float(np.max(np.abs(K))))):
+                raise ValueError("the mass matrix is singular on the constraint manifold")
         self._qdd_free = None
 
     def solve_dirs(self, D: np.ndarray) -> np.ndarray:
         """S D: accelerations produced by generalized forces D (columns), bilateral constraints held."""
         if self.nb:
             D = np.vstack([D, np.zeros((self.nb, D.shape[1]))])
-        return sla.lu_solve(self.lu, D, check_finite=False)[: self.n]
+        return np.linalg.solve(self.K, D)[: self.n]
 
     @property
     def qdd_free(self) -> np.ndarray:
         """Acceleration with no contact force (bilateral constraints held)."""
         if self._qdd_free is None:
             rhs = np.concatenate([self.F, -self.zeta]) if self.nb else self.F
-            self._qdd_free = sla.lu_solve(self.lu, rhs, check_finite=False)[: self.n]
+            self._qdd_free = np.linalg.solve(self.K, rhs)[: self.n]
         return self._qdd_free
 
 
@@ -374,7 +377,7 @@ class _Model:
             self.F0, self.Kq, self.Cv = F0.ravel(), -K.reshape(n, n), -C.reshape(n, n)
             self.H, self.gap0 = H.reshape(2 * m, n), gap0.ravel()
             self._const_data = _Data(self.A, self.F0, self.G, np.zeros(system.n_bilateral), self.H,
-                                     np.zeros(2 * m), self.gap0)
+                                     np.zeros(2 * m), self.gap0, check=True)
         else:
             self.fn = _accel_function(system)
 
