@@ -102,7 +102,7 @@ class HomotopyOptions:
         More IPOPT options (without the ``ipopt.`` prefix); they override the defaults.
     """
 
-    sigma0: float = 1e-1
+    sigma0: float = 1.0
     factor: float = 0.1
     sigma_min: float = 1e-12
     tol: float = 1e-8
@@ -567,6 +567,7 @@ class OptimalControlProblem:
         self.terminal_constraints, self.path_constraints = terminal_constraints, path_constraints
         self.max_cost = max_cost
         self._nlp = None
+        self._step_map = None
         self.build_time = 0.0
 
     # ------------------------------------------------------------------ the Moreau-Jean step
@@ -656,8 +657,11 @@ class OptimalControlProblem:
             qa, qb, va, vb = q_nodes[k], q_nodes[k + 1], v_nodes[k], v_nodes[k + 1]
             ua, ub = u_nodes[k], u_nodes[k + 1]
             Wh, r, H, G, phi_t1, _ = step(tk, h, qa, va, ua, ub)
-            pT = blk["bp"] - blk["bm"]
-            p = ca.vertcat(blk["pN"], pT)
+            # the complementarity variables are forces (impulse / h), so that the relaxation a w <= sigma
+            # means the same for every N (a product of a force and a velocity: a power)
+            pN = h * blk["pN"]
+            pT = h * (blk["bp"] - blk["bm"])
+            p = ca.vertcat(pN, pT)
             dyn = ca.mtimes(Wh, vb - va) - r
             if m:
                 dyn = dyn - ca.mtimes(H.T, p)
@@ -678,7 +682,7 @@ class OptimalControlProblem:
                 a = ca.vertcat(blk["pN"], blk["bp"], blk["bm"], lam)
                 w = ca.vertcat(blk["wN"], blk["wp"], blk["wm"], blk["wl"])
                 constrain(a * w - sigma, -np.inf, 0.0)  # Scholtes
-            st = Step(k, tk, tk + h, h, qa, qb, va, vb, ua, ub, blk["pN"], pT)
+            st = Step(k, tk, tk + h, h, qa, qb, va, vb, ua, ub, pN, pT)
             if self.stage_cost is not None:
                 J = J + h * _scalar(self.stage_cost(st), "stage_cost")
             if self.path_constraints is not None:
@@ -769,7 +773,7 @@ class OptimalControlProblem:
             for k in range(N):
                 H = self.system.contact_jacobian(gs.q[k])
                 uN, uT = H[:m] @ gs.v[k + 1], H[m:] @ gs.v[k + 1]
-                pN, pT = np.maximum(gs.p_N[k], 0.0), gs.p_T[k]
+                pN, pT = np.maximum(gs.p_N[k], 0.0) / h, gs.p_T[k] / h  # forces
                 bp, bm = np.maximum(pT, 0.0), np.maximum(-pT, 0.0)
                 lam = np.abs(uT)
                 vals = {"pN": pN, "bp": bp, "bm": bm, "lam": lam,
@@ -778,7 +782,6 @@ class OptimalControlProblem:
                         "wl": np.maximum(mu * pN - bp - bm, 0.0)}
                 for nm, val in vals.items():
                     x0[ix[nm][k]] = val
-            del h
         if self.max_cost is not None:
             x0[ix["z"]] = 0.0
         return x0
@@ -910,8 +913,9 @@ class OptimalControlProblem:
         u = np.vstack([x[i] for i in ix["u"]]).reshape(N + 1, self.nu)
         m = self.system.n_contacts
         if m:
-            pN = x[ix["pN"]].reshape(N, m)
-            pT = (x[ix["bp"]] - x[ix["bm"]]).reshape(N, m)
+            h = T / N
+            pN = h * x[ix["pN"]].reshape(N, m)
+            pT = h * (x[ix["bp"]] - x[ix["bm"]]).reshape(N, m)
         else:
             pN = pT = np.zeros((N, 0))
         return T, q, v, u, pN, pT
@@ -919,37 +923,47 @@ class OptimalControlProblem:
     def _diagnose(self, x) -> dict:
         """Coulomb residual (ContactProblem.residual), dynamics residual and modes, per step, in NumPy."""
         T, q, v, u, pN, pT = self._unpack(x)
-        N, n, m = self.N, self.system.n, self.system.n_contacts
+        N, n, m, nb = self.N, self.system.n, self.system.n_contacts, self.system.n_bilateral
         h, th = T / N, self.theta
         mu, e = self.system.mu, self.system.e
-        res, dres, conflicts = 0.0, 0.0, 0
+        if self._step_map is None:
+            self._step_map = self._step.map(N)
+        out = self._step_map(h * np.arange(N)[None, :], h, q[:-1].T, v[:-1].T, u[:-1].T, u[1:].T)
+
+        def blocks(a, r, c):  # (r, c N) -> (N, r, c)
+            return np.array(a, dtype=float).reshape(r, N, c).transpose(1, 0, 2)
+
+        Wh = blocks(out[0], n, n)
+        r = blocks(out[1], n, 1)[..., 0]
+        H = blocks(out[2], 2 * m, n)
+        G = blocks(out[3], nb, n)
+        phi_t1 = blocks(out[4], nb, 1)[..., 0]
+        gap = blocks(out[5], m, 1)[..., 0]
+        KKT = np.zeros((N, n + nb, n + nb))
+        KKT[:, :n, :n] = Wh
+        KKT[:, :n, n:] = G.transpose(0, 2, 1)
+        KKT[:, n:, :n] = G
+        rhs = np.concatenate([r, -phi_t1 - np.einsum("kij,kj->ki", G, v[:-1])], axis=1)
+        vfree = v[:-1] + np.linalg.solve(KKT, rhs[..., None])[:, :n, 0]
+        res, conflicts = 0.0, 0
         modes = np.full((N, m), -1, dtype=np.int8)
-        for k in range(N):
-            Wh, r, H, G, phi_t1, gap = (np.array(a, dtype=float) for a in
-                                        self._step(k * h, h, q[k], v[k], u[k], u[k + 1]))
-            Wh, r, H = Wh.reshape(n, n), r.ravel(), H.reshape(2 * m, n)
-            nb = self.system.n_bilateral
-            G = G.reshape(nb, n)
-            KKT = np.block([[Wh, G.T], [G, np.zeros((nb, nb))]])
-            rhs = np.concatenate([r, -phi_t1.ravel() - G @ v[k]])
-            sol = np.linalg.solve(KKT, rhs)
-            vfree = v[k] + sol[:n]
-            if m:
-                rhsH = np.vstack([H.T, np.zeros((nb, 2 * m))])
-                SHt = np.linalg.solve(KKT, rhsH)[:n]
-                p = np.concatenate([pN[k], pT[k]])
-                uN_minus = H[:m] @ v[k]
-                qf = H @ vfree
-                qf[:m] += e * uN_minus
-                pb = ContactProblem(H @ SHt, qf, mu)
-                res = max(res, pb.residual(p))
-                modes[k] = pb.modes(p, rtol=1e-6)
-                vplus = vfree + SHt @ p
-                gap_pred = gap.ravel() + h * ((1 - th) * uN_minus + th * (H[:m] @ vfree))
-                conflicts += int(np.any((gap_pred > 0) & (pN[k] > 1e-9 * max(1.0, pb.scale))))
-            else:
-                vplus = vfree
-            dres = max(dres, float(np.max(np.abs(vplus - v[k + 1]))))
+        if m:
+            SHt = np.linalg.solve(KKT, np.concatenate([H.transpose(0, 2, 1), np.zeros((N, nb, 2 * m))], axis=1))[:, :n]
+            W = H @ SHt
+            uN_minus = np.einsum("kij,kj->ki", H[:, :m], v[:-1])
+            qf = np.einsum("kij,kj->ki", H, vfree)
+            gap_pred = gap + h * ((1 - th) * uN_minus + th * qf[:, :m])
+            qf[:, :m] += e * uN_minus
+            p = np.concatenate([pN, pT], axis=1)
+            for k in range(N):
+                pb = ContactProblem(W[k], qf[k], mu)
+                res = max(res, pb.residual(p[k]))
+                modes[k] = pb.modes(p[k], rtol=1e-6)
+                conflicts += int(np.any((gap_pred[k] > 0) & (pN[k] > 1e-9 * max(1.0, pb.scale))))
+            vplus = vfree + np.einsum("kij,kj->ki", SHt, p)
+        else:
+            vplus = vfree
+        dres = float(np.max(np.abs(vplus - v[1:])))
         ix = self._ix
         if m:
             a = np.concatenate([x[ix[nm]].ravel() for nm in ("pN", "bp", "bm", "lam")])
