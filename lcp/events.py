@@ -493,6 +493,34 @@ def _enumerate(acc: _Accel, allowed=None) -> tuple[list, int]:
     return sols, tried
 
 
+def _boundary_alternatives(acc: _Accel, modes, p, rtol: float = 1e-9) -> list:
+    """Per closed contact, the modes that describe the same solution p when p is on a boundary
+    between modes (stick force on the friction bound, zero tangential or normal acceleration,
+    zero normal force)."""
+    pb, k = acc.pb, acc.k
+    a = pb.velocity(p)
+    tol = rtol * max(pb.scale, float(np.max(np.abs(p))) if k else 0.0)
+    alts = []
+    for j, md in enumerate(modes):
+        alt = {md}
+        sliding = acc.slide[j] != 0
+        closed_mode = (SLIDE_POS if acc.slide[j] > 0 else SLIDE_NEG) if sliding else STICK
+        if md == OPEN:
+            if abs(a[j]) * pb.rho[j] <= tol:
+                alt.add(closed_mode)
+        else:
+            if p[j] <= tol:
+                alt.add(OPEN)
+            if not sliding:
+                aT = a[k + j] * pb.rho[k + j]
+                if md == STICK and acc.mu[j] * p[j] - abs(p[k + j]) <= tol:
+                    alt.add(SLIDE_POS if p[k + j] < 0 else SLIDE_NEG)
+                if md in (SLIDE_POS, SLIDE_NEG) and abs(aT) <= tol:
+                    alt.add(STICK)
+        alts.append(tuple(sorted(alt)))
+    return alts
+
+
 def _group(sols: list, qdd_scale: float) -> list:
     """Group solutions by motion: equal accelerations are one motion (ties at a mode boundary)."""
     groups = []
@@ -545,6 +573,12 @@ class _ClosedFormPhase(_Phase):
         super().__init__(*args)
         data = self.model.data(self.t0, self.q0, self.v0)
         self.qdd, N, f = self.accel(data)
+        # The constraints of this mode hold at the acceleration level up to rounding (1e-16 |qdd|),
+        # which dt^2/2 amplifies over long phases; one mass-metric projection makes it eps^2.
+        rows = [self.model.G, self.model.H[self.idx], self.model.H[self.model.m + self.idx[self.slide == 0]]]
+        J = np.vstack(rows)
+        if J.shape[0]:
+            self.qdd = self.qdd - _mass_projection(self.model.A, J, J @ self.qdd)
         m = self.model.m
         self.N = np.zeros(m)
         self.f = np.zeros(m)
@@ -871,6 +905,12 @@ class _Integrator:
                                                           (SLIDE_POS if slide[j] > 0 else SLIDE_NEG))
                               for j in range(acc.k))
                 sols = [_Solution(modes, res.p, acc.qdd(res.p))]
+                alts = _boundary_alternatives(acc, modes, res.p)
+                if any(len(a) > 1 for a in alts):
+                    # Lemke returns one solution; at a mode boundary its neighbours are the same
+                    # motion, and the tie must be seen to be broken (else the phase chatters)
+                    sols, tried = _enumerate(acc, set(product(*alts)))
+                    self.stats.iterations += tried
         for s in sols:
             self.stats.max_residual = max(self.stats.max_residual, acc.pb.residual(s.p))
         return _group(sols, self.scales["A"]), acc
