@@ -464,6 +464,7 @@ class OptimalControlProblem:
     """Optimal control of a system with frictional contacts, transcribed with Moreau-Jean steps.
 
     minimize   terminal_cost(T, q_N, v_N) + sum_k h stage_cost(step_k) + max_k max_cost(step_k)
+               + control_rate_weight sum_k |u_{k+1} - u_k|^2 / h
     subject to the Moreau-Jean step and the discrete Coulomb law at every step (module docstring),
                u_min <= u_k <= u_max,  q_0, v_0 given,
                terminal_constraints(q_N, v_N) = 0,  path_constraints(step_k) <= 0,
@@ -500,6 +501,11 @@ class OptimalControlProblem:
     max_cost : callable(Step) -> scalar, optional
         Minimizes its maximum over the steps (an epigraph variable), e.g. the peak normal force
         ``lambda s: s.N[0]``.
+    control_rate_weight : float
+        Adds this weight times the integral of |du/dt|^2. With theta = 1/2 a step only sees the
+        mean (u_k + u_{k+1}) / 2, so an alternating (u_k) is invisible to the dynamics; when the
+        cost does not penalize it either (minimum time, peak force), a small weight (1e-6) selects
+        the smoothest of the equally good controls.
 
     Examples
     --------
@@ -522,7 +528,7 @@ class OptimalControlProblem:
                  free_time: bool = False, T_bounds=(1e-3, 1e3), q0=None, v0=None, theta: float = 0.5,
                  stage_cost: Callable | None = None, terminal_cost: Callable | None = None,
                  terminal_constraints: Callable | None = None, path_constraints: Callable | None = None,
-                 max_cost: Callable | None = None):
+                 max_cost: Callable | None = None, control_rate_weight: float = 0.0):
         from .scenes import Scene
 
         if isinstance(system, Scene):
@@ -566,6 +572,7 @@ class OptimalControlProblem:
         self.stage_cost, self.terminal_cost = stage_cost, terminal_cost
         self.terminal_constraints, self.path_constraints = terminal_constraints, path_constraints
         self.max_cost = max_cost
+        self.control_rate_weight = _positive("control_rate_weight", control_rate_weight, allow_zero=True)
         self._nlp = None
         self._step_map = None
         self.build_time = 0.0
@@ -685,6 +692,8 @@ class OptimalControlProblem:
             st = Step(k, tk, tk + h, h, qa, qb, va, vb, ua, ub, pN, pT)
             if self.stage_cost is not None:
                 J = J + h * _scalar(self.stage_cost(st), "stage_cost")
+            if self.control_rate_weight:
+                J = J + self.control_rate_weight * ca.sumsqr(ub - ua) / h
             if self.path_constraints is not None:
                 pc = ca.vec(ca.SX(self.path_constraints(st)))
                 constrain(pc, -np.inf, 0.0)
@@ -1061,11 +1070,16 @@ def replay(result: OCPResult, refine: int = 10, method: str = "moreau-jean", sol
         q, v = sim.q[::refine][: N + 1], sim.v[::refine][: N + 1]
     else:
         h = float("nan")
+        if method == "event":
+            method_options.setdefault("t_eval", result.t)
         sim = simulate(sysc, result.T, method=method, q0=pb.q0, v0=pb.v0, **method_options)
         if not sim.success:
             raise RuntimeError(f"replay failed: {sim.message}")
-        q = np.stack([np.interp(result.t, sim.t, sim.q[:, j]) for j in range(sim.q.shape[1])], axis=1)
-        v = np.stack([np.interp(result.t, sim.t, sim.v[:, j]) for j in range(sim.v.shape[1])], axis=1)
+        if len(sim.t) == N + 1 and np.allclose(sim.t, result.t, rtol=0, atol=1e-12 * result.T):
+            q, v = sim.q, sim.v
+        else:
+            q = np.stack([np.interp(result.t, sim.t, sim.q[:, j]) for j in range(sim.q.shape[1])], axis=1)
+            v = np.stack([np.interp(result.t, sim.t, sim.v[:, j]) for j in range(sim.v.shape[1])], axis=1)
     return ReplayResult(sim=sim, method=method, h=h, t=result.t, q=q, v=v,
                         error_q=np.max(np.abs(q - result.q), axis=0),
                         error_v=np.max(np.abs(v - result.v), axis=0))
