@@ -13,7 +13,8 @@ which is exactly a linear complementarity problem).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+import functools
 from typing import Sequence
 
 import casadi as ca
@@ -212,6 +213,39 @@ class System:
             [self.mass_expr, self.force_expr, K, C, G, phi_t, gap, H])
         # energy bookkeeping needs a potential only when the user gives one; kinetic energy is general
         self.kinetic_fn = ca.Function("kinetic", [self.t_sym, q, v], [0.5 * ca.mtimes([v.T, self.mass_expr, v])])
+
+    @functools.cached_property
+    def one_step_fn(self) -> ca.Function:
+        """The data of one Moreau-Jean step as one CasADi Function (built on first use, then reused).
+
+        ``one_step(t, q, v, h, theta) -> (v_free, S, T, SHt, W, gap, H)``, where the theta-method's
+        velocity update with bilateral constraints eliminated is
+
+            [W_h G'; G 0] [dv; lambda] = [r; c],   W_h = A + h theta C + (h theta)^2 K,
+            r = h ((1 - theta) F(t, q, v) + theta F(t + h, q, v)) - h^2 theta K v,
+            c = -phi_t(t + h, q) - G v,
+
+        so that dv = S r + T c; ``v_free = v + dv`` is the velocity without contact impulses,
+        ``SHt = S H'`` maps contact impulses to velocity, and ``W = H S H'`` is the Delassus
+        operator of the local velocities u = W p + H v_free.
+        """
+        n, m, nb = self.n, self.n_contacts, self.n_bilateral
+        t, h, th = ca.MX.sym("t"), ca.MX.sym("h"), ca.MX.sym("theta")
+        q, v = ca.MX.sym("q", n), ca.MX.sym("v", n)
+        A, F, K, C, G, _, gap, H = self.step_data_fn(t, q, v)
+        F1 = self.force_fn(t + h, q, v)
+        _, _, phi_t1 = self.constraints_fn(t + h, q)
+        Wh = A + h * th * C + (h * th) ** 2 * K
+        KKT = ca.blockcat([[Wh, G.T], [G, ca.MX(nb, nb)]]) if nb else Wh
+        X = ca.solve(KKT, ca.MX.eye(n + nb))
+        S, T = X[:n, :n], X[:n, n:]
+        r = h * ((1 - th) * F + th * F1) - h * h * th * ca.mtimes(K, v)
+        dv = ca.mtimes(S, r)
+        if nb:
+            dv = dv + ca.mtimes(T, -phi_t1 - ca.mtimes(G, v))
+        SHt = ca.mtimes(S, H.T)
+        return ca.Function("one_step", [t, q, v, h, th], [v + dv, S, T, SHt, ca.mtimes(H, SHt), gap, H],
+                           ["t", "q", "v", "h", "theta"], ["v_free", "S", "T", "SHt", "W", "gap", "H"])
 
     # ------------------------------------------------------------------ numeric helpers
     def mass(self, q, t: float = 0.0) -> np.ndarray:

@@ -65,62 +65,39 @@ class _Assembly:
         self.constant = system.is_constant
         if self.constant:
             z = np.zeros(self.n)
-            A, F0, K, C, G, phi_t, gap0, H = self._eval(0.0, z, z)
-            self.F0, self.Kq, self.Cv = F0, -K, -C  # F = F0 + Kq q + Cv v (affine, no t)
-            self.H = H
-            self.gap0 = gap0  # gaps are affine: g(q) = gap0 + H_N q
-            self.S, self.T = self._kkt(A, K, C, G)
-            self.SHt = self.S @ H.T
-            self.W = H @ self.SHt
-            self.phi_t, self.G = phi_t, G
+            _, S, T, SHt, W, gap0, H = self._eval(0.0, z, z)
+            self.S, self.T, self.SHt, self.W, self.H = S, T, SHt, W, H
+            self.gap0 = gap0  # gaps are affine here: g(q) = g(0) + H_N q
+            K, C = (np.array(x, dtype=float).reshape(self.n, self.n) for x in system.force_jac_fn(0.0, z, z))
+            self.F0 = system.force(z, z)
+            self.Kq, self.Cv = -K, -C  # F = F0 + Kq q + Cv v (affine, no t)
+            _, G, phi_t = (np.array(x, dtype=float) for x in system.constraints_fn(0.0, z))
+            self.G, self.phi_t = G.reshape(system.n_bilateral, self.n), phi_t.ravel()
             self.force_constant = not system.force_depends_on_state
 
     def _eval(self, t, q, v):
-        n, m, sys = self.n, self.m, self.sys
-        A, F, K, C, G, phi_t, gap, H = (np.array(x, dtype=float) for x in sys.step_data_fn(t, q, v))
-        return (A.reshape(n, n), F.ravel(), K.reshape(n, n), C.reshape(n, n),
-                G.reshape(sys.n_bilateral, n), phi_t.ravel(), gap.ravel(), H.reshape(2 * m, n))
-
-    def _kkt(self, A, K, C, G):
-        """S and T with  dv = S r + T c  solving  [Wh G'; G 0][dv; lam] = [r; c]."""
-        h, th, n = self.h, self.theta, self.n
-        Wh = A + h * th * C + (h * th) ** 2 * K
-        nb = G.shape[0]
-        KKT = np.block([[Wh, G.T], [G, np.zeros((nb, nb))]])
-        # NumPy's solve: SciPy's lu_solve wrapper costs milliseconds on these tiny matrices
-        try:
-            X = np.linalg.solve(KKT, np.eye(n + nb))
-        except np.linalg.LinAlgError as exc:
-            raise ValueError("singular iteration matrix: the mass matrix is singular on the constraint "
-                             "manifold") from exc
-        if not np.all(np.isfinite(X)):
-            raise ValueError("singular iteration matrix: the mass matrix is singular on the constraint manifold")
-        return X[:n, :n], X[:n, n:]
+        """CasADi's one-step data (System.one_step_fn) as NumPy arrays, checked."""
+        n, m = self.n, self.m
+        out = self.sys.one_step_fn(t, q, v, self.h, self.theta)
+        vfree, S, T, SHt, W, gap, H = (np.array(x, dtype=float) for x in out)
+        if not (np.all(np.isfinite(S)) and np.all(np.isfinite(vfree))):
+            raise FloatingPointError("singular iteration matrix: the mass matrix is singular on the "
+                                     "constraint manifold")
+        return (vfree.ravel(), S.reshape(n, n), T.reshape(n, -1), SHt.reshape(n, 2 * m),
+                W.reshape(2 * m, 2 * m), gap.ravel(), H.reshape(2 * m, n))
 
     def at(self, t, q, v):
         """(v_free, SHt, W, gap, H) at the start of a step from (t, q, v)."""
-        h, th = self.h, self.theta
         if self.constant:
-            if self.force_constant:
-                F = self.F0
-            else:
-                F = self.F0 + self.Kq @ q + self.Cv @ v
-            # theta-weighting of an affine, time-independent force, linearized exactly:
-            r = h * F + h * h * th * self.Kq @ v
-            dv = self.S @ r
+            h, th = self.h, self.theta
+            F = self.F0 if self.force_constant else self.F0 + self.Kq @ q + self.Cv @ v
+            # the theta-weighted affine force, linearized exactly (as in System.one_step_fn)
+            dv = self.S @ (h * F + h * h * th * self.Kq @ v)
             if self.T.shape[1]:
                 dv = dv + self.T @ (-self.phi_t - self.G @ v)
             return v + dv, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
-        A, F, K, C, G, phi_t, gap, H = self._eval(t, q, v)
-        F1 = np.array(self.sys.force_fn(t + h, q, v), dtype=float).ravel() if self.sys.force_depends_on_t else F
-        S, T = self._kkt(A, K, C, G)
-        r = h * ((1 - th) * F + th * F1) - h * h * th * K @ v
-        dv = S @ r
-        if G.shape[0]:
-            _, _, phi_t1 = (np.array(x, dtype=float) for x in self.sys.constraints_fn(t + h, q))
-            dv = dv + T @ (-phi_t1.ravel() - G @ v)
-        SHt = S @ H.T
-        return v + dv, SHt, H @ SHt, gap, H
+        vfree, _, _, SHt, W, gap, H = self._eval(t, q, v)
+        return vfree, SHt, W, gap, H
 
 
 def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> SimulationResult:
@@ -133,7 +110,10 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     n_steps = int(np.ceil(t_end / h * (1 - 1e-12)))
     if n_steps > 50_000_000:
         raise ValueError(f"h = {h!r} needs {n_steps} steps to reach t_end = {t_end!r}: too many")
-    asm = _Assembly(system, h, th)
+    try:
+        asm = _Assembly(system, h, th)
+    except FloatingPointError as exc:
+        raise ValueError(str(exc)) from exc
     m, n = system.n_contacts, system.n
     mu, e = system.mu, system.e
 
@@ -152,7 +132,12 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     k_done = 0
     for k in range(n_steps):
         tk = t[k]
-        vfree, SHt, W, gap, H = asm.at(tk, q, v)
+        try:
+            vfree, SHt, W, gap, H = asm.at(tk, q, v)
+        except FloatingPointError as exc:
+            status = -2
+            message = f"{STATUS_MESSAGES[-2]} Step {k} (t = {tk:.10g}): {exc}."
+            break
         if m:
             uN_minus = H[:m] @ v
             # Active when the free motion closes the gap within this step. Unlike "gap <= 0", a

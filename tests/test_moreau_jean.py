@@ -117,7 +117,7 @@ def test_shock_sweep(R, solver):
             assert res.p_N[0, 0] == pytest.approx(1.0 * 1.0 * 1.0 + h * 2 * 9.81, rel=1e-9)
             assert res.p_T[0, 0] == pytest.approx(-2.0 * 1.0, rel=1e-9)
             if theta == 1.0:
-                np.testing.assert_array_equal(res.q[:, 0], 0.0)
+                assert np.max(np.abs(res.q[:, 0])) <= 1e-15  # x stays 0 (to rounding)
         elif theta == 0.5:
             err = jean_pratt_errors(sc, res)
             assert err["x"] <= err["bound"] + X_ROUNDING
