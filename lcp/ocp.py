@@ -24,7 +24,8 @@ The discrete Coulomb law of each contact is the LCP of
     0 <= lambda perp  mu p_N - beta+ - beta-  >= 0,      u = H(q_k) v_{k+1}, u_N- = H_N(q_k) v_k.
 
 The right-hand sides are lifted into slack variables w >= 0, and each pair a perp w is relaxed as in
-Scholtes (2001): a >= 0, w >= 0, a w <= sigma. The relaxation parameter goes down geometrically;
+Scholtes (2001): a >= 0, w >= 0, a w <= sigma. The unknowns a are scaled as forces (p_N / h,
+beta / h), so a w is a power (force times velocity) and a given sigma means the same for every N. The relaxation parameter goes down geometrically;
 each NLP (one IPOPT instance, built once, sigma a parameter) is warm-started from the previous
 solution, until the Coulomb residual, recomputed independently from the optimizer's states with
 :meth:`~lcp.contact_problem.ContactProblem.residual`, is below the requested tolerance. A final
@@ -83,7 +84,8 @@ class HomotopyOptions:
     Parameters
     ----------
     sigma0 : float
-        First relaxation parameter (> 0): complementarity pairs satisfy a w <= sigma.
+        First relaxation parameter (> 0): complementarity pairs satisfy a w <= sigma (a force times
+        a velocity, in W).
     factor : float
         sigma is multiplied by this factor (in (0, 1)) after each stage.
     sigma_min : float
@@ -653,7 +655,6 @@ class OptimalControlProblem:
             ubg.append(np.broadcast_to(hi, (expr.shape[0],)).astype(float))
 
         J = ca.SX(0)
-        self._steps_sym = []
         for k in range(N):
             blk = {}
             for nm in names:

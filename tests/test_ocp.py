@@ -1,0 +1,282 @@
+"""lcp.ocp: optimal control through frictional contact (MPCC, Scholtes homotopy, replay).
+
+Reference values are closed-form (physics.md section 2, forward sliding D a = u - c with
+c = R (m+M) g and D = A (1 - kappa)):
+- minimum time from rest to rest over d with |u| <= u_max: bang-bang, T* = sqrt(2 d (1/a1 + 1/a2)),
+  a1 = (u_max - c)/D, a2 = (u_max + c)/D;
+- minimum int u^2 dt: J* = 4/3 c^2 L*, L* = (36 D^2 d^2 / c^2)^(1/4);
+- smallest peak normal force when stopping from v0 by T: (m+M) g + M tan(alpha) v0 / T.
+"""
+import math
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import lcp
+from lcp.ocp import (HomotopyOptions, OCPGuess, OCPResult, OptimalControlProblem, controlled_system, effort,
+                     replay, tangential_push)
+
+G = 9.81
+D_TARGET, U_MAX = 0.5, 20.0
+R_REST = 0.5
+
+
+def _consts(R):
+    kappa = R / 2.0  # m = M = 1, alpha = pi/4: A = 2, M t = 1
+    return R * 2 * G, 2.0 * (1.0 - kappa)
+
+
+def t_star(R=R_REST, d=D_TARGET, umax=U_MAX):
+    c, D = _consts(R)
+    return math.sqrt(2 * d * (D / (umax - c) + D / (umax + c)))
+
+
+def j_star(R=R_REST, d=D_TARGET):
+    c, D = _consts(R)
+    return 4.0 / 3.0 * c * c * (36 * D * D * d * d / (c * c)) ** 0.25
+
+
+def rest_problem(N, objective="time", coordinates="reduced", **kw):
+    sc = lcp.scenes.jean_pratt(R=R_REST, v0=0.0, coordinates=coordinates)
+    common = dict(control_matrix=tangential_push(sc.system), u_min=-U_MAX, u_max=U_MAX,
+                  terminal_constraints=lambda q, v: ca.vertcat(q[0] - D_TARGET, v[0]))
+    common.update(kw)
+    if objective == "time":
+        return OptimalControlProblem(sc, N, T=1.0, free_time=True, T_bounds=(0.05, 5.0),
+                                     terminal_cost=lambda T, q, v: T, **common)
+    return OptimalControlProblem(sc, N, T=1.0, stage_cost=effort, **common)
+
+
+def shock_problem(N, R=1.9, T=0.2):
+    sc = lcp.scenes.jean_pratt(R=R, v0=1.0)
+    return OptimalControlProblem(sc, N, control_matrix=tangential_push(sc.system), u_min=-39.0, u_max=39.0,
+                                 T=T, max_cost=lambda s: s.N[0], terminal_constraints=lambda q, v: v[0],
+                                 control_rate_weight=1e-6)
+
+
+@pytest.fixture(scope="module")
+def min_time():
+    return {N: rest_problem(N).solve() for N in (10, 20, 40)}
+
+
+# ---------------------------------------------------------------------------------------- problem 1
+def test_min_time_solution(min_time):
+    for N, res in min_time.items():
+        assert isinstance(res, OCPResult)
+        assert res.success and res.status == 0, res.message
+        assert res.complementarity_residual <= 1e-8
+        assert res.lcp_residual <= 1e-8
+        assert res.dynamics_residual <= 1e-10
+        assert res.inactive_conflicts == 0
+        # boundary conditions
+        assert res.q[0, 0] == 0.0 and res.v[0, 0] == 0.0
+        assert abs(res.q[-1, 0] - D_TARGET) <= 1e-9
+        assert abs(res.v[-1, 0]) <= 1e-9
+        assert np.max(np.abs(res.q[:, 1])) <= 1e-12  # the block never leaves the line
+        # control bounds
+        assert np.all(np.abs(res.u) <= U_MAX * (1 + 1e-12))
+        # not better than the continuous bang-bang optimum, and close to it
+        assert t_star() * (1 - 1e-9) <= res.T <= t_star() * (1 + 0.1 / N)
+        # shape of the answer: slide forward all the way, stop in the last step
+        assert np.all(res.modes[:-1, 0] == lcp.contact_problem.SLIDE_POS)
+        assert np.all(res.N > 0)
+        assert res.t.shape == (N + 1,) and res.u.shape == (N + 1, 1) and res.p_N.shape == (N, 1)
+        assert res.h == pytest.approx(res.T / N, rel=1e-14)
+
+
+def test_min_time_bang_bang(min_time):
+    res = min_time[40]
+    u = res.u[:, 0]
+    # bang-bang with one switch (one interval of ramp for the linear hold)
+    assert np.sum(np.abs(np.abs(u) - U_MAX) > 1e-6) <= 1
+    assert np.all(np.diff(u) <= 1e-6)
+
+
+def test_homotopy_history(min_time):
+    res = min_time[20]
+    relax = [s for s in res.homotopy if s.sigma > 0]
+    sig = [s.sigma for s in relax]
+    assert sig[0] == 1.0 and np.allclose(np.diff(np.log10(sig)), -1.0)
+    # the relaxation alone reaches the tolerance; the residual falls in proportion to sigma
+    assert relax[-1].residual <= 1e-8 < relax[-2].residual
+    assert all(s.max_product <= 1.01 * s.sigma for s in relax)
+    assert all(s.success for s in res.homotopy)
+    assert res.homotopy_steps == len(relax)
+    assert res.homotopy[-1].sigma == 0.0  # the polishing solve
+    assert res.iterations == sum(s.iterations for s in res.homotopy)
+    # the cost rises towards the MPCC optimum as the relaxation tightens
+    costs = [s.cost for s in relax]
+    assert np.all(np.diff(costs) >= -1e-9)
+
+
+def test_replay_same_h_reproduces_the_optimizer(min_time):
+    for res in min_time.values():
+        rp = replay(res, refine=1)
+        assert rp.sim.success
+        assert rp.max_error_q <= 1e-10
+        assert rp.max_error_v <= 1e-9
+
+
+def test_replay_mismatch_converges_with_N(min_time):
+    errs = [replay(min_time[N], refine=10).error_q[0] for N in (10, 20, 40)]
+    assert errs[0] > errs[1] > errs[2]
+    # second order: each doubling of N divides the mismatch by about 4
+    assert errs[0] / errs[1] > 3.0 and errs[1] / errs[2] > 3.0
+    assert errs[2] < 5e-4
+
+
+def test_event_replay_agrees(min_time):
+    pytest.importorskip("lcp.events")
+    res = min_time[20]
+    ev = replay(res, method="event")
+    mj = replay(res, refine=20)
+    assert ev.sim.success
+    assert np.max(np.abs(ev.q - mj.q)) < 1e-5  # both resolve the continuous response
+    assert ev.error_q[0] == pytest.approx(mj.error_q[0], rel=0.02)
+
+
+def test_min_effort():
+    for N in (10, 20):
+        res = rest_problem(N, "effort").solve()
+        assert res.success and res.complementarity_residual <= 1e-8
+        assert abs(res.q[-1, 0] - D_TARGET) <= 1e-9 and abs(res.v[-1, 0]) <= 1e-9
+        assert np.all(np.abs(res.u) <= U_MAX * (1 + 1e-12))
+        assert j_star() <= res.cost <= j_star() * (1 + 1.0 / N)
+        # the block sticks first and last: the optimizer does not push while it waits
+        assert res.modes[0, 0] == lcp.contact_problem.STICK and res.modes[-1, 0] == lcp.contact_problem.STICK
+        assert abs(res.u[-1, 0]) < 0.1 * R_REST * 2 * G
+
+
+def test_path_constraint_caps_the_normal_force():
+    cap = 30.0
+    res = rest_problem(20, path_constraints=lambda s: s.N[0] - cap).solve()
+    free = rest_problem(20).solve()
+    assert res.success and res.complementarity_residual <= 1e-8
+    assert res.N.max() <= cap + 1e-6
+    assert free.N.max() > 39.0  # braking at -u_max presses the block with ~39.5 N
+    assert res.T > free.T
+
+
+def test_full_coordinates_match_reduced(min_time):
+    res = rest_problem(20, coordinates="full").solve()
+    assert res.success and res.complementarity_residual <= 1e-8
+    assert res.T == pytest.approx(min_time[20].T, rel=1e-8)
+    assert replay(res, refine=1).max_error_q <= 1e-10
+
+
+def test_warm_start_from_another_N(min_time):
+    res = rest_problem(40).solve(guess=min_time[20])
+    assert res.success
+    assert res.T == pytest.approx(min_time[40].T, rel=1e-8)
+
+
+# ---------------------------------------------------------------------------------------- problem 2
+def test_shock_avoidance_peak():
+    R, T, N = 1.9, 0.2, 20
+    sc = lcp.scenes.jean_pratt(R=R, v0=1.0)
+    bound = 2 * G + 1.0 / T
+    res = shock_problem(N, R, T).solve()
+    assert res.success and res.complementarity_residual <= 1e-8
+    assert res.peak == pytest.approx(bound, rel=1e-8)
+    assert res.N.max() <= bound * (1 + 1e-8)
+    assert abs(res.v[-1, 0]) <= 1e-9
+    assert np.all(np.abs(res.u) <= 39.0 * (1 + 1e-12))
+    assert sc.N0 / res.peak > 15  # 392 N uncontrolled
+    # a constant deceleration: u just below the friction force R (m+M) g
+    assert np.allclose(res.u[:, 0], R * 2 * G - 2 * (1 - sc.kappa) * 1.0 / T, atol=1e-3)
+    rp = replay(res, refine=20)
+    assert rp.sim.N.max() <= bound * 1.001
+    assert rp.max_error_q <= 1e-6
+
+
+# ---------------------------------------------------------------------------------------- general model
+def test_two_contacts_block_chain():
+    sc = lcp.scenes.block_chain(2, v0=[0.0, 0.0], k_spring=50.0, mu=0.3, damping=2.0)
+    ocp = OptimalControlProblem(sc, 20, control_matrix=tangential_push(sc.system, 0), u_min=-15, u_max=15,
+                                T=2.0, stage_cost=effort,
+                                terminal_constraints=lambda q, v: ca.vertcat(q[0] - 0.3, q[2] - 1.3, v[0], v[2]))
+    res = ocp.solve()
+    assert res.success and res.complementarity_residual <= 1e-8
+    assert res.p_N.shape == (20, 2)
+    assert np.abs(res.q[-1, [0, 2]] - [0.3, 1.3]).max() <= 1e-8
+    assert set(np.unique(res.modes)) <= {lcp.contact_problem.STICK, lcp.contact_problem.SLIDE_POS,
+                                         lcp.contact_problem.SLIDE_NEG}
+    assert replay(res, refine=1).max_error_q <= 1e-9
+
+
+def test_controlled_system_and_push():
+    sc = lcp.scenes.jean_pratt(v0=0.0)
+    B = tangential_push(sc.system)
+    assert np.array(ca.evalf(B)).ravel().tolist() == [1.0, 0.0]
+    s = controlled_system(sc.system, B, [0.0, 1.0, 2.0], [0.0, 10.0, -10.0])
+    assert s.force_depends_on_t
+    assert s.force([0, 0], [0, 0], t=0.5)[0] == pytest.approx(5.0)
+    assert s.force([0, 0], [0, 0], t=1.5)[0] == pytest.approx(0.0)
+    assert s.force([0, 0], [0, 0], t=1.5)[1] == pytest.approx(-2 * G)
+
+
+def test_guess_from_simulation():
+    ocp = rest_problem(10)
+    gs = ocp.guess(u=0.0)
+    assert isinstance(gs, OCPGuess) and gs.source == "simulation"
+    assert np.all(gs.q == 0.0)  # |u| = 0 < R (m+M) g: the block stays stuck
+    assert gs.p_N[:, 0] == pytest.approx(2 * G * gs.T / 10)
+    gs2 = ocp.guess(u=lambda t: 15.0, T=0.5)
+    assert gs2.u.shape == (11, 1) and gs2.q[-1, 0] > 0
+    res = rest_problem(10).solve()
+    assert np.allclose(res.control(res.t), res.u)
+
+
+def test_failure_statuses():
+    # too few stages and no polishing: the residual stays above tolerance
+    res = rest_problem(10).solve(sigma0=1.0, sigma_min=1e-3, polish=False)
+    assert res.status == -2 and not res.success
+    assert "residual" in res.message and res.complementarity_residual > 1e-8
+    # an iteration cap that stops IPOPT in the first stage
+    res = rest_problem(10).solve(max_iter=2)
+    assert res.status == -1 and not res.success and "Stage 0" in res.message
+
+
+# ---------------------------------------------------------------------------------------- validation
+@pytest.mark.parametrize("kw, name", [
+    (dict(N=0), "N"), (dict(N=2.5), "N"), (dict(u_min=5.0, u_max=1.0), "u_min"),
+    (dict(theta=0.3), "theta"), (dict(T=-1.0), "T"), (dict(T=10.0, free_time=True, T_bounds=(0.1, 1.0)), "T"),
+    (dict(T_bounds=(2.0, 1.0)), "T_bounds"), (dict(control_matrix=np.ones(3)), "control_matrix"),
+    (dict(stage_cost=3.0), "stage_cost"), (dict(control_rate_weight=-1.0), "control_rate_weight"),
+])
+def test_bad_problem_input(kw, name):
+    sc = lcp.scenes.jean_pratt(v0=0.0)
+    args = dict(N=10, control_matrix=tangential_push(sc.system))
+    args.update(kw)
+    N = args.pop("N")
+    with pytest.raises(ValueError, match=name):
+        OptimalControlProblem(sc, N, **args)
+
+
+def test_bad_inputs_misc():
+    sc = lcp.scenes.jean_pratt(v0=0.0)
+    with pytest.raises(ValueError, match="control_matrix"):
+        OptimalControlProblem(sc, 5, control_matrix=ca.vertcat(sc.system.v_sym[0], 0))
+    with pytest.raises(ValueError, match="q0"):
+        OptimalControlProblem(sc.system, 5, control_matrix=[1, 0])
+    with pytest.raises(ValueError, match="contact"):
+        tangential_push(sc.system, 3)
+    for kw, name in [(dict(factor=1.5), "factor"), (dict(sigma0=1e-3, sigma_min=1e-2), "sigma_min"),
+                     (dict(tol=0.0), "tol"), (dict(max_iter=0), "max_iter")]:
+        with pytest.raises(ValueError, match=name):
+            HomotopyOptions(**kw)
+    ocp = rest_problem(5)
+    with pytest.raises(ValueError, match="options"):
+        ocp.solve(options=HomotopyOptions(), sigma0=0.5)
+    with pytest.raises(ValueError, match="guess"):
+        ocp.solve(guess=[1, 2, 3])
+    bad = OptimalControlProblem(sc, 5, control_matrix=tangential_push(sc.system),
+                                stage_cost=lambda s: ca.vertcat(s.u0, s.u1))
+    with pytest.raises(ValueError, match="stage_cost"):
+        bad.solve()
+    res = rest_problem(5).solve()
+    with pytest.raises(ValueError, match="refine"):
+        replay(res, refine=0)
+    with pytest.raises(ValueError, match="result"):
+        replay("not a result")
