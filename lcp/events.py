@@ -786,10 +786,21 @@ class _OdePhase(_Phase):
 
 
 # --------------------------------------------------------------------------------- integrator
+_MODELS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def _model(system) -> _Model:
+    """The evaluator of a system, built once (a constant system is then assembled only once)."""
+    model = _MODELS.get(system)
+    if model is None:
+        model = _MODELS[system] = _Model(system)
+    return model
+
+
 class _Integrator:
     def __init__(self, system, q0, v0, t_end, options: EventOptions):
         self.sys = system
-        self.model = _Model(system)
+        self.model = _model(system)
         self.o = options
         self.t_end = t_end
         self.mu, self.e = system.mu, system.e
