@@ -25,12 +25,13 @@ The discrete Coulomb law of each contact is the LCP of
 
 The right-hand sides are lifted into slack variables w >= 0, and each pair a perp w is relaxed as in
 Scholtes (2001): a >= 0, w >= 0, a w <= sigma. The unknowns a are scaled as forces (p_N / h,
-beta / h), so a w is a power (force times velocity) and a given sigma means the same for every N. The relaxation parameter goes down geometrically;
-each NLP (one IPOPT instance, built once, sigma a parameter) is warm-started from the previous
-solution, until the Coulomb residual, recomputed independently from the optimizer's states with
-:meth:`~lcp.contact_problem.ContactProblem.residual`, is below the requested tolerance. A final
-polishing solve fixes, pair by pair, the smaller member at zero (the active set the homotopy has
-identified), which makes the complementarity exact (as nosnoc's polishing step does).
+beta / h), so a w is a power (force times velocity) and a given sigma means the same for every N.
+The relaxation parameter goes down geometrically; each NLP (one IPOPT instance, built once, sigma
+a parameter) is warm-started from the previous solution, until the Coulomb residual, recomputed
+independently from the optimizer's states with :meth:`~lcp.contact_problem.ContactProblem.residual`,
+is below the requested tolerance. A final polishing solve fixes, pair by pair, the smaller member at
+zero (the active set the homotopy has identified), which makes the complementarity exact (as
+nosnoc's polishing of the homotopy solution); it is kept only if IPOPT converges and the residual does not grow.
 
 Limitation: every contact is treated as active at every step (the velocity-level law). Moreau-Jean
 also skips a contact whose predicted gap is positive; :attr:`OCPResult.inactive_conflicts` counts
@@ -875,7 +876,7 @@ class OptimalControlProblem:
         if best is not None and status == -2:
             message = (f"{OCP_STATUS_MESSAGES[-2]} Residual {best[2]['residual']:.3g} > tol = {options.tol:.3g} "
                        f"at sigma = {history[-1].sigma:.3g}.")
-        if best is not None and options.polish and status >= -2:
+        if best is not None and options.polish:
             pol = self._polish(best[0], lam_x, lam_g, P0, warm)
             if pol is not None:
                 xp, fp, diagp, st, dt = pol
@@ -884,8 +885,10 @@ class OptimalControlProblem:
                                              fp, st["return_status"], okp, dt))
                 if okp and diagp["residual"] <= max(best[2]["residual"], options.tol):
                     best = (xp, fp, diagp)
-                    if diagp["residual"] <= options.tol:
-                        status, message = 0, OCP_STATUS_MESSAGES[0]
+                    if diagp["residual"] <= options.tol and status != 0:
+                        # the last converged stage identified the active set; polishing finished it
+                        message = (f"{OCP_STATUS_MESSAGES[0]} (By the polishing solve; before it: {message})")
+                        status = 0
                 elif status == 0:
                     status, message = 1, OCP_STATUS_MESSAGES[1]
         solve_time = time.perf_counter() - t_solve

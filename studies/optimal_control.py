@@ -324,7 +324,8 @@ def _fig_sweep(sweep, path):
     ax.semilogy(k, [r["N0"] for r in sweep], "o-", color="0.4", label="uncontrolled peak N0 = (m+M)g/(1-kappa)")
     ax.semilogy(k, [r["peak_uncontrolled"] for r in sweep], "x", color="k", label="uncontrolled, simulated")
     ax.semilogy(k, [r["peak_opt"] for r in sweep], "s-", color="tab:blue", label="optimal control: peak (optimizer)")
-    ax.semilogy(k, [r["peak_replay"] for r in sweep], "+", ms=10, color="tab:red", label="optimal control: peak (replay)")
+    ax.semilogy(k, [r["peak_replay"] for r in sweep], "+", ms=10, color="tab:red",
+                label="optimal control: peak (replay)")
     ax.semilogy(k, [r["bound"] for r in sweep], ":", color="tab:blue", label="bound (m+M)g + Mt v0/T")
     ax.set_xlabel(r"shock number $\kappa$ = R M tan(alpha) / A")
     ax.set_ylabel("peak normal force [N]")
