@@ -569,10 +569,13 @@ class _ClosedFormPhase(_Phase):
     integrator = "closed-form"
     nfev = 0
 
-    def __init__(self, *args):
+    def __init__(self, *args, start=None):
         super().__init__(*args)
-        data = self.model.data(self.t0, self.q0, self.v0)
-        self.qdd, N, f = self.accel(data)
+        if start is None:
+            data = self.model.data(self.t0, self.q0, self.v0)
+            self.qdd, N, f = self.accel(data)
+        else:  # the accelerations and forces the mode decision already solved for
+            self.qdd, N, f = start
         # The constraints of this mode hold at the acceleration level up to rounding (1e-16 |qdd|),
         # which dt^2/2 amplifies over long phases; one mass-metric projection makes it eps^2.
         rows = [self.model.G, self.model.H[self.idx], self.model.H[self.model.m + self.idx[self.slide == 0]]]
@@ -983,9 +986,11 @@ class _Integrator:
             self.events.append(Event(float(t), kind, int(contacts[0]) if k == 1 else -1))
 
     def decide(self, t, q, v):
-        """Apply impulses where needed, then return (closed, modes) of the next phase.
+        """Apply impulses where needed, then find the modes of the next phase.
 
-        Returns (q, v, closed, modes) or raises _Inconsistent.
+        Returns (q, v, closed, solution, problem): the contacts at the surface, the chosen
+        solution of their acceleration-level problem (None if there are none) and that problem;
+        raises _Inconsistent when no motion can be continued.
         """
         for _ in range(8):
             data = self.model.data(t, q, v)
@@ -1000,13 +1005,13 @@ class _Integrator:
                 self.record_impulse(t, at, p, "impact", "gap closed with approach velocity")
                 continue
             if not closed.size:
-                return q, v, closed, ()
+                return q, v, closed, None, None
             slide = self.slide_signs(closed, u)
             groups, acc = self.solve_modes(data, closed, slide)
             if len(groups) == 1:
                 group = groups[0]
                 sol = group[0] if len(group) == 1 else self.lookahead(t, q, v, closed, slide, group, data)
-                return q, v, closed, sol.modes
+                return q, v, closed, sol, acc
             self.stats.ambiguous_steps += int(len(groups) > 1)
             why = ("no consistent contact mode (Painleve: no solution)" if not groups else
                    f"{len(groups)} consistent contact modes (Painleve: non-uniqueness)")
@@ -1024,8 +1029,8 @@ class _Integrator:
                 for g in groups:
                     for s in g:
                         if all((im == OPEN) == (sm == OPEN) for im, sm in zip(imodes, s.modes)):
-                            return q, v, closed, s.modes
-                return q, v, closed, groups[0][0].modes
+                            return q, v, closed, s, acc
+                return q, v, closed, groups[0][0], acc
             raise _Inconsistent(f"at t = {t:.17g}: {why}; the impulsive fallback gives no impulse")
         raise _Inconsistent(f"at t = {t:.17g}: impulses did not lead to a consistent contact mode")
 
@@ -1039,16 +1044,24 @@ class _Integrator:
         short = 0
         while True:
             try:
-                q, v, closed, modes = self.decide(t, q, v)
+                q, v, closed, sol, acc = self.decide(t, q, v)
             except _Inconsistent as exc:
                 status, message = -3, f"{EVENT_STATUS_MESSAGES[-3]} {exc}"
                 break
+            modes = sol.modes if sol is not None else ()
             keep = [i for i, md in enumerate(modes) if md != OPEN]
-            closed = closed[keep]
-            modes = tuple(modes[i] for i in keep)
-            cls = _ClosedFormPhase if self.closed_form else _OdePhase
-            args = (self.model, t, q, v, P, closed, modes, self.mu)
-            ph = cls(*args) if self.closed_form else cls(*args, options=o, scales=self.scales)
+            args = (self.model, t, q, v, P, closed[keep], tuple(modes[i] for i in keep), self.mu)
+            if self.closed_form:
+                Nm, fm = np.zeros(m), np.zeros(m)
+                if sol is not None:
+                    Nm[closed], fm[closed] = acc.forces(sol.p)  # zero for the contacts that open
+                    start = (sol.qdd, Nm[closed[keep]], fm[closed[keep]])
+                else:
+                    start = (self.model.data(t, q, v).qdd_free, Nm[:0], fm[:0])
+                ph = _ClosedFormPhase(*args, start=start)
+            else:
+                ph = _OdePhase(*args, options=o, scales=self.scales)
+            closed, modes = ph.idx, ph.modes
             try:
                 ev = ph.run(self.t_end)
             except FloatingPointError as exc:
