@@ -23,10 +23,90 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["OPEN", "STICK", "SLIDE_POS", "SLIDE_NEG", "MODE_NAMES", "ContactProblem"]
+__all__ = ["OPEN", "STICK", "SLIDE_POS", "SLIDE_NEG", "MODE_NAMES", "ContactProblem", "planar_enum",
+           "PY_OPS", "NUMPY_OPS", "CASADI_OPS"]
 
 OPEN, STICK, SLIDE_POS, SLIDE_NEG = 0, 1, 2, 3
 MODE_NAMES = {OPEN: "open", STICK: "stick", SLIDE_POS: "slide+", SLIDE_NEG: "slide-"}
+
+
+class _Ops:
+    """The few operations :func:`planar_enum` needs, for one number type."""
+
+    def __init__(self, where, maximum, minimum):
+        self.where, self.maximum, self.minimum = where, maximum, minimum
+
+
+#: plain Python floats (the per-step solver), NumPy arrays (many scenes at once), CasADi SX (compiled steps)
+PY_OPS = _Ops(lambda c, a, b: a if c else b, max, min)
+NUMPY_OPS = _Ops(np.where, np.maximum, np.minimum)
+
+
+def _casadi_ops():
+    import casadi as ca
+
+    return _Ops(ca.if_else, ca.fmax, ca.fmin)
+
+
+class _LazyCasadiOps:
+    def __getattr__(self, name):
+        ops = _casadi_ops()
+        return getattr(ops, name)
+
+
+CASADI_OPS = _LazyCasadiOps()
+
+
+def planar_enum(W00, W01, W10, W11, qN, qT, mu, ops=PY_OPS, rtol: float = 1e-12):
+    """Closed-form solution of the discrete Coulomb problem of one planar contact.
+
+    u = W p + q with p = (p_N, p_T): the four cases are tried in the order open (p = 0, q_N >= 0),
+    stick (u = 0), slide+ (u_T > 0, p_T = -mu p_N), slide- (u_T < 0, p_T = mu p_N), and the first
+    admissible one is returned. A sliding case whose normal coefficient W_NN -+ mu W_NT is not
+    positive is the Painleve branch and is never admissible with p_N >= 0 pressing.
+
+    Written once for every number type: ``ops`` selects plain floats (:data:`PY_OPS`), NumPy
+    arrays elementwise (:data:`NUMPY_OPS`) or CasADi SX (:data:`CASADI_OPS`, for compiled steps).
+
+    Returns
+    -------
+    pN, pT : impulses (NaN where no case is admissible)
+    mode : OPEN, STICK, SLIDE_POS, SLIDE_NEG, or -1 where no case is admissible
+    n_distinct : number of admissible cases whose impulses differ from the returned one by more
+        than 1e-9 of the problem's scale, plus one (so > 1 flags several solutions)
+    """
+    where, fmax = ops.where, ops.maximum
+    scale = fmax(fmax(abs(qN) / W00, abs(qT) / W11), 1e-300)
+    tol = rtol * scale
+    open_ok = (qN / W00) >= -tol
+    det = W00 * W11 - W01 * W10
+    det_ok = det > 0
+    dets = where(det_ok, det, 1.0)
+    pN_st = (-qN * W11 + qT * W01) / dets
+    pT_st = (-qT * W00 + qN * W10) / dets
+    st_ok = det_ok * (pN_st >= -tol) * (abs(pT_st) <= mu * pN_st + tol)
+    a_p = W00 - mu * W01
+    ok_p = a_p > 0
+    pN_p = -qN / where(ok_p, a_p, 1.0)
+    uT_p = (W10 - mu * W11) * pN_p + qT
+    sp_ok = ok_p * (pN_p >= -tol) * ((uT_p / W11) > -tol)
+    a_m = W00 + mu * W01
+    ok_m = a_m > 0
+    pN_m = -qN / where(ok_m, a_m, 1.0)
+    uT_m = (W10 + mu * W11) * pN_m + qT
+    sm_ok = ok_m * (pN_m >= -tol) * ((uT_m / W11) < tol)
+    nan = float("nan")
+    pN = where(open_ok, 0.0, where(st_ok, pN_st, where(sp_ok, pN_p, where(sm_ok, pN_m, nan))))
+    pT = where(open_ok, 0.0, where(st_ok, pT_st, where(sp_ok, -mu * pN_p, where(sm_ok, mu * pN_m, nan))))
+    mode = where(open_ok, OPEN, where(st_ok, STICK, where(sp_ok, SLIDE_POS, where(sm_ok, SLIDE_NEG, -1))))
+    far = 1e-9 * scale
+
+    def differs(ok, a, b):
+        return ok * ((abs(a - pN) + abs(b - pT)) > far)
+
+    n_distinct = (1 + differs(open_ok, 0.0, 0.0) + differs(st_ok, pN_st, pT_st)
+                  + differs(sp_ok, pN_p, -mu * pN_p) + differs(sm_ok, pN_m, mu * pN_m))
+    return pN, pT, mode, n_distinct
 
 
 @dataclass

@@ -22,7 +22,8 @@ METHODS = {"moreau-jean": moreau_jean, "event": _event}
 
 def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 0.5,
              solver: str = "auto", method: str = "moreau-jean", q0=None, v0=None,
-             solver_options: dict | None = None, **method_options) -> SimulationResult:
+             solver_options: dict | None = None, fallback: bool = True, save_every: int = 1,
+             fast: bool = True, **method_options) -> SimulationResult:
     """Simulate a scene (or a bare :class:`~lcp.system.System` with ``q0`` and ``v0``).
 
     Parameters
@@ -45,6 +46,14 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
         Initial state (required for a bare System, overriding the scene's otherwise).
     solver_options : dict, optional
         Keyword arguments of the solver class (e.g. ``eps_abs`` for OSQP).
+    fallback : bool
+        Retry a step on which the chosen solver failed with an exact one (counted in
+        ``stats.fallbacks`` and named in ``message``); with False the run stops there.
+    save_every : int
+        Keep every ``save_every``-th state only (long runs).
+    fast : bool
+        Use the compiled path when it applies (constant system, one contact, ``"auto"`` or
+        ``"enum"``); the results are the same.
     **method_options
         Options of the chosen method other than Moreau-Jean's (see :mod:`lcp.events`).
 
@@ -83,7 +92,8 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
     if method == "moreau-jean":
         if method_options:
             raise ValueError(f"unknown options for method 'moreau-jean': {sorted(method_options)}")
-        opts = MoreauJeanOptions(h=h, theta=theta, solver=solver, solver_options=solver_options)
+        opts = MoreauJeanOptions(h=h, theta=theta, solver=solver, solver_options=solver_options,
+                                 fallback=fallback, save_every=save_every, fast=fast)
         return moreau_jean(system, q0, v0, float(t_end), opts)
     return METHODS[method](system, q0, v0, float(t_end), scene=scene if isinstance(scene, Scene) else None,
                            **method_options)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .contact_problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem
+from .contact_problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem, planar_enum
 from .lemke import lemke
 
 __all__ = ["StepSolution", "OneStepSolver", "EnumSolver", "LemkeSolver", "OsqpSolver",
@@ -109,33 +109,12 @@ class EnumSolver(OneStepSolver):
         return problem.k == 1
 
     def _solve(self, pb):
-        W, q, mu = pb.W, pb.q, pb.mu[0]
-        scale = pb.scale
-        tol = 1e-12 * scale
-        found = []
-        # open: no impulse, the free motion does not penetrate
-        if q[0] * pb.rho[0] >= -tol:
-            found.append(np.zeros(2))
-        det = W[0, 0] * W[1, 1] - W[0, 1] * W[1, 0]
-        if det > 0:  # stick: u = 0
-            pN = (-q[0] * W[1, 1] + q[1] * W[0, 1]) / det
-            pT = (-q[1] * W[0, 0] + q[0] * W[1, 0]) / det
-            if pN >= -tol and abs(pT) <= mu * pN + tol:
-                found.append(np.array([pN, pT]))
-        for sgn in (1.0, -1.0):  # slide+ (u_T > 0, p_T = -mu p_N), slide- (u_T < 0, p_T = mu p_N)
-            a = W[0, 0] - sgn * mu * W[0, 1]
-            if a <= 0:
-                continue  # the Painleve branch: no sliding solution with p_N >= 0 pressing down
-            pN = -q[0] / a
-            if pN < -tol:
-                continue
-            uT = (W[1, 0] - sgn * mu * W[1, 1]) * pN + q[1]
-            if sgn * uT * pb.rho[1] > -tol:
-                found.append(np.array([pN, -sgn * mu * pN]))
-        if not found:
+        W, q = pb.W, pb.q
+        pN, pT, mode, n_distinct = planar_enum(float(W[0, 0]), float(W[0, 1]), float(W[1, 0]), float(W[1, 1]),
+                                               float(q[0]), float(q[1]), float(pb.mu[0]))
+        if mode < 0:
             return StepSolution(np.full(2, np.nan), -1, "enumeration found no admissible case", 4)
-        distinct = [found[0]] + [f for f in found[1:] if np.max(np.abs(f - found[0])) > 1e-9 * max(scale, 1e-300)]
-        return StepSolution(found[0], 0, "solved", 4, ambiguous=len(distinct) > 1)
+        return StepSolution(np.array([pN, pT]), 0, "solved", 4, ambiguous=n_distinct > 1)
 
 
 class LemkeSolver(OneStepSolver):

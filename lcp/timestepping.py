@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import compiled
 from .contact_problem import MODE_NAMES, ContactProblem
 from .result import STATUS_MESSAGES, SimulationResult, SolverStats
 from .solvers import make_solver
@@ -36,12 +37,26 @@ class MoreauJeanOptions:
         One-step solver name (``"auto"``, ``"enum"``, ``"lemke"``, ``"osqp"``).
     solver_options : dict, optional
         Keyword arguments for the solver.
+    fallback : bool
+        When the chosen one-step solver fails on a step, retry that step with an exact one
+        (enumeration for one contact, Lemke otherwise); every such step is counted in
+        ``stats.fallbacks`` and named in the message. With False the run stops at the failure.
+    save_every : int
+        Keep every ``save_every``-th state (and the impulses of the step that reached it), so that
+        long runs do not store what nobody asked for.
+    fast : bool
+        Use the compiled path (:mod:`lcp.compiled`) when it applies: a constant system with one
+        contact and the closed-form solver (``"auto"`` or ``"enum"``). Same results, no Python
+        per step.
     """
 
     h: float
     theta: float = 0.5
     solver: str = "auto"
     solver_options: dict | None = None
+    fallback: bool = True
+    save_every: int = 1
+    fast: bool = True
 
     def __post_init__(self):
         h = self.h
@@ -50,6 +65,8 @@ class MoreauJeanOptions:
         th = self.theta
         if not isinstance(th, (int, float, np.floating)) or not np.isfinite(th) or not 0.5 <= th <= 1.0:
             raise ValueError(f"theta must lie in [1/2, 1], got {th!r}")
+        if not isinstance(self.save_every, (int, np.integer)) or self.save_every < 1:
+            raise ValueError(f"save_every must be an integer >= 1, got {self.save_every!r}")
 
 
 class _Assembly:
@@ -87,7 +104,7 @@ class _Assembly:
                 W.reshape(2 * m, 2 * m), gap.ravel(), H.reshape(2 * m, n))
 
     def at(self, t, q, v):
-        """(v_free, SHt, W, gap, H) at the start of a step from (t, q, v)."""
+        """(v_free - v, SHt, W, gap, H) at the start of a step from (t, q, v)."""
         if self.constant:
             h, th = self.h, self.theta
             F = self.F0 if self.force_constant else self.F0 + self.Kq @ q + self.Cv @ v
@@ -95,9 +112,24 @@ class _Assembly:
             dv = self.S @ (h * F + h * h * th * self.Kq @ v)
             if self.T.shape[1]:
                 dv = dv + self.T @ (-self.phi_t - self.G @ v)
-            return v + dv, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
+            return dv, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
         vfree, _, _, SHt, W, gap, H = self._eval(t, q, v)
-        return vfree, SHt, W, gap, H
+        return vfree - v, SHt, W, gap, H
+
+
+def _kahan(s, inc, comp):
+    """s + inc by Kahan's compensated sum: (new sum, new compensation)."""
+    y = inc - comp
+    t = s + y
+    return t, (t - s) - y
+
+
+def _fallback_for(solver, k: int):
+    """The exact solver that retries a failed step (None if the failed one was already that)."""
+    name = "enum" if k == 1 else "lemke"
+    if solver.name in (name, "auto"):
+        return None if solver.name == name or k > 1 else make_solver("lemke")
+    return make_solver(name)
 
 
 def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> SimulationResult:
@@ -108,32 +140,40 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     h, th = float(options.h), float(options.theta)
     solver = make_solver(options.solver, **(options.solver_options or {}))
     n_steps = int(np.ceil(t_end / h * (1 - 1e-12)))
-    if n_steps > 50_000_000:
+    if n_steps > 2_000_000_000:
         raise ValueError(f"h = {h!r} needs {n_steps} steps to reach t_end = {t_end!r}: too many")
+    every = int(options.save_every)
     try:
         asm = _Assembly(system, h, th)
     except FloatingPointError as exc:
         raise ValueError(str(exc)) from exc
+    if options.fast and solver.name in ("auto", "enum") and compiled.applicable(system):
+        return _moreau_jean_compiled(asm, q0, v0, n_steps, every, solver.name)
+    if n_steps // every > 50_000_000:
+        raise ValueError(f"{n_steps // every} saved states would not fit in memory: raise save_every")
     m, n = system.n_contacts, system.n
     mu, e = system.mu, system.e
 
-    # uniform steps: the last time is n_steps h, the first grid point at or after t_end
-    t = h * np.arange(n_steps + 1)
-    Q = np.empty((n_steps + 1, n))
-    V = np.empty((n_steps + 1, n))
-    PN = np.zeros((n_steps, m))
-    PT = np.zeros((n_steps, m))
-    modes = np.full((n_steps, m), -1, dtype=np.int8)
+    n_saved = n_steps // every
+    Q = np.empty((n_saved + 1, n))
+    V = np.empty((n_saved + 1, n))
+    PN = np.zeros((n_saved, m))
+    PT = np.zeros((n_saved, m))
+    modes = np.full((n_saved, m), -1, dtype=np.int8)
     Q[0], V[0] = q0, v0
     stats = SolverStats()
     status, message = 0, STATUS_MESSAGES[0]
     q, v = q0.copy(), v0.copy()
+    cq, cv = np.zeros(n), np.zeros(n)
     keyed = asm.constant  # constant W: solvers may cache per active set
+    fallbacks = {}
+    first_fallback = None
     k_done = 0
     for k in range(n_steps):
-        tk = t[k]
+        tk = k * h
         try:
-            vfree, SHt, W, gap, H = asm.at(tk, q, v)
+            dvf, SHt, W, gap, H = asm.at(tk, q, v)
+            vfree = v + dvf
         except FloatingPointError as exc:
             status = -2
             message = f"{STATUS_MESSAGES[-2]} Step {k} (t = {tk:.10g}): {exc}."
@@ -146,8 +186,9 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             active = np.flatnonzero(gap_pred <= 0.0)
         else:
             active = np.zeros(0, dtype=int)
+        row = (k + 1) // every - 1 if (k + 1) % every == 0 else -1
         if active.size == 0:
-            v_new = vfree
+            dv = dvf
             stats.free_steps += 1
         else:
             idx = np.concatenate([active, m + active])
@@ -160,6 +201,15 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             stats.iterations += sol.iterations
             stats.max_iterations = max(stats.max_iterations, sol.iterations)
             stats.qp_solves += sol.qp_solves
+            if not sol.success and options.fallback:
+                fb = fallbacks.setdefault(active.size, _fallback_for(solver, active.size))
+                if fb is not None:
+                    sol2 = fb.solve(pb)
+                    if sol2.success:
+                        stats.fallbacks += 1
+                        if first_fallback is None:
+                            first_fallback = (k, tk, sol.message, fb.name)
+                        sol = sol2
             if not sol.success:
                 status = -1
                 message = (f"{STATUS_MESSAGES[-1]} Step {k} (t = {tk:.10g}), solver '{solver.name}': "
@@ -170,24 +220,59 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             stats.ambiguous_steps += int(sol.ambiguous)
             stats.max_residual = max(stats.max_residual, sol.residual)
             p = sol.p
-            v_new = vfree + SHt[:, idx] @ p
-            PN[k, active] = p[: active.size]
-            PT[k, active] = p[active.size:]
+            dv = dvf + SHt[:, idx] @ p
             md = pb.modes(p)
-            modes[k, active] = md
+            if row >= 0:
+                PN[row, active] = p[: active.size]
+                PT[row, active] = p[active.size:]
+                modes[row, active] = md
             for code in md:
                 stats.mode_counts[MODE_NAMES[int(code)]] += 1
-        q = q + h * ((1 - th) * v + th * v_new)
+        # compensated (Kahan) sums: over 1e6 steps plain sums would drift by rounding
+        v_new, cv = _kahan(v, dv, cv)
+        q, cq = _kahan(q, h * ((1 - th) * v + th * v_new), cq)
         v = v_new
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
             status = -2
             message = f"{STATUS_MESSAGES[-2]} Step {k} (t = {tk:.10g})."
             break
-        Q[k + 1], V[k + 1] = q, v
+        if row >= 0:
+            Q[row + 1], V[row + 1] = q, v
         k_done = k + 1
     stats.steps = k_done
+    if first_fallback is not None and status == 0:
+        k, tk, why, name = first_fallback
+        message += (f" {stats.fallbacks} step(s) were solved by the fallback solver '{name}', the first at "
+                    f"step {k} (t = {tk:.10g}) after: {why}")
     # never return a trajectory past an unreported failure: cut at the last good state
-    last = k_done + 1
-    return SimulationResult(t=t[:last], q=Q[:last], v=V[:last], p_N=PN[:k_done], p_T=PT[:k_done],
-                            modes=modes[:k_done], status=status, message=message, stats=stats,
+    last = k_done // every
+    t = every * h * np.arange(last + 1)
+    return SimulationResult(t=t, q=Q[:last + 1], v=V[:last + 1], p_N=PN[:last], p_T=PT[:last],
+                            modes=modes[:last], status=status, message=message, stats=stats,
                             method="moreau-jean", solver=solver.name, h=h, theta=th)
+
+
+def _moreau_jean_compiled(asm, q0, v0, n_steps, every, solver_name) -> SimulationResult:
+    """The compiled fast path; same result contract as the Python loop."""
+    Q, V, PN, PT, md, counts, max_res, n_amb, done, fail = compiled.simulate_compiled(asm, q0, v0, n_steps, every)
+    stats = SolverStats()
+    stats.steps = done
+    stats.free_steps = counts.pop("inactive")
+    stats.mode_counts = counts
+    stats.solver_calls = done - stats.free_steps
+    stats.iterations = 4 * stats.solver_calls  # the four cases of the closed form
+    stats.max_iterations = 4 if stats.solver_calls else 0
+    stats.max_residual = max_res
+    stats.ambiguous_steps = n_amb
+    h = asm.h
+    if fail is None:
+        status, message = 0, STATUS_MESSAGES[0]
+    else:
+        status = -1
+        message = (f"{STATUS_MESSAGES[-1]} Step {fail} (t = {fail * h:.10g}), solver '{solver_name}' "
+                   "(compiled): no case of the contact problem is admissible")
+    md = np.where(md == -2, -1, md).astype(np.int8)
+    t = every * h * np.arange(Q.shape[0])
+    return SimulationResult(t=t, q=Q, v=V, p_N=PN[:, None], p_T=PT[:, None], modes=md[:, None],
+                            status=status, message=message, stats=stats, method="moreau-jean",
+                            solver=f"{solver_name} (compiled)", h=h, theta=asm.theta)

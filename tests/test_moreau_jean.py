@@ -161,3 +161,42 @@ def test_result_contract():
     assert res.stats.solver_calls == res.stats.steps
     assert sum(res.stats.mode_counts.values()) == res.stats.steps
     assert res.stats.iterations > 0
+
+
+@pytest.mark.parametrize("kw", [dict(), dict(v0=-1.0), dict(R=2.5), dict(phi=-12.0), dict(coordinates="full", R=0.3),
+                                dict(m=0.3, M=4.0, alpha=1.2, R=0.2, v0=2.0)])
+@pytest.mark.parametrize("theta", [0.5, 1.0])
+def test_compiled_path_matches_python_loop(kw, theta):
+    sc = jean_pratt(**kw)
+    a = lcp.simulate(sc, h=1e-3, theta=theta)
+    b = lcp.simulate(sc, h=1e-3, theta=theta, fast=False)
+    assert a.solver.endswith("(compiled)") and b.solver == "auto"
+    np.testing.assert_allclose(a.q, b.q, atol=1e-15)
+    np.testing.assert_allclose(a.v, b.v, atol=1e-15)
+    np.testing.assert_allclose(a.p_N, b.p_N, atol=1e-15)
+    np.testing.assert_allclose(a.p_T, b.p_T, atol=1e-15)
+    np.testing.assert_array_equal(a.modes, b.modes)
+    assert a.stats.mode_counts == b.stats.mode_counts
+    assert a.stats.max_residual <= RESIDUAL_TOL
+
+
+def test_long_run_keeps_exactness_with_decimation():
+    # 1e6 steps: compensated sums keep x within B h^2/8 and y at rounding level
+    sc = jean_pratt()
+    n = 1_000_000
+    h = 0.3 / n
+    res = lcp.simulate(sc, 0.3, h=h, save_every=1000)
+    assert res.success and res.stats.steps == n
+    assert res.q.shape == (n // 1000 + 1, 2) and res.p_N.shape == (n // 1000, 1)
+    err = np.max(np.abs(res.q[:, 0] - sc.exact(res.t)["x"]))
+    assert err <= sc.B * h * h / 8
+    assert np.max(np.abs(res.q[:, 1])) <= Y_TOL
+
+
+def test_decimated_python_loop_matches_full_run():
+    sc = jean_pratt(R=0.3)
+    full = lcp.simulate(sc, 0.5, h=1e-3, fast=False)
+    dec = lcp.simulate(sc, 0.5, h=1e-3, fast=False, save_every=7)
+    np.testing.assert_array_equal(dec.q, full.q[::7][: dec.q.shape[0]])
+    np.testing.assert_array_equal(dec.p_N, full.p_N[6::7][: dec.p_N.shape[0]])
+    np.testing.assert_allclose(dec.t, full.t[::7][: dec.t.size], rtol=1e-15)

@@ -119,3 +119,16 @@ def test_block_chain_energy_never_increases():
     E = kin + pot
     # theta = 1/2 is energy-neutral for the springs; friction only dissipates
     assert np.all(np.diff(E) <= 1e-10 * E[0])
+
+
+def test_failing_solver_falls_back_to_an_exact_one_and_says_so():
+    sc = lcp.scenes.block_chain(3)
+    opts = dict(osqp_max_iter=1, max_iter=1)
+    res = lcp.simulate(sc, 0.2, h=1e-3, solver="osqp", solver_options=opts)
+    assert res.success and res.stats.fallbacks > 0
+    assert "fallback solver 'lemke'" in res.message and "step 0" in res.message
+    ref = lcp.simulate(sc, 0.2, h=1e-3, solver="lemke")
+    np.testing.assert_allclose(res.q, ref.q, atol=1e-12)
+    stop = lcp.simulate(sc, 0.2, h=1e-3, solver="osqp", solver_options=opts, fallback=False)
+    assert not stop.success and stop.status == -1
+    assert "Step 0 (t = 0)" in stop.message and stop.stats.steps == 0 and stop.t.size == 1
