@@ -279,3 +279,38 @@ def test_bad_input_names_the_parameter():
         lcp.simulate(lcp.scenes.block_chain(2), method="event", smooth="closed-form")
     with pytest.raises(ValueError, match="penetrates"):
         event_driven(sc.system, np.array([0.0, -1e-3]), sc.v0, 0.3)
+
+
+# ------------------------------------------------------------------------ time-dependent load: located events
+def ramp_jean_pratt(c, R=0.5):
+    """Jean-Pratt (m = M = 1, alpha = pi/4) with a growing horizontal load phi = c t."""
+    q, v, t = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("t")
+    mass = ca.SX(np.array([[2.0, -1.0], [-1.0, 2.0]]))
+    return System(q, v, mass, ca.vertcat(c * t, -2 * 9.81), contacts=[Contact(gap=q[1], tangent=q[0], mu=R)], t=t)
+
+
+def test_stick_to_slip_when_the_load_reaches_the_friction_bound():
+    c, R, Ns, A, kappa = 20.0, 0.5, 2 * 9.81, 2.0, 0.25
+    res = lcp.simulate(ramp_jean_pratt(c, R), 1.0, method="event", q0=np.zeros(2), v0=np.zeros(2))
+    assert res.success and res.integrators == ["DOP853"]
+    assert res.mode_sequence == [("stick",), ("slide+",)]
+    (ev,) = res.events
+    ts = R * Ns / c  # |phi| = R (m + M) g
+    assert ev.kind == "slip" and abs(ev.t - ts) <= 1e-14
+    # then A (1 - kappa) xdd = c (t - ts): x = c (t - ts)^3 / (6 A (1 - kappa))
+    dt = np.maximum(res.t - ts, 0.0)
+    assert np.max(np.abs(res.q[:, 0] - c * dt ** 3 / (6 * A * (1 - kappa)))) <= 1e-13
+    assert np.max(np.abs(res.q[:, 1])) <= 1e-15
+
+
+def test_lift_off_when_the_normal_force_reaches_zero():
+    c, R, Ns, A, kappa = 100.0, 0.5, 2 * 9.81, 2.0, 0.25
+    res = lcp.simulate(ramp_jean_pratt(c, R), 0.6, method="event", q0=np.zeros(2), v0=np.array([5.0, 0.0]))
+    assert res.success and res.mode_sequence == [("slide+",), ("open",)]
+    (ev,) = res.events
+    # N = Ns - M tan(alpha) xdd = 0 with A (1 - kappa) xdd = c t - R Ns
+    t_lift = (R * Ns + A * (1 - kappa) * Ns) / c
+    assert ev.kind == "lift-off" and abs(ev.t - t_lift) <= 1e-14
+    after = res.t > t_lift
+    assert np.all(res.q[after, 1] > 0) and np.all(res.force_N[after] == 0.0)
+    assert np.all(res.force_N[~after, 0] > 0)
