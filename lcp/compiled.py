@@ -36,11 +36,24 @@ def applicable(system) -> bool:
     return bool(system.is_constant and system.n_contacts == 1)
 
 
-def n_constants(n: int) -> int:
-    return n + 2 * n * n + 2 * n + 4 + 2 * n + 5
+def _layout(n: int, affine: bool):
+    """Names and sizes of the packed per-scene constants. Without ``affine`` the free velocity
+    does not depend on the state (constant forces), which saves 4 n^2 operations per step."""
+    parts = [("a", n)] + ([("Bq", n * n), ("Bv", n * n)] if affine else [])
+    return parts + [("SHt", 2 * n), ("W", 4), ("H", 2 * n), ("gap0", 1), ("mu", 1), ("e", 1), ("h", 1),
+                    ("theta", 1)]
 
 
-def pack(asm) -> np.ndarray:
+def n_constants(n: int, affine: bool = True) -> int:
+    return sum(k for _, k in _layout(n, affine))
+
+
+def needs_affine(asm) -> bool:
+    """Whether the free velocity depends on the state (springs, dampers, bilateral constraints)."""
+    return not (asm.force_constant and asm.T.shape[1] == 0)
+
+
+def pack(asm, affine: bool = True) -> np.ndarray:
     """Per-scene constants of a constant single-contact system (from a Moreau-Jean assembly).
 
     The free velocity is dv = a + Bq q + Bv v (exact for affine, time-independent forces with the
@@ -53,28 +66,25 @@ def pack(asm) -> np.ndarray:
     if T.shape[1]:
         a = a + T @ (-asm.phi_t)
         Bv = Bv - T @ asm.G
+    if not affine and (np.any(Bq) or np.any(Bv)):
+        raise ValueError("this system's free velocity depends on its state: pack it with affine=True")
     sys_ = asm.sys
-    return np.concatenate([a, Bq.ravel(), Bv.ravel(), asm.SHt.ravel(), asm.W.ravel(), asm.H.ravel(),
-                           [asm.gap0[0], sys_.mu[0], sys_.e[0], h, th]])
+    return np.concatenate([a] + ([Bq.ravel(), Bv.ravel()] if affine else [])
+                          + [asm.SHt.ravel(), asm.W.ravel(), asm.H.ravel(),
+                             [asm.gap0[0], sys_.mu[0], sys_.e[0], h, th]])
 
 
-def _unpack(c, n):
-    i = 0
-
-    def take(k):
-        nonlocal i
-        out = c[i:i + k]
+def _unpack(c, n, affine):
+    out, i = {}, 0
+    for name, k in _layout(n, affine):
+        out[name] = c[i:i + k]
         i += k
-        return out
-
-    a = take(n)
-    Bq = ca.reshape(take(n * n), n, n).T  # NumPy ravel is row-major, CasADi reshape column-major
-    Bv = ca.reshape(take(n * n), n, n).T
-    SHt = ca.reshape(take(2 * n), 2, n).T
-    W = take(4)
-    H = ca.reshape(take(2 * n), n, 2).T
-    gap0, mu, e, h, th = (take(1) for _ in range(5))
-    return a, Bq, Bv, SHt, W, H, gap0, mu, e, h, th
+    # NumPy ravel is row-major, CasADi reshape column-major: hence the transposes
+    Bq = ca.reshape(out["Bq"], n, n).T if affine else None
+    Bv = ca.reshape(out["Bv"], n, n).T if affine else None
+    SHt = ca.reshape(out["SHt"], 2, n).T
+    H = ca.reshape(out["H"], n, 2).T
+    return (out["a"], Bq, Bv, SHt, out["W"], H, out["gap0"], out["mu"], out["e"], out["h"], out["theta"])
 
 
 def _kahan(s, inc, comp):
@@ -89,44 +99,55 @@ def _kahan(s, inc, comp):
 
 
 @functools.lru_cache(maxsize=None)
-def step_function(n: int) -> ca.Function:
-    """One Moreau-Jean step x = (q, v, c_q, c_v) -> x+ for a constant single-contact system with n coordinates
-    (c_q, c_v: the compensations of the Kahan sums of q and v).
+def step_function(n: int, affine: bool = True, lean: bool = False) -> ca.Function:
+    """One Moreau-Jean step x = (q, v, c_q, c_v) -> x+ for a constant single-contact system with n
+    coordinates (c_q, c_v: the compensations of the Kahan sums of q and v).
 
-    Outputs: x+ (2n) and (p_N, p_T, mode, residual, n_distinct); mode is -2 for an inactive contact
-    and -1 where no case of the contact problem is admissible (then p is NaN and x+ too).
+    Full form ``(x, c) -> (x+, info)``, info = (p_N, p_T, mode, residual, n_distinct); mode is -2
+    for an inactive contact and -1 where no case of the contact problem is admissible (then p and
+    x+ are NaN). Lean form (for batches) ``(z, c) -> z+`` with z = (x, n_slide, max|gap|): only the
+    number of sliding steps and the largest gap are kept besides the state.
     """
-    x = ca.SX.sym("x", 4 * n)
-    c = ca.SX.sym("c", n_constants(n))
+    nc = n_constants(n, affine)
+    c = ca.SX.sym("c", nc)
+    if lean:
+        z = ca.SX.sym("z", 4 * n + 2)
+        x, extra = z[:4 * n], z[4 * n:]
+    else:
+        x = ca.SX.sym("x", 4 * n)
     q, v, cq, cv = x[:n], x[n:2 * n], x[2 * n:3 * n], x[3 * n:]
-    a, Bq, Bv, SHt, W, H, gap0, mu, e, h, th = _unpack(c, n)
-    dvf = a + ca.mtimes(Bq, q) + ca.mtimes(Bv, v)
+    a, Bq, Bv, SHt, W, H, gap0, mu, e, h, th = _unpack(c, n, affine)
+    dvf = a + ca.mtimes(Bq, q) + ca.mtimes(Bv, v) if affine else a
     vfree = v + dvf
     uN_minus = ca.dot(H[0, :].T, v)
     uN_free = ca.dot(H[0, :].T, vfree)
     uT_free = ca.dot(H[1, :].T, vfree)
+    gap = gap0 + ca.dot(H[0, :].T, q)
     # active when the free motion closes the gap within the step (robust to a +1e-21 rounding gap)
-    gap_pred = gap0 + ca.dot(H[0, :].T, q) + h * ((1 - th) * uN_minus + th * uN_free)
-    active = gap_pred <= 0
+    active = gap + h * ((1 - th) * uN_minus + th * uN_free) <= 0
     qN = uN_free + e * uN_minus
-    W00, W01, W10, W11 = W[0], W[2], W[1], W[3]  # row-major packing of the 2 x 2 operator
+    W00, W01, W10, W11 = W[0], W[1], W[2], W[3]  # row-major packing of the 2 x 2 operator
     pN, pT, mode, n_distinct = planar_enum(W00, W01, W10, W11, qN, uT_free, mu, ops=CASADI_OPS)
     pN = ca.if_else(active, pN, 0)
     pT = ca.if_else(active, pT, 0)
+    # compensated (Kahan) sums of v and q, as in the Python loop: over 1e6 steps plain sums drift
+    v_new, cv_new = _kahan(v, dvf + ca.mtimes(SHt, ca.vertcat(pN, pT)), cv)
+    q_new, cq_new = _kahan(q, h * ((1 - th) * v + th * v_new), cq)
+    x_new = ca.vertcat(q_new, v_new, cq_new, cv_new)
+    if lean:
+        sliding = active * (mode >= 2)
+        extra_new = ca.vertcat(extra[0] + sliding, ca.fmax(extra[1], ca.fabs(gap)))
+        return ca.Function(f"mj_step_lean_{n}_{int(affine)}", [z, c], [ca.vertcat(x_new, extra_new)],
+                           ["z", "c"], ["z_next"])
     mode = ca.if_else(active, mode, -2)
     # Coulomb residual (natural map, impulse units), as ContactProblem.residual
     uN = W00 * pN + W01 * pT + qN
     uT = W10 * pN + W11 * pT + uT_free
     rN = ca.fmin(pN, uN / W00)
-    s = mu * ca.fmax(pN, 0)
-    rT = pT - ca.fmin(ca.fmax(pT - uT / W11, -s), s)
+    s_ = mu * ca.fmax(pN, 0)
+    rT = pT - ca.fmin(ca.fmax(pT - uT / W11, -s_), s_)
     res = ca.if_else(active, ca.fmax(ca.fabs(rN), ca.fabs(rT)), 0)
-    # compensated (Kahan) sums of v and q, as in the Python loop (_kahan): over 1e6 steps plain
-    # sums would drift by rounding
-    v_new, cv_new = _kahan(v, dvf + ca.mtimes(SHt, ca.vertcat(pN, pT)), cv)
-    q_new, cq_new = _kahan(q, h * ((1 - th) * v + th * v_new), cq)
-    return ca.Function("mj_step", [x, c], [ca.vertcat(q_new, v_new, cq_new, cv_new),
-                                           ca.vertcat(pN, pT, mode, res, ca.if_else(active, n_distinct, 1))],
+    return ca.Function("mj_step", [x, c], [x_new, ca.vertcat(pN, pT, mode, res, ca.if_else(active, n_distinct, 1))],
                        ["x", "c"], ["x_next", "info"])
 
 
@@ -139,47 +160,148 @@ def cache_dir() -> Path:
     return (Path(xdg) if xdg else Path.home() / ".cache") / "lcp-lem"
 
 
-def _compile(fn: ca.Function) -> ca.Function:
-    """Compile a CasADi Function to a shared library once per machine; the CasADi VM if no compiler."""
-    cc = shutil.which(os.environ.get("CC", "gcc")) or shutil.which("cc")
+def _compiler():
+    return shutil.which(os.environ.get("CC", "gcc")) or shutil.which("cc")
+
+
+@functools.lru_cache(maxsize=None)
+def openmp_available() -> bool:
+    """Whether the C compiler builds and links OpenMP code (checked once per process)."""
+    cc = _compiler()
     if cc is None:
-        return fn
+        return False
+    with tempfile.TemporaryDirectory() as tmp:
+        src = Path(tmp) / "t.c"
+        src.write_text("#include <omp.h>\nint f(void){return omp_get_max_threads();}\n")
+        try:
+            subprocess.run([cc, "-fopenmp", "-fPIC", "-shared", str(src), "-o", str(Path(tmp) / "t.so")],
+                           check=True, capture_output=True, timeout=60)
+        except (subprocess.SubprocessError, OSError):
+            return False
+    return True
+
+
+def generate_c(fn: ca.Function) -> bytes:
+    """C source of a CasADi Function (CasADi's code generator)."""
     with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / f"{fn.name()}.c"
         cg = ca.CodeGenerator(src.name, {"with_header": False})
         cg.add(fn)
         cg.generate(tmp + os.sep)
-        code = src.read_bytes()
-    key = hashlib.sha256(code + sys.version.encode() + ca.__version__.encode()).hexdigest()[:16]
-    lib = cache_dir() / f"{fn.name()}_{key}.so"
+        return src.read_bytes()
+
+
+def build_library(name: str, code: bytes, openmp: bool = False) -> Path | None:
+    """Compile C source to a shared library, cached per machine by a hash of source, flags and
+    versions. None when no working compiler is found."""
+    cc = _compiler()
+    if cc is None:
+        return None
+    flags = ["-O3", "-fPIC", "-shared"] + (["-fopenmp"] if openmp else [])
+    key = hashlib.sha256(code + " ".join(flags).encode() + sys.version.encode()
+                         + ca.__version__.encode()).hexdigest()[:16]
+    lib = cache_dir() / f"{name}_{key}.so"
     if not lib.exists():
         lib.parent.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory() as tmp:
-            src = Path(tmp) / "chunk.c"
+            src = Path(tmp) / f"{name}.c"
             src.write_bytes(code)
             part = Path(tmp) / lib.name
             try:
-                subprocess.run([cc, "-O3", "-fPIC", "-shared", str(src), "-o", str(part), "-lm"],
+                subprocess.run([cc, *flags, str(src), "-o", str(part), "-lm"],
                                check=True, capture_output=True, timeout=300)
             except (subprocess.SubprocessError, OSError):
-                return fn  # no working compiler: the CasADi VM is slower but exact
+                return None
             shutil.move(str(part), lib)  # atomic within a file system: safe for parallel workers
-    return ca.external(fn.name(), str(lib))
+    return lib
+
+
+def _compile(fn: ca.Function) -> ca.Function:
+    """Compile a CasADi Function once per machine; the CasADi VM (slower, same results) without a compiler."""
+    lib = build_library(fn.name(), generate_c(fn))
+    return ca.external(fn.name(), str(lib)) if lib is not None else fn
+
+
+_DRIVER = r"""
+#include <stdlib.h>
+#include <string.h>
+#ifndef casadi_int
+#define casadi_int long long int
+#endif
+int STEP(const double** arg, double** res, casadi_int* iw, double* w, int mem);
+int STEP_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+
+/* Advance nscenes scenes (rows of Z, nz values each, constants rows of C, nc each) by steps
+   steps; scenes are independent, so OpenMP threads share them out. */
+int lcp_batch_run(double* Z, const double* C, long nz, long nc, long nscenes, long steps) {
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  int fail = 0;
+  STEP_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  #pragma omp parallel
+  {
+    const double** arg = malloc((sz_arg + 2) * sizeof(double*));
+    double** res = malloc((sz_res + 1) * sizeof(double*));
+    casadi_int* iw = malloc((sz_iw + 1) * sizeof(casadi_int));
+    double* w = malloc((sz_w + 1) * sizeof(double));
+    double* tmp = malloc(nz * sizeof(double));
+    if (!arg || !res || !iw || !w || !tmp) {
+      #pragma omp atomic write
+      fail = 1;
+    } else {
+      long j, k;
+      #pragma omp for schedule(static)
+      for (j = 0; j < nscenes; ++j) {
+        double* z = Z + j * nz;
+        arg[0] = z; arg[1] = C + j * nc; res[0] = tmp;
+        for (k = 0; k < steps; ++k) {
+          STEP(arg, res, iw, w, 0);
+          memcpy(z, tmp, nz * sizeof(double));
+        }
+      }
+    }
+    free(arg); free(res); free(iw); free(w); free(tmp);
+  }
+  return fail;
+}
+"""
 
 
 @functools.lru_cache(maxsize=None)
-def chunk_function(n: int, steps: int = CHUNK, compiled: bool = True) -> ca.Function:
+def batch_library(n: int, affine: bool = False):
+    """The lean step compiled with a C driver looping over scenes (OpenMP when available).
+
+    Returns a ctypes function ``lcp_batch_run(Z, C, nz, nc, nscenes, steps)`` or None without a
+    working compiler.
+    """
+    import ctypes
+
+    step = step_function(n, affine, True)
+    code = generate_c(step) + _DRIVER.replace("STEP", step.name()).encode()
+    openmp = openmp_available()
+    lib = build_library(f"lcp_batch_{n}_{int(affine)}", code, openmp=openmp)
+    if lib is None:
+        return None
+    fn = ctypes.CDLL(str(lib)).lcp_batch_run
+    dp = ctypes.POINTER(ctypes.c_double)
+    fn.argtypes = [dp, dp, ctypes.c_long, ctypes.c_long, ctypes.c_long, ctypes.c_long]
+    fn.restype = ctypes.c_int
+    fn.openmp = openmp
+    return fn
+
+
+@functools.lru_cache(maxsize=None)
+def chunk_function(n: int, affine: bool = True, steps: int = CHUNK, compiled: bool = True) -> ca.Function:
     """``steps`` chained Moreau-Jean steps (mapaccum), compiled: x0, c -> (X (4n x steps), info (5 x steps))."""
-    x0, c = ca.MX.sym("x0", 4 * n), ca.MX.sym("c", n_constants(n))
-    X, info = step_function(n).mapaccum(steps)(x0, ca.repmat(c, 1, steps))
-    fn = ca.Function(f"mj_chunk_{n}_{steps}", [x0, c], [X, info], ["x0", "c"], ["X", "info"])
+    x0, c = ca.MX.sym("x0", 4 * n), ca.MX.sym("c", n_constants(n, affine))
+    X, info = step_function(n, affine).mapaccum(steps)(x0, ca.repmat(c, 1, steps))
+    fn = ca.Function(f"mj_chunk_{n}_{int(affine)}_{steps}", [x0, c], [X, info], ["x0", "c"], ["X", "info"])
     return _compile(fn) if compiled else fn
 
 
-def _bound_chunk(n: int, c: np.ndarray, compiled: bool = True):
+def _bound_chunk(n: int, c: np.ndarray, affine: bool, compiled: bool = True):
     """A compiled chunk bound to NumPy buffers: calling it runs CHUNK steps from ``x`` in place of
     any CasADi DM conversion (which would cost more than the steps themselves)."""
-    fn = chunk_function(n, CHUNK, compiled)
+    fn = chunk_function(n, affine, CHUNK, compiled)
     buf, run = fn.buffer()
     x = np.zeros(4 * n)
     c = np.ascontiguousarray(c, dtype=float)
@@ -201,8 +323,9 @@ def simulate_compiled(asm, q0, v0, n_steps: int, save_every: int = 1, compiled: 
     returned last (None if every step succeeded).
     """
     n = asm.n
-    c = pack(asm)
-    run_chunk, x, Xbuf, Ibuf = _bound_chunk(n, c, compiled)
+    affine = needs_affine(asm)
+    c = pack(asm, affine)
+    run_chunk, x, Xbuf, Ibuf = _bound_chunk(n, c, affine, compiled)
     n_saved = n_steps // save_every
     Q = np.empty((n_saved + 1, n))
     V = np.empty((n_saved + 1, n))
