@@ -656,7 +656,6 @@ class _OdePhase(_Phase):
         self.integrator = options.ode_method
         self.scales = scales
         self._cache_key = None
-        model, n, m = self.model, self.model.n, self.model.m
         self.linear = model.constant  # affine forces: the whole phase is a linear ODE y' = L y + c
         if self.linear:
             self._build_linear()
@@ -934,7 +933,7 @@ class _Integrator:
         uT = u[m + closed] if closed.size else np.zeros(0)
         return np.where(np.abs(uT) <= self.vel_tol, 0.0, np.sign(uT))
 
-    def lookahead(self, t, q, v, closed, slide, group, data):
+    def lookahead(self, t, q, v, closed, slide, group):
         """Break a tie (one motion, several mode sets) by the problem a short time later."""
         qdd = group[0].qdd
         dt = 1e-6 * self.t_end
@@ -946,7 +945,7 @@ class _Integrator:
             return groups[0][0]
         return group[0]
 
-    def impact(self, t, q, v, contacts, data, reason):
+    def impact(self, t, q, v, contacts, data):
         """Velocity-level impact problem on ``contacts``; returns (dv, p, modes) or None."""
         m = self.m
         idx = np.asarray(contacts, dtype=int)
@@ -997,7 +996,7 @@ class _Integrator:
             closed, approaching, u = self.classify(q, v)
             if approaching.size:
                 at = np.union1d(closed, approaching)
-                out = self.impact(t, q, v, at, data, "impact")
+                out = self.impact(t, q, v, at, data)
                 if out is None:
                     raise _Inconsistent(f"the impact problem at t = {t:.17g} has no solution")
                 dv, p, _ = out
@@ -1010,12 +1009,12 @@ class _Integrator:
             groups, acc = self.solve_modes(data, closed, slide)
             if len(groups) == 1:
                 group = groups[0]
-                sol = group[0] if len(group) == 1 else self.lookahead(t, q, v, closed, slide, group, data)
+                sol = group[0] if len(group) == 1 else self.lookahead(t, q, v, closed, slide, group)
                 return q, v, closed, sol, acc
             self.stats.ambiguous_steps += int(len(groups) > 1)
             why = ("no consistent contact mode (Painleve: no solution)" if not groups else
                    f"{len(groups)} consistent contact modes (Painleve: non-uniqueness)")
-            out = self.impact(t, q, v, closed, data, why)
+            out = self.impact(t, q, v, closed, data)
             if out is None:
                 raise _Inconsistent(f"at t = {t:.17g}: {why}, and the impact problem has no solution")
             dv, p, imodes = out

@@ -162,8 +162,7 @@ def plot_sweep(rows, hs, v0, path):
         a.set_xticks(x)
         a.set_xticklabels(labels, rotation=45)
         a.set_xlabel("shock number $\\kappa = R M \\tan\\alpha / A$")
-    sign = "> 0" if v0 > 0 else "< 0"
-    fig.suptitle(f"Jean-Pratt, m = M = 1, $\\alpha = \\pi/4$, $v_0$ = {v0:g} ({'v0 ' + sign}): "
+    fig.suptitle(f"Jean-Pratt, m = M = 1, $\\alpha = \\pi/4$, $v_0$ = {v0:g}: "
                  "approaching the shock limit $\\kappa \\to 1$" + ("" if v0 > 0 else
                                                                   " (no shock for $v_0 < 0$: $N_0 = (m+M)g/(1+\\kappa)$)"))
     fig.tight_layout()
