@@ -656,7 +656,7 @@ class _OdePhase(_Phase):
         self.integrator = options.ode_method
         self.scales = scales
         self._cache_key = None
-        self.linear = model.constant  # affine forces: the whole phase is a linear ODE y' = L y + c
+        self.linear = self.model.constant  # affine forces: the whole phase is a linear ODE y' = L y + c
         if self.linear:
             self._build_linear()
 
