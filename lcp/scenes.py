@@ -69,7 +69,7 @@ def _check_params(**kw):
 
 def jean_pratt(m: float = 1.0, M: float = 1.0, alpha: float = math.pi / 4, R: float = 0.5,
                v0: float = 1.0, g: float = 9.81, phi: float = 0.0, coordinates: str = "reduced",
-               t_end: float | None = None) -> Scene:
+               t_end: float | None = None, load: Callable | None = None) -> Scene:
     """The Jean-Pratt system: block m on a frictional line, coupled by a slide of slope tan(alpha)
     to a body M on a vertical guide.
 
@@ -93,6 +93,10 @@ def jean_pratt(m: float = 1.0, M: float = 1.0, alpha: float = math.pi / 4, R: fl
         which exercises the general model's constraint elimination.
     t_end : float, optional
         Default horizon; by default max(0.3, 2 tau0).
+    load : callable, optional
+        A time-dependent horizontal load on m added to phi: ``load(t)`` receives the CasADi time
+        symbol and returns an expression (e.g. ``lambda t: 12 * casadi.sin(2 * pi * t)``). The
+        scene then has no exact solution (``scene.exact`` raises).
 
     Returns
     -------
@@ -120,28 +124,39 @@ def jean_pratt(m: float = 1.0, M: float = 1.0, alpha: float = math.pi / 4, R: fl
     if coordinates not in ("reduced", "full"):
         raise ValueError(f"coordinates must be 'reduced' or 'full', got {coordinates!r}")
     t = tan_alpha(alpha)
-    params = dict(m=m, M=M, alpha=alpha, R=R, v0=v0, g=g, phi=phi, coordinates=coordinates)
+    params = dict(m=m, M=M, alpha=alpha, R=R, v0=v0, g=g, phi=phi, coordinates=coordinates, load=load)
+    time_sym = ca.SX.sym("t")
+    horizontal = phi
+    if load is not None:
+        if not callable(load):
+            raise ValueError("load must be a callable of the CasADi time symbol")
+        try:
+            horizontal = phi + ca.SX(load(time_sym))
+        except Exception as exc:  # noqa: BLE001 - report any failure of the user's expression
+            raise ValueError(f"load(t) must return a scalar CasADi expression: {exc}") from exc
+        if horizontal.numel() != 1:
+            raise ValueError("load(t) must return a scalar CasADi expression")
     if coordinates == "reduced":
         q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
         mass = ca.SX(np.array([[m + M * t * t, -M * t], [-M * t, m + M]]))
-        force = ca.vertcat(phi, -(m + M) * g)
+        force = ca.vertcat(horizontal, -(m + M) * g)
         system = System(q, v, mass, force, contacts=[Contact(gap=q[1], tangent=q[0], mu=R, name="P")],
-                        names=("x", "y"))
+                        names=("x", "y"), t=time_sym)
         q0, v0v = np.zeros(2), np.array([v0, 0.0])
     else:
         q, v = ca.SX.sym("q", 3), ca.SX.sym("v", 3)
         mass = ca.SX(np.diag([m, m, M]))
         # the applied -M g tan(alpha) + phi on m cancels M's push through the slide when phi = 0
-        force = ca.vertcat(-M * g * t + phi, -m * g, -M * g)
+        force = ca.vertcat(-M * g * t + horizontal, -m * g, -M * g)
         slide = q[2] - q[1] + q[0] * t
         system = System(q, v, mass, force, contacts=[Contact(gap=q[1], tangent=q[0], mu=R, name="P")],
-                        constraints=slide, names=("x", "y", "Y"))
+                        constraints=slide, names=("x", "y", "Y"), t=time_sym)
         q0, v0v = np.zeros(3), np.array([v0, 0.0, -v0 * t])
     if M == 0 and coordinates == "full":
         raise ValueError("M must be > 0 with coordinates='full' (the guided body's mass matrix is singular)")
-    sol = JeanPrattExact(m=m, M=M, alpha=alpha, R=R, v0=v0, g=g, phi=phi)
+    sol = JeanPrattExact(m=m, M=M, alpha=alpha, R=R, v0=v0, g=g, phi=phi) if load is None else None
     if t_end is None:
-        t_end = max(0.3, 2 * sol.tau0) if np.isfinite(sol.tau0) else 0.3
+        t_end = max(0.3, 2 * sol.tau0) if sol is not None and np.isfinite(sol.tau0) else 0.3
     _check_params(t_end=t_end)
     if t_end <= 0:
         raise ValueError(f"t_end must be > 0, got {t_end!r}")
