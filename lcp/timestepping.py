@@ -201,7 +201,7 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             stats.iterations += sol.iterations
             stats.max_iterations = max(stats.max_iterations, sol.iterations)
             stats.qp_solves += sol.qp_solves
-            if not sol.success and options.fallback:
+            if not sol.success and options.fallback and sol.status != -3:  # -3: forced solver does not apply
                 fb = fallbacks.setdefault(active.size, _fallback_for(solver, active.size))
                 if fb is not None:
                     sol2 = fb.solve(pb)
