@@ -125,10 +125,9 @@ def _kahan(s, inc, comp):
 
 
 def _fallback_for(solver, k: int):
-    """The exact solver that retries a failed step (None if the failed one was already that)."""
-    name = "enum" if k == 1 else "lemke"
-    if solver.name in (name, "auto"):
-        return None if solver.name == name or k > 1 else make_solver("lemke")
+    """The other exact solver that retries a step on which ``solver`` failed (k active contacts)."""
+    name = {"auto": "osqp", "enum": "lemke", "lemke": "enum" if k == 1 else "osqp",
+            "osqp": "enum" if k == 1 else "lemke"}.get(solver.name, "lemke")
     return make_solver(name)
 
 
