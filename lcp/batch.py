@@ -126,7 +126,7 @@ def _numpy_step(Z, c, n):
     gap = gap0 + np.einsum("ij,ij->j", H[0], q)
     active = gap + h * ((1 - th) * uN_minus + th * uN_free) <= 0
     with np.errstate(divide="ignore", invalid="ignore"):
-        pN, pT, mode, _ = planar_enum(W[0], W[1], W[2], W[3], uN_free + e * uN_minus, uT_free, mu, ops=NUMPY_OPS)
+        pN, pT, mode, _ = planar_enum(W[0], W[1], W[2], W[3], uN_free + e * np.minimum(uN_minus, 0.0), uT_free, mu, ops=NUMPY_OPS)
     pN = np.where(active, pN, 0.0)
     pT = np.where(active, pT, 0.0)
     inc = a + SHt[:, 0] * pN + SHt[:, 1] * pT

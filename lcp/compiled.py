@@ -125,7 +125,8 @@ def step_function(n: int, affine: bool = True, lean: bool = False) -> ca.Functio
     gap = gap0 + ca.dot(H[0, :].T, q)
     # active when the free motion closes the gap within the step (robust to a +1e-21 rounding gap)
     active = gap + h * ((1 - th) * uN_minus + th * uN_free) <= 0
-    qN = uN_free + e * uN_minus
+    # Newton restitution acts only on an approaching contact (a separating one is not bounced back)
+    qN = uN_free + e * ca.fmin(uN_minus, 0)
     W00, W01, W10, W11 = W[0], W[1], W[2], W[3]  # row-major packing of the 2 x 2 operator
     pN, pT, mode, n_distinct = planar_enum(W00, W01, W10, W11, qN, uT_free, mu, ops=CASADI_OPS)
     pN = ca.if_else(active, pN, 0)

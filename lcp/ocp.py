@@ -685,7 +685,7 @@ class OptimalControlProblem:
                 uN, uT = ca.mtimes(HN, vb), ca.mtimes(HT, vb)
                 lam = blk["lam"]
                 # lifted right-hand sides of the LCP (ContactProblem.to_lcp)
-                constrain(blk["wN"] - (uN + e * ca.mtimes(HN, va)), 0.0, 0.0)
+                constrain(blk["wN"] - (uN + e * ca.fmin(ca.mtimes(HN, va), 0)), 0.0, 0.0)
                 constrain(blk["wp"] - (lam + uT), 0.0, 0.0)
                 constrain(blk["wm"] - (lam - uT), 0.0, 0.0)
                 constrain(blk["wl"] - (mu * blk["pN"] - blk["bp"] - blk["bm"]), 0.0, 0.0)
@@ -789,7 +789,7 @@ class OptimalControlProblem:
                 bp, bm = np.maximum(pT, 0.0), np.maximum(-pT, 0.0)
                 lam = np.abs(uT)
                 vals = {"pN": pN, "bp": bp, "bm": bm, "lam": lam,
-                        "wN": np.maximum(uN + e * (H[:m] @ gs.v[k]), 0.0),
+                        "wN": np.maximum(uN + e * np.minimum(H[:m] @ gs.v[k], 0.0), 0.0),
                         "wp": np.maximum(lam + uT, 0.0), "wm": np.maximum(lam - uT, 0.0),
                         "wl": np.maximum(mu * pN - bp - bm, 0.0)}
                 for nm, val in vals.items():
@@ -967,7 +967,7 @@ class OptimalControlProblem:
             uN_minus = np.einsum("kij,kj->ki", H[:, :m], v[:-1])
             qf = np.einsum("kij,kj->ki", H, vfree)
             gap_pred = gap + h * ((1 - th) * uN_minus + th * qf[:, :m])
-            qf[:, :m] += e * uN_minus
+            qf[:, :m] += e * np.minimum(uN_minus, 0.0)  # restitution of approaching contacts only
             p = np.concatenate([pN, pT], axis=1)
             for k in range(N):
                 pb = ContactProblem(W[k], qf[k], mu)

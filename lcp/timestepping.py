@@ -193,7 +193,9 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             idx = np.concatenate([active, m + active])
             Wa = W[np.ix_(idx, idx)]
             qa = H[idx] @ vfree
-            qa[: active.size] += e[active] * uN_minus[active]
+            # Newton restitution u_N+ >= -e u_N- acts only on approaching contacts: with a
+            # separating one (u_N- > 0) it would pull the body back and create energy
+            qa[: active.size] += e[active] * np.minimum(uN_minus[active], 0.0)
             pb = ContactProblem(Wa, qa, mu[active], key=tuple(active) if keyed else None)
             sol = solver.solve(pb)
             stats.solver_calls += 1

@@ -1,0 +1,402 @@
+"""Numerical stability under stress: every method on hard cases, and every failure visible.
+
+``python -m studies.stability [--out DIR] [--quick]`` runs each method on each hard case and
+classifies the outcome:
+
+- **correct**: the run succeeded and every check holds (finite, Coulomb residual, no lift-off or
+  sinking, constraint drift, energy, agreement with the exact solution or a reference);
+- **reported failure**: the method said it failed (``success`` False, with status and message), or
+  the input was refused with a ``ValueError``;
+- **silently wrong**: the run said it succeeded but a check fails. This column must stay empty.
+
+It writes ``stability.csv`` (one row per case and method, with the measured numbers),
+``summary.csv`` and ``stability.png`` (the outcome table as a colour map).
+
+Energy: with e = 0 and conservative forces the energy E = T + V never increases for theta = 1.
+With theta = 1/2 Moreau-Jean's discrete energy can rise in a *reversal step* (the block turns
+round inside the step: the friction impulse is chosen from the end-of-step velocity while the
+mean velocity still points the other way), by at most |p_T| |u_T-| / 2 = O(h^2); the check allows
+exactly that bound on reversal steps and nothing elsewhere.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import math
+import time
+import tracemalloc
+from typing import Callable
+
+import casadi as ca
+import numpy as np
+
+import lcp
+from lcp.scenes import block_chain, jean_pratt
+from lcp.system import Contact, System
+
+from ._common import out_dir, parse_args, plt, save, write_csv
+
+NAME = "stability"
+
+#: methods: label -> keyword arguments of lcp.simulate
+METHODS = {
+    "MJ compiled": dict(method="moreau-jean", solver="auto"),
+    "MJ enum (Python)": dict(method="moreau-jean", solver="enum", fast=False),
+    "MJ lemke": dict(method="moreau-jean", solver="lemke"),
+    "MJ osqp": dict(method="moreau-jean", solver="osqp"),
+    "event": dict(method="event"),
+}
+OUTCOMES = ("correct", "reported failure", "silently wrong", "not applicable")
+
+
+@dataclass
+class Case:
+    """A hard case: how to build it and what 'correct' means.
+
+    ``build()`` returns (scene, t_end, h, save_every). ``reference`` is "exact" (the scene's exact
+    solution), "converged" (Moreau-Jean at h/4 must agree to O(h)), or None (invariants only).
+    """
+
+    group: str
+    name: str
+    build: Callable
+    reference: str | None = "exact"
+    methods: tuple = tuple(METHODS)
+    theta: float = 0.5
+    x_tol: Callable | None = None  # extra tolerance on x (scene, h) -> float
+    notes: str = ""
+    energy: bool = True
+    quick: bool = True
+
+
+@dataclass
+class Row:
+    group: str
+    case: str
+    method: str
+    outcome: str
+    reason: str = ""
+    steps: int = 0
+    seconds: float = 0.0
+    peak_mb: float = float("nan")
+    nan_inf: bool = False
+    residual: float = float("nan")
+    max_gap: float = float("nan")
+    bilateral_drift: float = float("nan")
+    energy_rise: float = float("nan")
+    x_error: float = float("nan")
+    x_tol: float = float("nan")
+    status: int = 0
+    message: str = ""
+    extra: dict = field(default_factory=dict)
+
+
+# ----------------------------------------------------------------------------- cases
+def _jp(h_per_tau=50 + 1 / 7, t_factor=1.5, **kw):
+    """A Jean-Pratt scene with h scaled to its stop time (about 50 steps to the stop)."""
+    def build():
+        sc = jean_pratt(**kw)
+        tau = sc.tau0 if np.isfinite(sc.tau0) and sc.tau0 > 0 else 0.1
+        h = tau / h_per_tau
+        return sc, t_factor * tau + 10 * h, h, 1
+    return build
+
+
+def _kappa_R(kappa, m=1.0, M=1.0, alpha=math.pi / 4):
+    t = 1.0 if alpha == math.pi / 4 else math.tan(alpha)
+    return kappa * (m + M * t * t) / (M * t)
+
+
+def _bounce(e=0.5, h=1e-3):
+    def build():
+        q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
+        s = System(q, v, ca.SX.eye(2), ca.vertcat(0, -9.81), contacts=[Contact(gap=q[1], tangent=q[0], mu=0.3, e=e)],
+                   names=("x", "y"))
+        from lcp.scenes import Scene
+        sc = Scene(s, np.array([0.0, 1.0]), np.array([0.5, 0.0]), 2.0, "bouncing_block", dict(e=e), None)
+        return sc, 2.0, h, 1
+    return build
+
+
+def _chain(K=6, mass_ratio=1e6, k_spring=1e4, h=1e-3):
+    def build():
+        masses = np.geomspace(1.0, mass_ratio, K)
+        rng = np.random.default_rng(K)
+        sc = block_chain(K, m=masses, mu=0.4, k_spring=k_spring * masses.min(), v0=rng.uniform(-1, 1, K), t_end=0.5)
+        return sc, 0.5, h, 1
+    return build
+
+
+def _periodic(h=1e-3):
+    def build():
+        sc = jean_pratt(v0=0.0, load=lambda t: 15.0 * ca.sin(2 * math.pi * t), t_end=3.0)
+        return sc, 3.0, h, 1
+    return build
+
+
+def cases(quick: bool) -> list[Case]:
+    out = []
+    hs = [1e-1, 1e-2, 1e-3, 1e-4] + ([] if quick else [1e-5, 1e-6])
+    for h in hs:
+        def build(h=h):
+            sc = jean_pratt()
+            return sc, 0.3 if h < 1e-4 else 0.3, h, 1
+        slow_python = h < 1e-4
+        out.append(Case("step size", f"h = {h:g}", build,
+                        methods=("MJ compiled", "event") + (() if slow_python else ("MJ enum (Python)", "MJ lemke", "MJ osqp")),
+                        quick=h >= 1e-3))
+    ks = range(1, 16) if not quick else (1, 6, 12, 15)
+    for k in ks:
+        for sgn in (-1, +1):
+            kap = 1 + sgn * 10.0 ** -k
+            out.append(Case("kappa near 1", f"kappa = 1 {'+' if sgn > 0 else '-'} 1e-{k}",
+                            lambda kap=kap: (jean_pratt(R=2.0 * kap), 0.05, 1e-3, 1)))
+    out.append(Case("kappa near 1", "kappa = 1 exactly", lambda: (jean_pratt(R=2.0), 0.05, 1e-3, 1)))
+    for ratio in ([1e-6, 1e-3, 1.0, 1e3, 1e6] if not quick else [1e-6, 1e6]):
+        out.append(Case("mass ratio m/M", f"m/M = {ratio:g}",
+                        _jp(m=ratio, M=1.0, alpha=0.6, R=_kappa_R(0.5, ratio, 1.0, 0.6))))
+    for tan in ([1e-3, 1e-2, 1e2, 1e3] if not quick else [1e-3, 1e3]):
+        al = math.atan(tan)
+        out.append(Case("alpha near 0 or pi/2", f"tan(alpha) = {tan:g}",
+                        _jp(alpha=al, R=_kappa_R(0.5, alpha=al))))
+    for v0 in ([1e-12, 1e-6, 1e-2, 1e2, 1e3] if not quick else [1e-12, 1e3]):
+        for sgn in (1, -1):
+            out.append(Case("|v0|", f"v0 = {sgn * v0:g}", _jp(v0=sgn * v0)))
+    n_long = 10**6 if not quick else 10**5
+    out.append(Case("long horizon", f"{n_long:.0e} steps",
+                    lambda n=n_long: (jean_pratt(), 0.3, 0.3 / n, 1000),
+                    methods=("MJ compiled", "event"), notes="memory: decimated (save_every = 1000)"))
+    out.append(Case("long horizon", "1e5 steps (Python loops)",
+                    lambda: (jean_pratt(), 0.3, 0.3e-5, 1000),
+                    methods=("MJ enum (Python)", "MJ lemke", "MJ osqp"), quick=False))
+    out.append(Case("periodic load", "phi(t) = 15 sin(2 pi t), 3 s", _periodic(2e-3 if quick else 1e-3),
+                    reference="converged", methods=("MJ compiled", "MJ enum (Python)", "MJ lemke", "MJ osqp", "event"),
+                    energy=False, notes="non-conservative load: energy not checked"))
+    out.append(Case("loaded contact", "phi = -12 (reversal)", _jp(phi=-12.0, t_factor=4.0),
+                    x_tol=lambda sc, h: 2 * 13.0 * h * 1.0))
+    out.append(Case("open and close", "bouncing block, e = 0.5", _bounce(), reference=None,
+                    methods=("MJ compiled", "MJ enum (Python)", "MJ lemke", "MJ osqp", "event"), energy=True))
+    for ratio in ([1e2, 1e6] if quick else [1e2, 1e4, 1e6]):
+        out.append(Case("ill-conditioned chain", f"K = 6, mass ratio {ratio:g}", _chain(6, ratio),
+                        reference="converged", methods=("MJ lemke", "MJ osqp", "MJ compiled"),
+                        notes="MJ compiled = auto (Lemke for several contacts)"))
+    return [c for c in out if c.quick or not quick]
+
+
+# ----------------------------------------------------------------------------- checks
+def _energy(scene, res):
+    """Total energy along the result for Jean-Pratt (reduced/full) and the bouncing block / chain."""
+    s = scene.system
+    T = np.array([s.kinetic_energy(q, v) for q, v in zip(res.q, res.v)])
+    p = scene.params
+    if scene.name == "jean_pratt":
+        if p["coordinates"] == "reduced":
+            V = (p["m"] + p["M"]) * p["g"] * res.q[:, 1] - p["phi"] * res.q[:, 0]
+        else:
+            V = p["g"] * (p["m"] * res.q[:, 1] + p["M"] * res.q[:, 2]) + (p["M"] * p["g"] * scene.tan - p["phi"]) * res.q[:, 0]
+    elif scene.name == "bouncing_block":
+        V = 9.81 * res.q[:, 1]
+    else:  # block chain
+        x = res.q[:, 0::2]
+        V = 0.5 * p["k_spring"] * np.sum((np.diff(x, axis=1) - p["spacing"]) ** 2, axis=1) \
+            + p["g"] * res.q[:, 1::2] @ p["m"]
+    return T + V
+
+
+def _energy_rise(scene, res, theta):
+    """Largest energy rise per saved step beyond what the scheme allows (see module docstring)."""
+    E = _energy(scene, res)
+    dE = np.diff(E)
+    scale = max(1.0, float(np.max(np.abs(E))))
+    allow = 1e-12 * scale * np.ones_like(dE)
+    if theta == 0.5 and res.p_T.shape[0] == dE.size and res.method == "moreau-jean":
+        # reversal steps: tangential velocity changes sign within the step
+        uT = res.v[:, 0] if scene.name != "block_chain" else None
+        if uT is not None:
+            rev = (uT[:-1] * uT[1:]) < 0
+            allow = allow + rev * 0.5 * np.abs(res.p_T[:, 0]) * np.abs(uT[:-1])
+    return float(np.max(dE - allow)) if dE.size else 0.0, scale
+
+
+def _check(case: Case, scene, res, h, method, ref_cache) -> tuple[bool, str, dict]:
+    """Checks of a successful run: returns (ok, reason, measured numbers)."""
+    m = dict()
+    finite = bool(np.all(np.isfinite(res.q)) and np.all(np.isfinite(res.v)))
+    m["nan_inf"] = not finite
+    if not finite:
+        return False, "non-finite state", m
+    m["residual"] = float(res.stats.max_residual)
+    s = scene.system
+    gaps = np.array([s.gaps(q) for q in res.q[:: max(1, len(res.q) // 2000)]])
+    m["max_gap"] = float(np.max(np.abs(gaps))) if gaps.size else 0.0
+    if s.n_bilateral:
+        drift = np.array([s.constraint_residual(q) for q in res.q[:: max(1, len(res.q) // 2000)]])
+        m["bilateral_drift"] = float(np.max(np.abs(drift)))
+    else:
+        m["bilateral_drift"] = 0.0
+    reasons = []
+    scale_p = 1.0
+    if scene.solution is not None:
+        scale_p = max(1.0, abs(scene.params["M"] * scene.tan * scene.params["v0"]))
+    if m["residual"] > 1e-9 * scale_p:
+        reasons.append(f"Coulomb residual {m['residual']:.2e}")
+    xscale = max(1.0, float(np.max(np.abs(res.q[:, 0]))))
+    if scene.name in ("jean_pratt", "block_chain"):
+        if m["max_gap"] > 1e-12 * xscale:
+            reasons.append(f"gap {m['max_gap']:.2e} (lift-off or sinking)")
+    elif scene.name == "bouncing_block":
+        # velocity-level contact: sinking at most one step of the impact velocity
+        if np.min(gaps) < -h * 10.0:
+            reasons.append(f"penetration {np.min(gaps):.2e}")
+    if m["bilateral_drift"] > 1e-10 * xscale:
+        reasons.append(f"bilateral drift {m['bilateral_drift']:.2e}")
+    if case.energy:
+        rise, escale = _energy_rise(scene, res, case.theta)
+        m["energy_rise"] = rise
+        if rise > 1e-10 * escale:
+            reasons.append(f"energy rose by {rise:.2e}")
+    if case.reference == "exact" and scene.solution is not None:
+        ex = scene.exact(res.t)
+        err = float(np.max(np.abs(res.q[:, 0] - ex["x"])))
+        xs = max(1.0, abs(scene.x_stop) if np.isfinite(scene.x_stop) else 1.0)
+        if method == "event":
+            tol = 1e-12 * xs
+        elif scene.params["phi"] == 0.0:
+            B = scene.B if np.isfinite(scene.B) else 0.0
+            tol = B * h * h / 8 + 1e-12 * xs + (res.q.shape[0] * 2e-16 * xs)
+        else:
+            tol = case.x_tol(scene, h) if case.x_tol else 1e-12
+        if scene.kappa >= 1 and method != "event":
+            tol = max(tol, abs(scene.params["v0"]) * h * (1 - case.theta) + 1e-12)
+        m["x_error"], m["x_tol"] = err, tol
+        if not err <= tol:
+            reasons.append(f"|x - exact| = {err:.2e} > {tol:.2e}")
+    elif case.reference == "converged":
+        key = case.name
+        if key not in ref_cache:
+            fine = lcp.simulate(scene, res.t[-1], h=h / 4, solver="lemke", fast=False)
+            ref_cache[key] = fine
+        fine = ref_cache[key]
+        if not fine.success:
+            reasons.append("reference run failed")
+        else:
+            xf = np.array([np.interp(res.t, fine.t, fine.q[:, j]) for j in range(0, s.n, 2 if s.n > 2 else 1)]).T
+            xr = res.q[:, 0:s.n:2 if s.n > 2 else 1]
+            err = float(np.max(np.abs(xr - xf)))
+            vmax = max(1.0, float(np.max(np.abs(res.v))))
+            accel = 50.0  # generous: O(h) error constant of the load and spring scenes
+            tol = (vmax + accel) * h * float(res.t[-1]) + 1e-9
+            m["x_error"], m["x_tol"] = err, tol
+            if not err <= tol:
+                reasons.append(f"disagrees with the h/4 reference by {err:.2e} > {tol:.2e}")
+    return not reasons, "; ".join(reasons), m
+
+
+def run_case(case: Case, method: str, ref_cache: dict) -> Row:
+    row = Row(case.group, case.name, method, "correct")
+    try:
+        scene, t_end, h, every = case.build()
+    except ValueError as exc:
+        row.outcome, row.reason = "reported failure", f"ValueError: {exc}"
+        return row
+    kw = dict(METHODS[method])
+    if kw["method"] == "moreau-jean":
+        kw.update(h=h, theta=case.theta, save_every=every)
+        if method == "MJ compiled" and not lcp.compiled.applicable(scene.system):
+            kw["solver"] = "auto"  # several contacts: auto (Lemke) in the Python loop
+    else:
+        n_eval = min(2001, int(t_end / h) + 1) if every == 1 else 1001
+        kw.update(n_eval=max(n_eval, 2))
+    tracemalloc.start()
+    t0 = time.perf_counter()
+    try:
+        res = lcp.simulate(scene, t_end, **kw)
+    except ValueError as exc:
+        tracemalloc.stop()
+        row.outcome, row.reason = "reported failure", f"ValueError: {exc}"
+        return row
+    except Exception as exc:  # noqa: BLE001 - a crash is recorded, never hidden
+        tracemalloc.stop()
+        row.outcome, row.reason = "reported failure", f"exception {type(exc).__name__}: {exc}"
+        row.extra["crash"] = True
+        return row
+    row.seconds = time.perf_counter() - t0
+    row.peak_mb = tracemalloc.get_traced_memory()[1] / 2**20
+    tracemalloc.stop()
+    row.steps, row.status, row.message = res.stats.steps, res.status, res.message
+    if not res.success:
+        row.outcome, row.reason = "reported failure", res.message
+        return row
+    ok, reason, meas = _check(case, scene, res, h, method, ref_cache)
+    for k, val in meas.items():
+        setattr(row, k, val)
+    if not ok:
+        row.outcome, row.reason = "silently wrong", reason
+    return row
+
+
+def run(out=None, quick: bool = False) -> dict:
+    """Run every case with every applicable method; write the table and the figure.
+
+    Returns
+    -------
+    dict
+        ``rows`` (list of Row), ``counts`` {outcome: n}, ``files``.
+    """
+    outdir = out_dir(out, NAME)
+    rows = []
+    for case in cases(quick):
+        ref_cache = {}
+        for method in METHODS:
+            if method not in case.methods:
+                rows.append(Row(case.group, case.name, method, "not applicable"))
+                continue
+            rows.append(run_case(case, method, ref_cache))
+    fields_ = ["group", "case", "method", "outcome", "reason", "steps", "seconds", "peak_mb", "nan_inf",
+               "residual", "max_gap", "bilateral_drift", "energy_rise", "x_error", "x_tol", "status", "message"]
+    write_csv(outdir / "stability.csv", fields_, [[getattr(r, f) for f in fields_] for r in rows])
+    counts = {o: sum(r.outcome == o for r in rows) for o in OUTCOMES}
+    per_method = {mth: {o: sum(r.outcome == o and r.method == mth for r in rows) for o in OUTCOMES} for mth in METHODS}
+    write_csv(outdir / "summary.csv", ["method"] + list(OUTCOMES),
+              [[mth] + [per_method[mth][o] for o in OUTCOMES] for mth in METHODS])
+    _figure(rows, outdir)
+    return dict(rows=rows, counts=counts, per_method=per_method, out=str(outdir),
+                files=sorted(p.name for p in outdir.iterdir()))
+
+
+def _figure(rows, outdir):
+    case_names = list(dict.fromkeys((r.group, r.case) for r in rows))
+    methods = list(METHODS)
+    code = {"correct": 0, "reported failure": 1, "silently wrong": 2, "not applicable": 3}
+    grid = np.full((len(case_names), len(methods)), 3)
+    for r in rows:
+        grid[case_names.index((r.group, r.case)), methods.index(r.method)] = code[r.outcome]
+    from matplotlib.colors import ListedColormap
+    cmap = ListedColormap(["#4daf4a", "#ffbf00", "#e41a1c", "#dddddd"])
+    fig, ax = plt.subplots(figsize=(8.5, 0.24 * len(case_names) + 1.8))
+    ax.imshow(grid, cmap=cmap, vmin=-0.5, vmax=3.5, aspect="auto")
+    ax.set_xticks(range(len(methods)), methods, rotation=20, ha="right", fontsize=8)
+    ax.set_yticks(range(len(case_names)), [f"{g}: {c}" for g, c in case_names], fontsize=7)
+    ax.set_title("Outcome per hard case and method (green correct, amber reported failure,\n"
+                 "red silently wrong, grey not applicable)", fontsize=9)
+    for i in range(len(case_names)):
+        for j in range(len(methods)):
+            if grid[i, j] == 2:
+                ax.text(j, i, "WRONG", ha="center", va="center", fontsize=6, color="white")
+    fig.tight_layout()
+    save(fig, outdir / "stability.png")
+
+
+def main(argv=None):
+    args = parse_args(NAME, "Stress every method on hard cases; no silently wrong result allowed.", argv)
+    res = run(args.out, args.quick)
+    print(f"Stability table written to {res['out']}/")
+    print(f"{'method':18s} " + " ".join(f"{o:>17s}" for o in OUTCOMES))
+    for mth, c in res["per_method"].items():
+        print(f"{mth:18s} " + " ".join(f"{c[o]:17d}" for o in OUTCOMES))
+    for r in res["rows"]:
+        if r.outcome in ("silently wrong", "reported failure"):
+            print(f"  [{r.outcome}] {r.group} / {r.case} / {r.method}: {r.reason[:160]}")
+
+
+if __name__ == "__main__":
+    main()
