@@ -19,7 +19,7 @@ import casadi as ca
 import numpy as np
 
 from . import compiled
-from .contact_problem import NUMPY_OPS, planar_enum
+from .contact_problem import NUMPY_OPS, planar_enum, planar_refine
 from .scenes import Scene
 from .timestepping import MoreauJeanOptions, _Assembly
 
@@ -130,6 +130,12 @@ def _numpy_step(Z, c, n):
     pN = np.where(active, pN, 0.0)
     pT = np.where(active, pT, 0.0)
     inc = a + SHt[:, 0] * pN + SHt[:, 1] * pT
+    v_try = v + inc
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dpN, dpT = planar_refine(W[0], W[1], W[2], W[3],
+                                 np.einsum("ij,ij->j", H[0], v_try) + e * np.minimum(uN_minus, 0.0),
+                                 np.einsum("ij,ij->j", H[1], v_try), mu, np.where(active, mode, -2), ops=NUMPY_OPS)
+    inc = inc + SHt[:, 0] * dpN + SHt[:, 1] * dpT
     y = inc - cv
     t_ = v + y
     cv = (t_ - v) - y

@@ -23,7 +23,7 @@ import tempfile
 import casadi as ca
 import numpy as np
 
-from .contact_problem import CASADI_OPS, MODE_NAMES, planar_enum
+from .contact_problem import CASADI_OPS, MODE_NAMES, planar_enum, planar_refine
 
 __all__ = ["applicable", "pack", "step_function", "chunk_function", "simulate_compiled", "cache_dir"]
 
@@ -131,8 +131,15 @@ def step_function(n: int, affine: bool = True, lean: bool = False) -> ca.Functio
     pN, pT, mode, n_distinct = planar_enum(W00, W01, W10, W11, qN, uT_free, mu, ops=CASADI_OPS)
     pN = ca.if_else(active, pN, 0)
     pT = ca.if_else(active, pT, 0)
+    # one refinement on the branch (as the Python loop): removes cond(W) eps from the velocities
+    dv = dvf + ca.mtimes(SHt, ca.vertcat(pN, pT))
+    v_try = v + dv
+    dpN, dpT = planar_refine(W00, W01, W10, W11, ca.dot(H[0, :].T, v_try) + e * ca.fmin(uN_minus, 0),
+                             ca.dot(H[1, :].T, v_try), mu, ca.if_else(active, mode, -2), ops=CASADI_OPS)
+    pN, pT = pN + dpN, pT + dpT
+    dv = dv + ca.mtimes(SHt, ca.vertcat(dpN, dpT))
     # compensated (Kahan) sums of v and q, as in the Python loop: over 1e6 steps plain sums drift
-    v_new, cv_new = _kahan(v, dvf + ca.mtimes(SHt, ca.vertcat(pN, pT)), cv)
+    v_new, cv_new = _kahan(v, dv, cv)
     q_new, cq_new = _kahan(q, h * ((1 - th) * v + th * v_new), cq)
     x_new = ca.vertcat(q_new, v_new, cq_new, cv_new)
     if lean:

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["OPEN", "STICK", "SLIDE_POS", "SLIDE_NEG", "MODE_NAMES", "ContactProblem", "planar_enum",
-           "PY_OPS", "NUMPY_OPS", "CASADI_OPS"]
+           "planar_refine", "PY_OPS", "NUMPY_OPS", "CASADI_OPS"]
 
 OPEN, STICK, SLIDE_POS, SLIDE_NEG = 0, 1, 2, 3
 MODE_NAMES = {OPEN: "open", STICK: "stick", SLIDE_POS: "slide+", SLIDE_NEG: "slide-"}
@@ -107,6 +107,30 @@ def planar_enum(W00, W01, W10, W11, qN, qT, mu, ops=PY_OPS, rtol: float = 1e-12)
     n_distinct = (1 + differs(open_ok, 0.0, 0.0) + differs(st_ok, pN_st, pT_st)
                   + differs(sp_ok, pN_p, -mu * pN_p) + differs(sm_ok, pN_m, mu * pN_m))
     return pN, pT, mode, n_distinct
+
+
+def planar_refine(W00, W01, W10, W11, rN, rT, mu, mode, ops=PY_OPS):
+    """One step of iterative refinement of a planar contact solution on its branch.
+
+    Given the local velocity residual (rN, rT) of the post-step velocity (what should be zero:
+    rN for a closed contact, rT for a sticking one), return the impulse correction (dpN, dpT) that
+    cancels it on the same branch (the sliding relation p_T = -+mu p_N is kept). With an
+    ill-conditioned mass matrix the first solve leaves rounding of order cond(W) eps in the
+    velocities, which would let a stuck block creep and a pressed one sink; one refinement
+    removes it. Same number-type genericity as :func:`planar_enum`.
+    """
+    where = ops.where
+    det = W00 * W11 - W01 * W10
+    dets = where(det != 0, det, 1.0)
+    st_N = (-rN * W11 + rT * W01) / dets
+    st_T = (-rT * W00 + rN * W10) / dets
+    a_p = W00 - mu * W01
+    a_m = W00 + mu * W01
+    sp_N = -rN / where(a_p != 0, a_p, 1.0)
+    sm_N = -rN / where(a_m != 0, a_m, 1.0)
+    dpN = where(mode == STICK, st_N, where(mode == SLIDE_POS, sp_N, where(mode == SLIDE_NEG, sm_N, 0.0)))
+    dpT = where(mode == STICK, st_T, where(mode == SLIDE_POS, -mu * sp_N, where(mode == SLIDE_NEG, mu * sm_N, 0.0)))
+    return dpN, dpT
 
 
 @dataclass

@@ -60,9 +60,8 @@ class JeanPrattExact:
         Impulsive stops: time, normal and tangential impulse.
     segments : list of Segment
     consistent : bool
-        False if, at some rest state, neither stick nor slip is possible (a loaded contact with
-        s kappa >= 1 in the pushed direction, physics.md section 2); the motion then stops being
-        defined at :attr:`t_inconsistent`.
+        Always True: a rest state where neither stick nor slip is possible (a load beyond the stick
+        bound with s kappa >= 1 in its direction) lifts the block off, which raises ValueError.
 
     Examples
     --------
@@ -145,9 +144,11 @@ class JeanPrattExact:
             s = math.copysign(1.0, self.phi)
             sl = self._slide(s)
             if sl is None:
-                self.consistent = False
-                self.t_inconsistent = tc
-                return
+                # s kappa >= 1 and the load exceeds the stick bound: the free motion then always lifts
+                # the block (M t phi > A (m+M) g follows from |phi| > R (m+M) g >= A (m+M) g / (M |t|))
+                raise ValueError(f"phi = {self.phi!r} lifts the block off the line from rest at t = {tc:.6g} "
+                                 "(kappa >= 1 in the loaded direction): this regime (an open contact) has no "
+                                 "exact solution here")
             a, N, f = sl
             self.segments.append(Segment(tc, math.inf, xc, 0.0, a, "slide+" if s > 0 else "slide-", N, f))
             return

@@ -45,11 +45,13 @@ class Scene:
     name: str
     params: dict = field(default_factory=dict)
     solution: JeanPrattExact | None = None
+    no_exact_reason: str = ""
 
     def exact(self, t) -> dict:
         """Exact x, xdot, N, f (and y = 0) at times t; see :class:`lcp.exact.JeanPrattExact`."""
         if self.solution is None:
-            raise ValueError(f"scene '{self.name}' has no exact solution")
+            raise ValueError(f"scene '{self.name}' has no exact solution"
+                             + (f": {self.no_exact_reason}" if self.no_exact_reason else ""))
         return self.solution(t)
 
     def __getattr__(self, name):
@@ -101,7 +103,9 @@ def jean_pratt(m: float = 1.0, M: float = 1.0, alpha: float = math.pi / 4, R: fl
     Returns
     -------
     Scene
-        With ``scene.exact(t)`` and the attributes kappa, N0, B, tau0, x_stop, shocks.
+        With ``scene.exact(t)`` and the attributes kappa, N0, B, tau0, x_stop, shocks. Where the
+        load lifts the block off the line (an open contact) the scene still simulates, but has no
+        exact solution (``scene.exact`` raises ValueError saying why).
 
     Examples
     --------
@@ -154,13 +158,18 @@ def jean_pratt(m: float = 1.0, M: float = 1.0, alpha: float = math.pi / 4, R: fl
         q0, v0v = np.zeros(3), np.array([v0, 0.0, -v0 * t])
     if M == 0 and coordinates == "full":
         raise ValueError("M must be > 0 with coordinates='full' (the guided body's mass matrix is singular)")
-    sol = JeanPrattExact(m=m, M=M, alpha=alpha, R=R, v0=v0, g=g, phi=phi) if load is None else None
+    sol, why = None, "a time-dependent load"
+    if load is None:
+        try:
+            sol = JeanPrattExact(m=m, M=M, alpha=alpha, R=R, v0=v0, g=g, phi=phi)
+        except ValueError as exc:  # lift-off: the scene is fine to simulate, only exact() is missing
+            why = str(exc)
     if t_end is None:
         t_end = max(0.3, 2 * sol.tau0) if sol is not None and np.isfinite(sol.tau0) else 0.3
     _check_params(t_end=t_end)
     if t_end <= 0:
         raise ValueError(f"t_end must be > 0, got {t_end!r}")
-    return Scene(system, q0, v0v, float(t_end), "jean_pratt", params, sol)
+    return Scene(system, q0, v0v, float(t_end), "jean_pratt", params, sol, no_exact_reason=why)
 
 
 def block_chain(K: int = 3, m=1.0, k_spring: float = 50.0, mu=0.3, g: float = 9.81, v0=None,

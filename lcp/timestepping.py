@@ -70,7 +70,7 @@ class MoreauJeanOptions:
 
 
 class _Assembly:
-    """The per-step matrices, built once when the system is constant.
+    """The per-step matrices, built once when they are constant.
 
     Gives, for a state (t, q, v): the free velocity v_free, S H' (so v+ = v_free + S H' p), the
     Delassus operator W = H S H', the gaps and H.
@@ -80,7 +80,11 @@ class _Assembly:
         self.sys, self.h, self.theta = system, h, theta
         self.n, self.m = system.n, system.n_contacts
         self.constant = system.is_constant
-        if self.constant:
+        # the matrices (S, W, ...) are constant also when only an additive F(t) varies: then the
+        # forces are evaluated per step and nothing else is rebuilt
+        self.matrices_constant = (system.mass_is_constant and system.kinematics_is_constant
+                                  and system.force_is_affine)
+        if self.matrices_constant:
             z = np.zeros(self.n)
             _, S, T, SHt, W, gap0, H = self._eval(0.0, z, z)
             self.S, self.T, self.SHt, self.W, self.H = S, T, SHt, W, H
@@ -110,6 +114,14 @@ class _Assembly:
             F = self.F0 if self.force_constant else self.F0 + self.Kq @ q + self.Cv @ v
             # the theta-weighted affine force, linearized exactly (as in System.one_step_fn)
             dv = self.S @ (h * F + h * h * th * self.Kq @ v)
+            if self.T.shape[1]:
+                dv = dv + self.T @ (-self.phi_t - self.G @ v)
+            return dv, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
+        if self.matrices_constant:  # time-dependent forces with constant matrices
+            h, th, f = self.h, self.theta, self.sys.force_fn
+            F = np.array(f(t, q, v), dtype=float).ravel()
+            F1 = np.array(f(t + h, q, v), dtype=float).ravel()
+            dv = self.S @ (h * ((1 - th) * F + th * F1) + h * h * th * self.Kq @ v)
             if self.T.shape[1]:
                 dv = dv + self.T @ (-self.phi_t - self.G @ v)
             return dv, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
@@ -223,6 +235,14 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             p = sol.p
             dv = dvf + SHt[:, idx] @ p
             md = pb.modes(p)
+            # one refinement on the branch: with an ill-conditioned mass matrix the solve leaves
+            # cond(W) eps in the velocities, which would let a stuck block creep and a pressed one sink
+            r = H[idx] @ (v + dv)
+            r[: active.size] += e[active] * np.minimum(uN_minus[active], 0.0)
+            dp = ContactProblem(Wa, r, mu[active]).solve_branch(md)
+            if dp is not None and np.all(np.isfinite(dp)):
+                p = p + dp
+                dv = dv + SHt[:, idx] @ dp
             if row >= 0:
                 PN[row, active] = p[: active.size]
                 PT[row, active] = p[active.size:]

@@ -121,3 +121,9 @@ def test_reverse_motion_never_paradoxical():
 def test_lift_off_is_reported():
     with pytest.raises(ValueError, match="lifts the block off"):
         JeanPrattExact(phi=1000.0, v0=0.0)
+
+
+def test_loaded_paradoxical_start_lifts_off_and_is_reported():
+    # kappa = 1.25 and a load beyond the stick bound: neither stick nor slip, the block lifts off
+    with pytest.raises(ValueError, match="lifts the block off"):
+        JeanPrattExact(R=2.5, v0=0.0, phi=60.0)
