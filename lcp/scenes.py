@@ -57,9 +57,12 @@ class Scene:
     def __getattr__(self, name):
         # kappa, N0, B, tau0, x_stop, shocks ... of the exact solution, as scene attributes
         sol = self.__dict__.get("solution")
-        if sol is not None and name in ("kappa", "N0", "B", "tau0", "x_stop", "shocks", "A", "tan",
-                                        "consistent", "impulse", "switch_times"):
-            return getattr(sol, name)
+        if name in ("kappa", "N0", "B", "tau0", "x_stop", "shocks", "A", "tan", "consistent", "impulse",
+                    "switch_times"):
+            if sol is not None:
+                return getattr(sol, name)
+            raise AttributeError(f"{name}: scene '{self.__dict__.get('name')}' has no exact solution "
+                                 f"({self.__dict__.get('no_exact_reason', '')})")
         raise AttributeError(name)
 
 
