@@ -13,7 +13,7 @@ from typing import Callable
 import casadi as ca
 import numpy as np
 
-from lem.series import tan_alpha
+from lem.series import check_parameters, tan_alpha
 
 from .exact import JeanPrattExact
 from .system import Contact, System
@@ -117,17 +117,8 @@ def jean_pratt(m: float = 1.0, M: float = 1.0, alpha: float = math.pi / 4, R: fl
     >>> round(sc.kappa, 12), round(sc.tau0, 6), sc.q0, sc.v0
     (0.25, 0.152905, array([0., 0.]), array([1., 0.]))
     """
-    _check_params(m=m, M=M, alpha=alpha, R=R, v0=v0, g=g, phi=phi)
-    if m <= 0:
-        raise ValueError(f"m must be > 0, got {m!r}")
-    if M < 0:
-        raise ValueError(f"M must be >= 0, got {M!r}")
-    if R < 0:
-        raise ValueError(f"R (friction coefficient) must be >= 0, got {R!r}")
-    if g < 0:
-        raise ValueError(f"g must be >= 0, got {g!r}")
-    if not abs(alpha) < math.pi / 2 or not math.isfinite(math.tan(alpha)):
-        raise ValueError(f"alpha must lie strictly inside (-pi/2, pi/2), got {alpha!r}")
+    check_parameters(m, M, alpha, R, g)
+    _check_params(v0=v0, phi=phi)
     if coordinates not in ("reduced", "full"):
         raise ValueError(f"coordinates must be 'reduced' or 'full', got {coordinates!r}")
     t = tan_alpha(alpha)

@@ -27,6 +27,7 @@ import math
 import numpy as np
 
 __all__ = [
+    "check_parameters",
     "tan_alpha",
     "kappa",
     "N0_printed",
@@ -61,10 +62,11 @@ def tan_alpha(alpha: float) -> float:
     return math.tan(alpha)
 
 
-def _check(m, M, alpha, R, g=9.81):
+def check_parameters(m, M, alpha, R, g=9.81):
+    """ValueError naming the first Jean-Pratt parameter out of range (shared with lcp.scenes)."""
     for name, val in (("m", m), ("M", M), ("alpha", alpha), ("R", R), ("g", g)):
-        if not np.isfinite(val):
-            raise ValueError(f"{name} must be finite, got {val!r}")
+        if not isinstance(val, (int, float, np.floating, np.integer)) or not np.isfinite(val):
+            raise ValueError(f"{name} must be a finite number, got {val!r}")
     if m <= 0:
         raise ValueError(f"m must be > 0, got {m!r}")
     if M < 0:
@@ -73,11 +75,13 @@ def _check(m, M, alpha, R, g=9.81):
         raise ValueError(f"R (friction coefficient) must be >= 0, got {R!r}")
     if not abs(alpha) < math.pi / 2:
         raise ValueError(f"alpha must lie strictly inside (-pi/2, pi/2), got {alpha!r}")
+    if g < 0:
+        raise ValueError(f"g must be >= 0, got {g!r}")
 
 
 def kappa(m: float, M: float, alpha: float, R: float) -> float:
     """Shock number kappa = R M tan(alpha) / (m + M tan(alpha)^2)."""
-    _check(m, M, alpha, R)
+    check_parameters(m, M, alpha, R)
     t = tan_alpha(alpha)
     return R * M * t / (m + M * t * t)
 
@@ -88,7 +92,7 @@ def N0_printed(m: float, M: float, alpha: float, R: float, g: float = 9.81, v0_s
     The sign ``-`` is for v0 > 0 and ``+`` for v0 < 0, as printed (this formula is correct).
     For v0 > 0 and kappa >= 1 it is negative or infinite: no sliding motion exists.
     """
-    _check(m, M, alpha, R, g)
+    check_parameters(m, M, alpha, R, g)
     if v0_sign not in (-1, 1):
         raise ValueError(f"v0_sign must be +1 or -1, got {v0_sign!r}")
     t = tan_alpha(alpha)
