@@ -1,0 +1,238 @@
+"""Troesch's problem by shooting over the LEM propagator (Toma 1986, physics.md §6).
+
+    y'' = lambda sinh(lambda y),  y(0) = 0,  y(1) = 1.
+
+The initial slope s = y'(0) is found by shooting: each trial integrates ``y' = z, z' = lambda
+sinh(lambda y)`` over [0, 1] with the restarted LEM engine (:func:`lem.truncation.solve`), whose
+propagators also give the sensitivity d y(1) / d s for Newton's method. y(1; s) increases with s
+(y'' > 0 for y > 0), so the root is bracketed and Newton steps that leave the bracket are replaced
+by bisection. For large lambda the shooting solution has a pole just beyond x = 1 (at x = 1.00135
+for lambda = 10): too large an s puts the pole inside [0, 1], which the engine reports as a failed
+trial (step size underflow or blow-up), and the trial then serves as an upper bracket.
+
+Examples
+--------
+>>> from lem.troesch import solve_troesch, TROESCH_REFERENCE
+>>> res = solve_troesch(1.0)
+>>> res.success, abs(res.slope / TROESCH_REFERENCE[1.0] - 1) < 1e-9
+(True, True)
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .truncation import AnalyticField, LEMResult, LEMWarning, solve
+
+__all__ = ["TROESCH_REFERENCE", "TROESCH_POLE_10", "STATUS_MESSAGES", "troesch_field", "shoot",
+           "TroeschResult", "solve_troesch"]
+
+#: High-accuracy y'(0) (physics.md §6).
+TROESCH_REFERENCE = {
+    0.5: 0.95904379541321905,
+    1.0: 0.84520268530995106,
+    5.0: 0.045750461406318740,
+    10.0: 3.5833778463081369e-4,
+}
+#: Position of the pole of the lambda = 10 shooting solution (physics.md §6).
+TROESCH_POLE_10 = 1.00135
+
+#: status code -> meaning; ``success`` is ``status >= 0``.
+STATUS_MESSAGES = {
+    0: "Converged: |y(1) - 1| and the slope correction are within tolerance, and every LEM "
+       "trajectory met its error estimate.",
+    1: "Converged in s, but the LEM error estimate of y(1) exceeds the tolerance: the slope is "
+       "only as good as slope_error_estimate says.",
+    -1: "No convergence within maxiter shooting iterations.",
+    -2: "The final trajectory failed (the LEM engine did not reach x = 1).",
+}
+
+
+def troesch_field(lam: float) -> AnalyticField:
+    """y' = z, z' = lam sinh(lam y) as an analytic field (exact Taylor coefficients via jets)."""
+    lam = _check_lam(lam)
+    return AnalyticField(lambda t, y: [y[1], lam * np.sinh(lam * y[0])], 2)
+
+
+def _check_lam(lam) -> float:
+    if isinstance(lam, bool) or not isinstance(lam, (int, float, np.floating, np.integer)) \
+            or not np.isfinite(lam) or lam <= 0:
+        raise ValueError(f"lam must be a finite positive number, got {lam!r}")
+    return float(lam)
+
+
+def shoot(lam: float, s: float, **options) -> LEMResult:
+    """Integrate y(0) = 0, y'(0) = s over [0, 1] with the (by default auto-restarted) LEM engine.
+
+    ``options`` go to :func:`lem.truncation.solve` (defaults: degree 16, restart "auto",
+    rtol 1e-12, atol 1e-14).
+    """
+    if not np.isfinite(s):
+        raise ValueError(f"s must be finite, got {s!r}")
+    opts = dict(degree=16, restart="auto", rtol=1e-12, atol=1e-14)
+    opts.update(options)
+    return solve(troesch_field(lam), (0.0, 1.0), [0.0, float(s)], **opts)
+
+
+@dataclass
+class TroeschResult:
+    """Outcome of :func:`solve_troesch`.
+
+    Attributes
+    ----------
+    lam : float
+    slope : float
+        y'(0) found.
+    residual : float
+        y(1) - 1 of the final trajectory.
+    slope_error_estimate : float
+        LEM error estimate of y(1) divided by d y(1)/d s, plus the last Newton correction.
+    status : int
+        See :data:`STATUS_MESSAGES`; ``success = status >= 0``.
+    message : str
+    iterations : int
+        Shooting trials (LEM integrations).
+    failed_trials : int
+        Trials whose trajectory did not reach x = 1 (pole inside the interval).
+    n_segments : int
+        LEM segments of the final trajectory.
+    dyds : float
+        d y(1) / d s at the solution (the conditioning of the shooting).
+    history : list of (s, y1 or nan, status)
+    solution : LEMResult
+        The final trajectory (t, y, error_estimate, ...).
+    reference : float or None
+        Value from :data:`TROESCH_REFERENCE` if lam is listed.
+    relative_error : float or None
+        |slope / reference - 1|.
+    """
+
+    lam: float
+    slope: float
+    residual: float
+    slope_error_estimate: float
+    status: int
+    message: str
+    iterations: int
+    failed_trials: int
+    n_segments: int
+    dyds: float
+    history: list = field(default_factory=list)
+    solution: LEMResult | None = None
+    reference: float | None = None
+    relative_error: float | None = None
+
+    @property
+    def success(self) -> bool:
+        return self.status >= 0
+
+
+def _initial_slope(lam: float) -> float:
+    # linear problem y'' = lam**2 y for small lam; the asymptotic 8 exp(-lam) for large lam.
+    return min(lam / math.sinh(lam), 8.0 * math.exp(-lam))
+
+
+def solve_troesch(lam: float, *, s0: float | None = None, xtol: float = 1e-13, ftol: float = 1e-12,
+                  maxiter: int = 80, **options) -> TroeschResult:
+    """Solve Troesch's problem for y'(0) by bracketed Newton shooting over the LEM propagator.
+
+    Parameters
+    ----------
+    lam : float
+        lambda > 0.
+    s0 : float, optional
+        First guess of y'(0) (default: min(lam/sinh(lam), 8 exp(-lam))).
+    xtol, ftol : float
+        Stop when the Newton correction is below ``xtol * s`` or |y(1) - 1| <= ftol.
+    maxiter : int
+        Maximum number of trials.
+    **options
+        Passed to :func:`lem.truncation.solve` (``degree``, ``rtol``, ``restart`` ...).
+
+    Returns
+    -------
+    TroeschResult
+
+    Examples
+    --------
+    >>> r = solve_troesch(0.5)
+    >>> round(r.slope, 12)
+    0.959043795413
+    """
+    lam = _check_lam(lam)
+    for name, v in (("xtol", xtol), ("ftol", ftol)):
+        if not (np.isfinite(v) and v > 0):
+            raise ValueError(f"{name} must be finite and > 0, got {v!r}")
+    if isinstance(maxiter, bool) or not isinstance(maxiter, int) or maxiter < 1:
+        raise ValueError(f"maxiter must be a positive integer, got {maxiter!r}")
+    s = _initial_slope(lam) if s0 is None else float(s0)
+    if not (np.isfinite(s) and s > 0):
+        raise ValueError(f"s0 must be finite and > 0, got {s0!r}")
+    options.setdefault("warn", False)  # failed trials are expected (overshoot): reported below
+    lo, hi = 0.0, math.inf        # y(1; lo) < 1 < y(1; hi) (hi: overshoot or pole inside [0, 1])
+    history, failed = [], 0
+    best = None
+    status, message = -1, STATUS_MESSAGES[-1]
+    # Far from the root a loose tolerance is enough to steer Newton (|F| >> error): it saves most
+    # of the cost, since the first trials pass close to the pole for large lambda.
+    coarse = dict(options)
+    coarse["rtol"] = max(options.get("rtol", 1e-12), 1e-7)
+    coarse["atol"] = max(options.get("atol", 1e-14), 1e-9)
+    near = False
+    for it in range(1, maxiter + 1):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", LEMWarning)
+            res = shoot(lam, s, **(options if near else coarse))
+        reached = res.status >= 0 or res.status == 1
+        if not reached or res.t[-1] != 1.0:
+            failed += 1
+            history.append((s, math.nan, res.status))
+            hi = min(hi, s)
+            s = _bisect(lo, hi)
+            continue
+        F = float(res.y[0, -1]) - 1.0
+        dF = float(res.sensitivity[0, 1, -1])
+        history.append((s, F + 1.0, res.status))
+        if F < 0:
+            lo = max(lo, s)
+        else:
+            hi = min(hi, s)
+        step = -F / dF if dF > 0 else math.nan
+        if near:
+            best = (s, F, dF, res)
+            if abs(F) <= ftol or (np.isfinite(step) and abs(step) <= xtol * s):
+                s_new = s + step if np.isfinite(step) else s
+                slope = s_new if lo <= s_new <= hi else s
+                est = float(res.error_estimate[0, -1]) / dF + abs(step)
+                status = 0 if res.status == 0 else 1
+                return _result(lam, slope, F, est, status, STATUS_MESSAGES[status], it, failed, res,
+                               dF, history)
+        elif abs(F) < 1e-3:
+            near = True  # from now on every trial uses the requested tolerance
+        s_new = s + step if np.isfinite(step) else math.nan
+        if not (lo < s_new < hi):
+            s_new = _bisect(lo, hi)
+        s = s_new
+    if best is None:
+        return TroeschResult(lam, math.nan, math.nan, math.inf, -2, STATUS_MESSAGES[-2], maxiter,
+                             failed, 0, math.nan, history, None, TROESCH_REFERENCE.get(lam), None)
+    s, F, dF, res = best
+    est = float(res.error_estimate[0, -1]) / dF + abs(F / dF)
+    return _result(lam, s, F, est, status, message, maxiter, failed, res, dF, history)
+
+
+def _bisect(lo: float, hi: float) -> float:
+    if not np.isfinite(hi):
+        return 2.0 * lo if lo > 0 else 1.0
+    # geometric mean: the slopes of interest span orders of magnitude (8 exp(-lam))
+    return math.sqrt(lo * hi) if lo > 0 else 0.5 * hi
+
+
+def _result(lam, slope, F, est, status, message, it, failed, res, dF, history) -> TroeschResult:
+    ref = TROESCH_REFERENCE.get(lam)
+    rel = abs(slope / ref - 1.0) if ref is not None else None
+    return TroeschResult(lam, float(slope), float(F), float(est), status, message, it, failed,
+                         res.stats.n_segments, float(dF), history, res, ref, rel)
