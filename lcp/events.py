@@ -65,6 +65,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
 from enum import Enum
+import functools
 from itertools import product
 import math
 import weakref
@@ -110,10 +111,37 @@ _ODE_METHODS = ("DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
 
 
 def _enum_value(enum, name, value):
+    member = _ENUM_MEMBERS[enum].get(value) if isinstance(value, str) else None
+    if member is not None:
+        return member
     try:
         return enum(value)
     except ValueError:
         raise ValueError(f"{name} must be one of {[e.value for e in enum]}, got {value!r}") from None
+
+
+#: members by value (a str Enum member is its own value): Enum(value) without the metaclass call
+_ENUM_MEMBERS = {enum: {e.value: e for e in enum} for enum in (SmoothIntegrator, ModeSolver)}
+_AUTO_SMOOTH, _CLOSED_FORM, _SCIPY = SmoothIntegrator.AUTO, SmoothIntegrator.CLOSED_FORM, SmoothIntegrator.SCIPY
+_AUTO_SOLVER, _ENUMERATE = ModeSolver.AUTO, ModeSolver.ENUMERATE
+
+
+_NO_CONTACTS = np.zeros(0, dtype=int)
+_NO_CONTACTS.setflags(write=False)
+
+
+def _finite(x) -> bool:
+    """np.isfinite(x).all() for a 1-D array, without NumPy's per-call overhead when small."""
+    if x.size <= 16:
+        return all(map(math.isfinite, x.tolist()))
+    return bool(np.isfinite(x).all())
+
+
+def _absmax(x) -> float:
+    """float(np.max(np.abs(x))) for a non-empty 1-D array, without NumPy's per-call overhead when small."""
+    if x.size <= 16:
+        return float(max(map(abs, x.tolist())))
+    return float(np.max(np.abs(x)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -167,18 +195,24 @@ class EventOptions:
             raise ValueError(f"ode_method must be one of {list(_ODE_METHODS)}, got {self.ode_method!r}")
         for name in ("rtol", "atol", "tol"):
             val = getattr(self, name)
-            if not isinstance(val, (int, float, np.floating)) or not np.isfinite(val) or val <= 0:
+            if not isinstance(val, (int, float, np.floating)) or not math.isfinite(val) or val <= 0:
                 raise ValueError(f"{name} must be finite and > 0, got {val!r}")
         for name, low in (("n_eval", 2), ("max_branches", 1), ("max_events", 1)):
             val = getattr(self, name)
             if not isinstance(val, (int, np.integer)) or isinstance(val, bool) or val < low:
                 raise ValueError(f"{name} must be an integer >= {low}, got {val!r}")
-        make_solver(self.impact_solver)  # raises ValueError naming the known solvers
+        if not (isinstance(self.impact_solver, str) and self.impact_solver in _VALID_SOLVER_NAMES):
+            make_solver(self.impact_solver)  # raises ValueError naming the known solvers
+            if isinstance(self.impact_solver, str):
+                _VALID_SOLVER_NAMES.add(self.impact_solver)
         if self.t_eval is not None:
             te = np.array(self.t_eval, dtype=float).ravel()
-            if te.size == 0 or not np.all(np.isfinite(te)):
+            # strictly increasing with finite ends: all finite (a NaN fails every comparison)
+            ok = (te.size and math.isfinite(te[0]) and math.isfinite(te[-1])
+                  and (te.size == 1 or (te[1:] > te[:-1]).all()))
+            if not ok and (te.size == 0 or not np.isfinite(te).all()):
                 raise ValueError("t_eval must be a non-empty array of finite times")
-            if np.any(np.diff(te) <= 0) or te[0] < 0:
+            if not ok or te[0] < 0:
                 raise ValueError("t_eval must be strictly increasing and >= 0")
             te.setflags(write=False)
             set_(self, "t_eval", te)
@@ -186,10 +220,11 @@ class EventOptions:
     @classmethod
     def from_kwargs(cls, **options) -> "EventOptions":
         """Build from keyword arguments; unknown names raise ValueError listing the known ones."""
-        known = [f.name for f in fields(cls)]
-        unknown = sorted(set(options) - set(known))
-        if unknown:
-            raise ValueError(f"unknown option(s) {unknown} for method 'event'; known options: {known}")
+        known = _OPTION_NAMES
+        if not known.issuperset(options):
+            names = [f.name for f in fields(cls)]
+            unknown = sorted(set(options) - known)
+            raise ValueError(f"unknown option(s) {unknown} for method 'event'; known options: {names}")
         return cls(**options)
 
     def output_times(self, t_end: float) -> np.ndarray:
@@ -198,6 +233,10 @@ class EventOptions:
         if self.t_eval[-1] > t_end:
             raise ValueError(f"t_eval must lie inside [0, t_end = {t_end!r}], got a last time {self.t_eval[-1]!r}")
         return np.array(self.t_eval)
+
+
+_OPTION_NAMES = frozenset(f.name for f in fields(EventOptions))
+_VALID_SOLVER_NAMES: set = set()  # impact-solver names make_solver accepted (no need to build one again)
 
 
 # ---------------------------------------------------------------------------------------- records
@@ -361,34 +400,58 @@ class _Data:
 
 
 class _Model:
-    """Evaluates the system; when it is constant, assembles once and never calls CasADi again."""
+    """Evaluates the system; when it is constant, assembles once and never calls CasADi again.
+
+    For a constant system it also keeps what depends on the system only, built on first use and
+    reused by every later integration of the same System object:
+
+    - ``state_checked``: the mass matrix was validated (``System.check_state``) once; it is the same
+      at every state, so later calls only check the shapes and finiteness of q0 and v0;
+    - ``projector(key, J)``: the mass-metric correction matrix A^-1 J' (J A^-1 J')^+ of a set of
+      constraint rows (the projections after an event apply it to a rounding-level residual);
+    - for polynomial systems (constant forces as well), the contact problems of the mode decision
+      do not depend on the state at all: ``mode_memo`` keeps their solutions per (closed contacts,
+      slide signs, allowed modes, solver), with the solver statistics to replay, and ``phase_memo``
+      the per-mode data of a closed-form phase.
+    """
 
     def __init__(self, system):
         self.sys = system
-        self.n, self.m = system.n, system.n_contacts
+        self.n, self.m, self.nb = system.n, system.n_contacts, system.n_bilateral
+        self.all_contacts = tuple(range(self.m))
         self.constant = system.is_constant
         # polynomial (quadratic) phases: constant mass, kinematics and forces
         self.polynomial = self.constant and not system.force_depends_on_state
+        self.state_checked = False
         if self.constant:
             n, m = self.n, self.m
             z = np.zeros(n)
             A, F0, K, C, G, phi_t, gap0, H = (np.array(x, dtype=float) for x in system.step_data_fn(0.0, z, z))
             self.A, self.G = A.reshape(n, n), G.reshape(system.n_bilateral, n)
+            self.phi_t = phi_t.ravel()
             self.F0, self.Kq, self.Cv = F0.ravel(), -K.reshape(n, n), -C.reshape(n, n)
             self.H, self.gap0 = H.reshape(2 * m, n), gap0.ravel()
+            self.HN = np.ascontiguousarray(self.H[:m])
+            self.A_max = float(np.max(np.abs(self.A))) if n else 0.0
             self._const_data = _Data(self.A, self.F0, self.G, np.zeros(system.n_bilateral), self.H,
                                      np.zeros(2 * m), self.gap0, check=True)
+            self._proj = {}
+            self.mode_memo = {}
+            self.phase_memo = {}
+            self.impact_memo = {}
+            self.free_ready = {}  # closed-form phase data with no closed contact (_ClosedFormPhase.ready)
         else:
             self.fn = _accel_function(system)
 
     def data(self, t, q, v) -> _Data:
         if self.constant:
+            if self.polynomial:
+                return self._const_data  # nothing depends on the state (gaps: see gaps())
             d = _Data.__new__(_Data)
             d.__dict__.update(self._const_data.__dict__)  # shares the factorization
-            d.gap = self.gap0 + self.H[: self.m] @ q
-            if not self.polynomial:
-                d.F = self.F0 + self.Kq @ q + self.Cv @ v
-                d._qdd_free = None
+            d.gap = self.gap0 + self.HN @ q
+            d.F = self.F0 + self.Kq @ q + self.Cv @ v
+            d._qdd_free = None
             return d
         n, m, nb = self.n, self.m, self.sys.n_bilateral
         A, F, G, zeta, H, Hdv, gap = (np.array(x, dtype=float) for x in self.fn(t, q, v))
@@ -397,7 +460,7 @@ class _Model:
 
     def gaps(self, q) -> np.ndarray:
         if self.constant:
-            return self.gap0 + self.H[: self.m] @ q
+            return self.gap0 + self.HN @ q
         return self.sys.gaps(q)
 
     def jac(self, q) -> np.ndarray:
@@ -405,6 +468,15 @@ class _Model:
         if self.constant:
             return self.H
         return self.sys.contact_jacobian(q)
+
+    def projector(self, key, rows) -> np.ndarray:
+        """Constant system: the matrix C with _mass_projection(A, J, r) = C r, J = vstack(rows)."""
+        C = self._proj.get(("C",) + key)
+        if C is None:
+            J = np.vstack(rows)
+            AJ = np.linalg.solve(self.A, J.T)
+            C = self._proj[("C",) + key] = AJ @ np.linalg.lstsq(J @ AJ, np.eye(J.shape[0]), rcond=None)[0]
+        return C
 
 
 # ---------------------------------------------------------------------------- contact problems
@@ -464,11 +536,13 @@ class _Accel:
         return [STICK if (s != 0 and md != OPEN) else md for md, s in zip(modes, self.slide)]
 
 
-@dataclass
+@dataclass(eq=False)
 class _Solution:
     modes: tuple  # per closed contact: OPEN / STICK / SLIDE_POS / SLIDE_NEG (sliding: SLIDE_*)
     p: np.ndarray
     qdd: np.ndarray
+    #: closed-form phase data of this solution (_ClosedFormPhase.ready), per closed set
+    ready: dict = field(default_factory=dict, repr=False)
 
 
 def _enumerate(acc: _Accel, allowed=None) -> tuple[list, int]:
@@ -523,6 +597,8 @@ def _boundary_alternatives(acc: _Accel, modes, p, rtol: float = 1e-9) -> list:
 
 def _group(sols: list, qdd_scale: float) -> list:
     """Group solutions by motion: equal accelerations are one motion (ties at a mode boundary)."""
+    if len(sols) <= 1:
+        return [list(sols)] if sols else []
     groups = []
     for s in sols:
         for g in groups:
@@ -535,24 +611,39 @@ def _group(sols: list, qdd_scale: float) -> list:
 
 
 # ---------------------------------------------------------------------------------- phases
+@functools.lru_cache(maxsize=4096)
+def _phase_static(m: int, idx: tuple, modes: tuple) -> tuple:
+    """What a phase needs from its closed contacts and modes alone (shared, read-only arrays):
+    (modes, idx, slide signs, open contacts, modes of all contacts, mode names, sliding (j, sign, row of
+    H_T,j) triples, idx as a tuple)."""
+    idx_a = np.array(idx, dtype=int)
+    slide = np.array([1.0 if md == SLIDE_POS else (-1.0 if md == SLIDE_NEG else 0.0) for md in modes])
+    closed = set(idx)
+    open_idx = np.array([j for j in range(m) if j not in closed], dtype=int)
+    full = np.full(m, OPEN, dtype=np.int8)
+    full[idx_a] = modes
+    names = tuple(MODE_NAMES[int(c)] for c in full)
+    sliding = tuple((j, s, m + j) for j, s in zip(idx, slide.tolist()) if s != 0)
+    for arr in (idx_a, slide, open_idx, full):
+        arr.setflags(write=False)
+    return modes, idx_a, slide, open_idx, full, names, sliding, idx
+
+
 class _Phase:
     """Common part of a smooth phase: fixed closed set, slide signs and stick set."""
 
-    def __init__(self, model, t0, q0, v0, P0, idx, modes, mu):
+    def __init__(self, model, t0, q0, v0, P0, idx, modes, mu, static=None):
         self.model = model
         self.t0, self.q0, self.v0, self.P0 = t0, q0, v0, P0
-        self.idx = np.asarray(idx, dtype=int)
-        self.modes = tuple(modes)  # per closed contact, never OPEN
-        self.slide = np.array([1.0 if md == SLIDE_POS else (-1.0 if md == SLIDE_NEG else 0.0) for md in modes])
         self.mu = mu
-        m = model.m
-        self.open_idx = np.setdiff1d(np.arange(m), self.idx)
-        full = np.full(m, OPEN, dtype=np.int8)
-        full[self.idx] = modes
-        self.full_modes = full
+        if static is None:  # modes: per closed contact, never OPEN
+            static = _phase_static(model.m, tuple(np.asarray(idx, dtype=int).tolist()), tuple(map(int, modes)))
+        self.static = static
+        (self.modes, self.idx, self.slide, self.open_idx, self.full_modes, self._names, self._sliding,
+         self.idx_t) = static
 
     def names(self) -> tuple:
-        return tuple(MODE_NAMES[int(c)] for c in self.full_modes)
+        return self._names
 
     def accel(self, data):
         acc = _Accel(data, self.idx, self.slide, self.mu)
@@ -571,6 +662,7 @@ class _ClosedFormPhase(_Phase):
 
     def __init__(self, *args, start=None):
         super().__init__(*args)
+        self.H = self.model.H
         if start is None:
             data = self.model.data(self.t0, self.q0, self.v0)
             self.qdd, N, f = self.accel(data)
@@ -586,26 +678,41 @@ class _ClosedFormPhase(_Phase):
         self.N = np.zeros(m)
         self.f = np.zeros(m)
         self.N[self.idx], self.f[self.idx] = N, f
-        self.H = self.model.H
+        self.NF = np.concatenate([self.N, self.f])
+        # per sliding contact: (j, sign, H_T,j, tangential acceleration H_T,j qdd)
+        self._slide_rows = tuple((j, s, self.H[row], self.H[row] @ self.qdd) for j, s, row in self._sliding)
+
+    def ready(self) -> tuple:
+        """What a later phase of the same modes and accelerations reuses (:meth:`from_ready`)."""
+        for arr in (self.qdd, self.N, self.f, self.NF):
+            arr.setflags(write=False)
+        return self.static, (self.H, self.qdd, self.N, self.f, self.NF, self._slide_rows)
+
+    @classmethod
+    def from_ready(cls, model, t0, q0, v0, P0, mu, ready):
+        """The phase of the same modes and accelerations as the one ``ready`` came from."""
+        ph = cls.__new__(cls)
+        ph.model, ph.t0, ph.q0, ph.v0, ph.P0, ph.mu = model, t0, q0, v0, P0, mu
+        ph.static, (ph.H, ph.qdd, ph.N, ph.f, ph.NF, ph._slide_rows) = ready
+        (ph.modes, ph.idx, ph.slide, ph.open_idx, ph.full_modes, ph._names, ph._sliding, ph.idx_t) = ph.static
+        return ph
 
     def run(self, t_stop):
         """First event before t_stop: (t_event, kind, contact) or None."""
-        H, m = self.H, self.model.m
+        H = self.H
         best = (math.inf, None, -1)
-        for j, s in zip(self.idx, self.slide):
-            if s == 0:
-                continue
-            u0 = H[m + j] @ self.v0
-            a = H[m + j] @ self.qdd
+        for j, s, Hrow, a in self._slide_rows:
+            u0 = Hrow @ self.v0
             if s * a < 0 and s * u0 > 0:
                 dt = -u0 / a  # cancellation-free: one division
                 if dt < best[0]:
                     best = (dt, "stop", int(j))
-        gap = self.model.gaps(self.q0)
-        for j in self.open_idx:
-            dt = _first_landing(gap[j], H[j] @ self.v0, H[j] @ self.qdd)
-            if dt < best[0]:
-                best = (dt, "impact", int(j))
+        if len(self.open_idx):
+            gap = self.model.gaps(self.q0)
+            for j in self.open_idx:
+                dt = _first_landing(gap[j], H[j] @ self.v0, H[j] @ self.qdd)
+                if dt < best[0]:
+                    best = (dt, "impact", int(j))
         dt, kind, j = best
         if not self.t0 + dt < t_stop:
             self.t1 = t_stop
@@ -617,15 +724,38 @@ class _ClosedFormPhase(_Phase):
         dt = self.t1 - self.t0
         v1 = self.v0 + dt * self.qdd
         q1 = self.q0 + dt * 0.5 * (self.v0 + v1)  # exact for constant acceleration, no cancellation
-        return q1, v1, self.P0 + dt * np.concatenate([self.N, self.f])
+        return q1, v1, self.P0 + dt * self.NF
 
-    def output(self, t):
-        dt = (t - self.t0)[:, None]
-        q = self.q0 + dt * self.v0 + 0.5 * dt * dt * self.qdd
-        v = self.v0 + dt * self.qdd
-        P = self.P0 + dt * np.concatenate([self.N, self.f])
-        n = t.size
-        return q, v, P, np.broadcast_to(self.N, (n, self.N.size)), np.broadcast_to(self.f, (n, self.f.size))
+    def output(self, t, out):
+        """Write (q, v, cumulative impulses) at the times t into the columns of ``out``
+        (shape (2n + 2m, t.size)); return the forces (N, f), the same at every time."""
+        _closed_form_output([self], t, [t.size], out)
+        return self.N, self.f
+
+
+def _closed_form_output(phases, t, counts, out):
+    """Closed-form phases, consecutive, on consecutive output times t (``counts[i]`` of them in
+    phase i): write the rows (q, v, cumulative impulses) of ``out`` (shape (2n + 2m, t.size)).
+
+    Elementwise q0 + dt v0 + dt^2/2 qdd, v0 + dt qdd and P0 + dt (N, f), evaluated in that order
+    (dt = t - t0), with each phase's constants repeated over its columns: long contiguous rows
+    for every phase at once, rather than NumPy's slow broadcasting of short ones.
+    """
+    n, r = phases[0].q0.size, out.shape[0]
+    Y0 = np.concatenate([x for ph in phases for x in (ph.q0, ph.v0, ph.P0)]).reshape(len(phases), r).T
+    Y1 = np.concatenate([x for ph in phases for x in (ph.v0, ph.qdd, ph.NF)]).reshape(len(phases), r).T
+    if len(phases) == 1:
+        dt = t - phases[0].t0
+        Y0, Y1 = np.broadcast_to(Y0, out.shape), np.broadcast_to(Y1, out.shape)
+    else:
+        dt = t - np.repeat([ph.t0 for ph in phases], counts)
+        Y0, Y1 = np.repeat(Y0, counts, axis=1), np.repeat(Y1, counts, axis=1)
+    h = 0.5 * dt
+    h *= dt
+    quad = h * Y1[n:2 * n]  # dt^2/2 qdd
+    np.multiply(dt, Y1, out=out)
+    np.add(Y0, out, out=out)
+    np.add(out[:n], quad, out=out[:n])
 
 
 def _first_landing(g0: float, u: float, a: float) -> float:
@@ -777,14 +907,16 @@ class _OdePhase(_Phase):
         y = self.y1
         return y[:n].copy(), y[n:2 * n].copy(), y[2 * n:].copy()
 
-    def output(self, t):
-        n, m = self.model.n, self.model.m
-        Y = self.sol.sol(t) if t.size else np.zeros((2 * n + 2 * m, 0))
+    def output(self, t, out):
+        """Write (q, v, cumulative impulses) at the times t into the columns of ``out``; return (N, f)."""
+        m = self.model.m
+        Y = self.sol.sol(t) if t.size else np.zeros((out.shape[0], 0))
+        out[:] = Y
         N = np.zeros((t.size, m))
         f = np.zeros((t.size, m))
         for i in range(t.size):
             _, N[i], f[i] = self._eval(float(t[i]), Y[:, i])
-        return Y[:n].T, Y[n:2 * n].T, Y[2 * n:].T, N, f
+        return N, f
 
 
 # --------------------------------------------------------------------------------- integrator
@@ -808,23 +940,39 @@ class _Integrator:
         self.mu, self.e = system.mu, system.e
         n, m = system.n, system.n_contacts
         self.n, self.m = n, m
-        if options.smooth == SmoothIntegrator.CLOSED_FORM and not self.model.polynomial:
+        if options.smooth is _CLOSED_FORM and not self.model.polynomial:
             raise ValueError("smooth='closed-form' needs constant mass, kinematics and forces "
                              "(System.is_constant and forces independent of q and v)")
-        self.closed_form = self.model.polynomial and options.smooth != SmoothIntegrator.SCIPY
-        self.impact_solver = make_solver(options.impact_solver)
+        self.closed_form = self.model.polynomial and options.smooth is not _SCIPY
+        self._impact_solver = None
         self.stats = SolverStats()
         self.events, self.impulses, self.phases = [], [], []
         self.mode_solver_used = set()
         # scales for the zero tests
-        d = self.model.data(0.0, q0, v0)
-        acc_scale = float(np.max(np.abs(d.qdd_free))) if n else 0.0
-        V = max(float(np.max(np.abs(v0))) if n else 0.0, acc_scale * t_end, 1e-300)
-        self.scales = {"V": V, "L": max(V * t_end, float(np.max(np.abs(q0))) if n else 0.0, 1e-300),
+        model = self.model
+        if model.polynomial:
+            acc_scale = model.__dict__.get("acc_scale")
+            if acc_scale is None:
+                d = model.data(0.0, q0, v0)
+                acc_scale = model.acc_scale = float(np.max(np.abs(d.qdd_free))) if n else 0.0
+            A_max = model.A_max
+        else:
+            d = model.data(0.0, q0, v0)
+            acc_scale = float(np.max(np.abs(d.qdd_free))) if n else 0.0
+            A_max = float(np.max(np.abs(d.A)))
+        V = max(_absmax(v0) if n else 0.0, acc_scale * t_end, 1e-300)
+        self.scales = {"V": V, "L": max(V * t_end, _absmax(q0) if n else 0.0, 1e-300),
                        "A": max(acc_scale, V / t_end),
-                       "P": max(float(np.max(np.abs(d.A))) * V, 1e-300)}
+                       "P": max(A_max * V, 1e-300)}
         self.vel_tol = options.tol * V
         self.gap_tol = options.tol * self.scales["L"]
+
+    @property
+    def impact_solver(self):
+        """The one-step solver of the velocity-level impact problems (built on first use)."""
+        if self._impact_solver is None:
+            self._impact_solver = make_solver(self.o.impact_solver)
+        return self._impact_solver
 
     # --- consistency of the initial state
     def check_initial(self, q0, v0):
@@ -838,20 +986,24 @@ class _Integrator:
                 raise ValueError("v0 violates the velocity form of the bilateral constraints")
         if self.m:
             gap = self.model.gaps(q0)
-            bad = np.flatnonzero(gap < -self.gap_tol)
-            if bad.size:
+            bad = np.flatnonzero(gap < -self.gap_tol) if min(gap.tolist()) < -self.gap_tol else ()
+            if len(bad):
                 raise ValueError(f"q0 penetrates contact {bad[0]} (gap {gap[bad[0]]:.3g} < 0)")
 
     # --- projection onto the constraints after a phase (removes integration drift and rounding)
     def project(self, t, q, v, gap_rows, normal_rows, tangent_rows):
         """Snap q onto g_j = 0 (j in gap_rows) and the bilateral constraints, and v onto
         u_N,j = 0 (normal_rows), u_T,j = 0 (tangent_rows) and the bilateral velocity constraints,
-        each by the smallest correction in the mass metric (it removes drift and rounding only)."""
+        each by the smallest correction in the mass metric (it removes drift and rounding only).
+        The rows are tuples of contact indices."""
+        if self.model.constant:
+            return self._project_constant(t, q, v, gap_rows, normal_rows, tangent_rows)
         n, m = self.n, self.m
         nb = self.sys.n_bilateral
-        A = self.model.A if self.model.constant else self.sys.mass(q, t)
+        gap_rows = np.array(gap_rows, dtype=int)
+        A = self.sys.mass(q, t)
         if gap_rows.size or nb:
-            for _ in range(1 if self.model.constant else 3):
+            for _ in range(3):
                 rows, res = [], []
                 if nb:
                     phi, G, _ = (np.array(x, dtype=float) for x in self.sys.constraints_fn(t, q))
@@ -870,7 +1022,7 @@ class _Integrator:
             G = G.reshape(nb, n)
             rows.append(G)
             res.append(G @ v + phi_t.ravel())
-        vr = np.concatenate([np.asarray(normal_rows, dtype=int), m + np.asarray(tangent_rows, dtype=int)])
+        vr = np.array(normal_rows + tuple(m + j for j in tangent_rows), dtype=int)
         if vr.size:
             H = self.model.jac(q)
             rows.append(H[vr])
@@ -881,36 +1033,104 @@ class _Integrator:
                 v = v - _mass_projection(A, J, r)
         return q, v
 
+    def _project_constant(self, t, q, v, gap_rows, normal_rows, tangent_rows):
+        """:meth:`project` for a constant system: one correction each (the constraints are
+        affine), with the rows and correction matrices of each row set built once per system."""
+        model, m = self.model, self.m
+        nb = model.nb
+        if gap_rows or nb:
+            key = ("q", gap_rows)
+            entry = model._proj.get(key)
+            if entry is None:
+                rows = np.array(gap_rows, dtype=int)
+                entry = model._proj[key] = (rows, model.projector(key, [model.G, model.H[rows]]))
+            rows, C = entry
+            res = []
+            if nb:
+                res.append(np.array(self.sys.constraints_fn(t, q)[0], dtype=float).ravel())
+            if gap_rows:
+                g = model.gaps(q)
+                res.append(g if len(gap_rows) == g.size and gap_rows == model.all_contacts else g[rows])
+            r = np.concatenate(res) if len(res) > 1 else res[0]
+            if r.any():
+                q = q - C @ r
+        vr = normal_rows + tuple(m + j for j in tangent_rows)
+        if nb or vr:
+            key = ("v", vr)
+            entry = model._proj.get(key)
+            if entry is None:
+                Hv = model.H[np.array(vr, dtype=int)]
+                entry = model._proj[key] = (Hv, model.projector(key, [model.G, Hv]))
+            Hv, C = entry
+            if nb:
+                r = np.concatenate([model.G @ v + model.phi_t, Hv @ v])
+            else:
+                r = Hv @ v
+            if r.any():
+                v = v - C @ r
+        return q, v
+
     # --- the acceleration-level problem and the next mode
     def classify(self, q, v):
-        """Contacts at the surface: (closed candidates, approaching ones), velocities H v."""
+        """Contacts at the surface: (closed candidates, approaching ones) as tuples of contact
+        indices, and the local velocities H v (a list)."""
         m = self.m
         if not m:
-            return np.zeros(0, int), np.zeros(0, int), np.zeros(0)
-        gap = self.model.gaps(q)
-        u = self.model.jac(q) @ v
-        at = gap <= self.gap_tol
-        closed = np.flatnonzero(at & (np.abs(u[:m]) <= self.vel_tol))
-        approaching = np.flatnonzero(at & (u[:m] < -self.vel_tol))
-        return closed, approaching, u
+            return (), (), []
+        gap = self.model.gaps(q).tolist()
+        ul = (self.model.jac(q) @ v).tolist()
+        gtol, vtol = self.gap_tol, self.vel_tol
+        closed, approaching = [], []
+        for j in range(m):
+            if gap[j] <= gtol:
+                if abs(ul[j]) <= vtol:
+                    closed.append(j)
+                elif ul[j] < -vtol:
+                    approaching.append(j)
+        return tuple(closed), tuple(approaching), ul
 
     def solve_modes(self, data, closed, slide, allowed=None):
-        """Distinct motions of the acceleration problem: list of groups of _Solution."""
-        acc = _Accel(data, closed, slide, self.mu, flush=True)
-        n_branches = int(np.prod([2 if s != 0 else 4 for s in slide])) if closed.size else 1
-        use_enum = (self.o.mode_solver == ModeSolver.ENUMERATE
-                    or (self.o.mode_solver == ModeSolver.AUTO and n_branches <= self.o.max_branches))
-        self.stats.solver_calls += 1
-        if use_enum or allowed is not None:
-            self.mode_solver_used.add("enumerate")
-            sols, tried = _enumerate(acc, allowed)
-            self.stats.iterations += tried
-            self.stats.max_iterations = max(self.stats.max_iterations, tried)
+        """Distinct motions of the acceleration problem: list of groups of _Solution.
+
+        ``closed`` (contact indices) and ``slide`` (signs) are tuples. For a polynomial system
+        the problem depends on them only: its solutions are kept per system
+        (``_Model.mode_memo``) and the solver statistics replayed.
+        """
+        n_branches = 1
+        for s in slide:
+            n_branches *= 2 if s != 0 else 4
+        use_enum = (self.o.mode_solver is _ENUMERATE
+                    or (self.o.mode_solver is _AUTO_SOLVER and n_branches <= self.o.max_branches))
+        if self.model.polynomial:
+            key = (closed, slide, None if allowed is None else frozenset(allowed), use_enum)
+            memo = self.model.mode_memo
+            entry = memo.get(key)
+            if entry is None:
+                entry = memo[key] = self._solve_modes(data, closed, slide, allowed, use_enum)
         else:
-            self.mode_solver_used.add("lemke")
+            entry = self._solve_modes(data, closed, slide, allowed, use_enum)
+        sols, acc, used, iterations, max_iterations, max_residual = entry
+        st = self.stats
+        st.solver_calls += 1
+        self.mode_solver_used.add(used)
+        st.iterations += iterations
+        st.max_iterations = max(st.max_iterations, max_iterations)
+        if max_residual is not None:
+            st.max_residual = max(st.max_residual, max_residual)
+        return _group(sols, self.scales["A"]), acc
+
+    def _solve_modes(self, data, closed, slide, allowed, use_enum):
+        """(solutions, problem, solver name, iterations, max iterations candidate, max residual)."""
+        closed, slide = np.array(closed, dtype=int), np.array(slide, dtype=float)
+        acc = _Accel(data, closed, slide, self.mu, flush=True)
+        if use_enum or allowed is not None:
+            used = "enumerate"
+            sols, tried = _enumerate(acc, allowed)
+            iterations = max_iterations = tried
+        else:
+            used = "lemke"
             res = make_solver("lemke").solve(acc.pb)
-            self.stats.iterations += res.iterations
-            self.stats.max_iterations = max(self.stats.max_iterations, res.iterations)
+            iterations = max_iterations = res.iterations
             sols = []
             if res.success:
                 md = acc.pb.modes(res.p)
@@ -923,23 +1143,30 @@ class _Integrator:
                     # Lemke returns one solution; at a mode boundary its neighbours are the same
                     # motion, and the tie must be seen to be broken (else the phase chatters)
                     sols, tried = _enumerate(acc, set(product(*alts)))
-                    self.stats.iterations += tried
+                    iterations += tried
+        max_residual = None
         for s in sols:
-            self.stats.max_residual = max(self.stats.max_residual, acc.pb.residual(s.p))
-        return _group(sols, self.scales["A"]), acc
+            r = acc.pb.residual(s.p)
+            max_residual = r if max_residual is None else max(max_residual, r)
+            s.p.setflags(write=False)
+            s.qdd.setflags(write=False)
+        return sols, acc, used, iterations, max_iterations, max_residual
 
-    def slide_signs(self, closed, u):
-        m = self.m
-        uT = u[m + closed] if closed.size else np.zeros(0)
-        return np.where(np.abs(uT) <= self.vel_tol, 0.0, np.sign(uT))
+    def slide_signs(self, closed, ul) -> tuple:
+        """Sign of the sliding velocity of each closed contact (0.0 for a stick candidate)."""
+        m, vtol = self.m, self.vel_tol
+        return tuple(0.0 if abs(x) <= vtol else (1.0 if x > 0 else -1.0) for x in (ul[m + j] for j in closed))
 
     def lookahead(self, t, q, v, closed, slide, group):
         """Break a tie (one motion, several mode sets) by the problem a short time later."""
         qdd = group[0].qdd
         dt = 1e-6 * self.t_end
-        q1 = q + dt * v + 0.5 * dt * dt * qdd
-        v1 = v + dt * qdd
-        d1 = self.model.data(t + dt, q1, v1)
+        if self.model.polynomial:
+            d1 = self.model.data(t + dt, q, v)  # the same at every state
+        else:
+            q1 = q + dt * v + 0.5 * dt * dt * qdd
+            v1 = v + dt * qdd
+            d1 = self.model.data(t + dt, q1, v1)
         groups, _ = self.solve_modes(d1, closed, slide, allowed={s.modes for s in group})
         if len(groups) == 1 and len(groups[0]) >= 1:
             return groups[0][0]
@@ -950,14 +1177,23 @@ class _Integrator:
         m = self.m
         idx = np.asarray(contacts, dtype=int)
         k = idx.size
-        rows = np.concatenate([idx, m + idx])
-        Hc = data.H[rows]
-        SH = data.solve_dirs(Hc.T)
-        W = Hc @ SH
+        key = idx.tobytes()
+        cached = self.model.impact_memo.get(key) if self.model.polynomial else None
+        if cached is None:
+            rows = np.concatenate([idx, m + idx])
+            Hc = data.H[rows]
+            SH = data.solve_dirs(Hc.T)
+            W = Hc @ SH
+            b = Hc @ data.qdd_free + data.Hdv[rows]
+            cached = (Hc, SH, W, b)
+            if self.model.polynomial:  # nothing here depends on the state
+                for arr in cached:
+                    arr.setflags(write=False)
+                self.model.impact_memo[key] = cached
+        Hc, SH, W, b = cached
         u = Hc @ v
         qv = u.copy()
         qv[:k] += self.e[idx] * u[:k]  # Newton restitution, as in the Moreau-Jean step
-        b = Hc @ data.qdd_free + data.Hdv[rows]
         # Moreau-Jean's problem for a vanishing step h = delta: free velocity u + delta b
         umax, bmax = float(np.max(np.abs(qv))), float(np.max(np.abs(b)))
         delta = 1e-8 * (umax / bmax if umax > 0 and bmax > 0 else self.t_end)
@@ -987,15 +1223,15 @@ class _Integrator:
     def decide(self, t, q, v):
         """Apply impulses where needed, then find the modes of the next phase.
 
-        Returns (q, v, closed, solution, problem): the contacts at the surface, the chosen
+        Returns (q, v, closed, solution, problem): the contacts at the surface (a tuple), the chosen
         solution of their acceleration-level problem (None if there are none) and that problem;
         raises _Inconsistent when no motion can be continued.
         """
         for _ in range(8):
             data = self.model.data(t, q, v)
-            closed, approaching, u = self.classify(q, v)
-            if approaching.size:
-                at = np.union1d(closed, approaching)
+            closed, approaching, ul = self.classify(q, v)
+            if approaching:
+                at = np.union1d(np.array(closed, dtype=int), np.array(approaching, dtype=int))
                 out = self.impact(t, q, v, at, data)
                 if out is None:
                     raise _Inconsistent(f"the impact problem at t = {t:.17g} has no solution")
@@ -1003,9 +1239,9 @@ class _Integrator:
                 v = v + dv
                 self.record_impulse(t, at, p, "impact", "gap closed with approach velocity")
                 continue
-            if not closed.size:
+            if not closed:
                 return q, v, closed, None, None
-            slide = self.slide_signs(closed, u)
+            slide = self.slide_signs(closed, ul)
             groups, acc = self.solve_modes(data, closed, slide)
             if len(groups) == 1:
                 group = groups[0]
@@ -1047,20 +1283,33 @@ class _Integrator:
             except _Inconsistent as exc:
                 status, message = -3, f"{EVENT_STATUS_MESSAGES[-3]} {exc}"
                 break
-            modes = sol.modes if sol is not None else ()
-            keep = [i for i, md in enumerate(modes) if md != OPEN]
-            args = (self.model, t, q, v, P, closed[keep], tuple(modes[i] for i in keep), self.mu)
             if self.closed_form:
-                Nm, fm = np.zeros(m), np.zeros(m)
-                if sol is not None:
-                    Nm[closed], fm[closed] = acc.forces(sol.p)  # zero for the contacts that open
-                    start = (sol.qdd, Nm[closed[keep]], fm[closed[keep]])
+                # The phase's modes, accelerations and forces depend on the solution only (a
+                # polynomial system's mode problems are the same at every state): kept with it.
+                cache = sol.ready if sol is not None else self.model.free_ready
+                ready = cache.get(closed)
+                if ready is None:
+                    closed_a = np.array(closed, dtype=int)
+                    modes = sol.modes if sol is not None else ()
+                    keep = [i for i, md in enumerate(modes) if md != OPEN]
+                    args = (self.model, t, q, v, P, closed_a[keep], tuple(modes[i] for i in keep), self.mu)
+                    Nm, fm = np.zeros(m), np.zeros(m)
+                    if sol is not None:
+                        Nm[closed_a], fm[closed_a] = acc.forces(sol.p)  # zero for the contacts that open
+                        start = (sol.qdd, Nm[closed_a[keep]], fm[closed_a[keep]])
+                    else:
+                        start = (self.model.data(t, q, v).qdd_free, Nm[:0], fm[:0])
+                    ph = _ClosedFormPhase(*args, start=start)
+                    cache[closed] = ph.ready()
                 else:
-                    start = (self.model.data(t, q, v).qdd_free, Nm[:0], fm[:0])
-                ph = _ClosedFormPhase(*args, start=start)
+                    ph = _ClosedFormPhase.from_ready(self.model, t, q, v, P, self.mu, ready)
             else:
+                closed_a = np.array(closed, dtype=int)
+                modes = sol.modes if sol is not None else ()
+                keep = [i for i, md in enumerate(modes) if md != OPEN]
+                args = (self.model, t, q, v, P, closed_a[keep], tuple(modes[i] for i in keep), self.mu)
                 ph = _OdePhase(*args, options=o, scales=self.scales)
-            closed, modes = ph.idx, ph.modes
+            closed, modes = ph.idx_t, ph.modes
             try:
                 ev = ph.run(self.t_end)
             except FloatingPointError as exc:
@@ -1068,18 +1317,19 @@ class _Integrator:
                 break
             run_phases.append(ph)
             self.phases.append(Phase(float(ph.t0), float(ph.t1), ph.names(), ph.integrator, int(ph.nfev)))
-            for c in ph.full_modes:
-                self.stats.mode_counts[MODE_NAMES[int(c)]] += 1
+            counts = self.stats.mode_counts
+            for name in ph.names():
+                counts[name] += 1
             if ev is None:
                 break
             te, kind, j = ev
             q, v, P = ph.end_state()
-            stick = closed[[i for i, md in enumerate(modes) if md == STICK]]
+            stick = tuple(c for c, md in zip(closed, modes) if md == STICK)
             if kind == "stop":
-                stick = np.append(stick, j)
-            gap_rows = closed if kind != "impact" else np.append(closed, j)
+                stick += (j,)
+            gap_rows = closed if kind != "impact" else closed + (j,)
             q, v = self.project(te, q, v, gap_rows, closed, stick)
-            if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
+            if not (_finite(q) and _finite(v)):
                 status, message = -2, f"{EVENT_STATUS_MESSAGES[-2]} At t = {te:.10g}."
                 break
             self.events.append(Event(float(te), kind, int(j)))
@@ -1097,6 +1347,28 @@ class _Integrator:
 
 class _Inconsistent(Exception):
     pass
+
+
+def _transposed(rows):
+    """C-contiguous copy of rows.T (column by column when there are few: faster than NumPy's)."""
+    k, N = rows.shape
+    if k > 8:
+        return np.ascontiguousarray(rows.T)
+    out = np.empty((N, k))
+    for i in range(k):
+        out[:, i] = rows[i]
+    return out
+
+
+def _check_state(system, q0, v0):
+    """``System.check_state``; for a constant system whose mass matrix was already validated,
+    only the shapes and finiteness of q0 and v0 (anything else: the full check, and its message)."""
+    model = _MODELS.get(system)
+    if model is not None and model.state_checked:
+        q, v = np.asarray(q0, dtype=float), np.asarray(v0, dtype=float)
+        if q.shape == v.shape == (model.n,) and _finite(q) and _finite(v):
+            return q, v
+    return system.check_state(q0, v0)
 
 
 def _mass_projection(A, J, r):
@@ -1154,9 +1426,10 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     if not (isinstance(t_end, (int, float, np.floating)) and np.isfinite(t_end) and t_end > 0):
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
     t_end = float(t_end)
-    q0, v0 = system.check_state(q0, v0)
+    q0, v0 = _check_state(system, q0, v0)
     t_out = opts.output_times(t_end)
     integ = _Integrator(system, q0, v0, t_end, opts)
+    integ.model.state_checked = integ.model.constant  # the mass matrix is the same at every state
     integ.check_initial(q0, v0)
     phases, status, message, t_fail = integ.run(q0, v0)
     n, m = system.n, system.n_contacts
@@ -1164,24 +1437,50 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
         t_out = t_out[t_out <= t_fail]
         if scene is not None:
             message = f"{message} (scene '{scene.name}')"
-    Q = np.full((t_out.size, n), np.nan)
-    V = np.full((t_out.size, n), np.nan)
-    Pc = np.zeros((t_out.size, 2 * m))
-    FN = np.zeros((t_out.size, m))
-    FT = np.zeros((t_out.size, m))
-    MD = np.full((t_out.size, m), -1, dtype=np.int8)
-    for i, ph in enumerate(phases):
-        last = i == len(phases) - 1
-        sel = (t_out >= ph.t0) & ((t_out < ph.t1) | (last & (t_out <= ph.t1)))
-        if sel.any():
-            Q[sel], V[sel], Pc[sel], FN[sel], FT[sel] = ph.output(t_out[sel])
-            MD[sel] = ph.full_modes
+    N_out = t_out.size
+    # rows q (n), v (n), cumulative impulses (2m); one column per output time
+    Y = np.empty((2 * n + 2 * m, N_out))
+    FN = np.empty((N_out, m))
+    FT = np.empty((N_out, m))
+    MD = np.empty((N_out, m), dtype=np.int8)
+
+    def blank(a, b):  # output times no phase covers: no state, no force, no mode
+        Y[:2 * n, a:b] = np.nan
+        Y[2 * n:, a:b] = 0.0
+        FN[a:b] = FT[a:b] = 0.0
+        MD[a:b] = -1
+
+    # output times in [t0, t1) of each phase, [t0, t1] for the last (t_out is increasing)
+    bounds = np.searchsorted(t_out, [ph.t0 for ph in phases] + [ph.t1 for ph in phases]).tolist()
+    n_ph = len(phases)
+    if n_ph and bounds[-1] < N_out and t_out[bounds[-1]] == phases[-1].t1:
+        bounds[-1] += 1
+    # the phases are consecutive in time: their output times are the columns [start, stop)
+    start = bounds[0] if n_ph else 0
+    stop = max(start, bounds[-1]) if n_ph else 0
+    if start > 0:
+        blank(0, start)
+    if stop < N_out:
+        blank(stop, N_out)
+    spans = [(ph, a, b) for ph, a, b in zip(phases, bounds[:n_ph], bounds[n_ph:]) if a < b]
+    if spans and integ.closed_form:
+        ph_s = [ph for ph, _, _ in spans]
+        _closed_form_output(ph_s, t_out[start:stop], [b - a for _, a, b in spans], Y[:, start:stop])
+        for ph, a, b in spans:
+            FN[a:b], FT[a:b] = ph.N, ph.f
+            MD[a:b] = ph.full_modes
+    else:
+        for ph, a, b in spans:
+            FN[a:b], FT[a:b] = ph.output(t_out[a:b], Y[:, a:b])
+            MD[a:b] = ph.full_modes
     # impulses over [t_i, t_{i+1}): the left-limit cumulative impulse, shocks at t_s < t included
     for imp in integ.impulses:
-        after = t_out > imp.t
-        Pc[after, imp.contact] += imp.P_N
-        Pc[after, m + imp.contact] += imp.P_T
-    dP = np.diff(Pc, axis=0)
+        after = int(np.searchsorted(t_out, imp.t, "right"))  # t_out > imp.t
+        Y[2 * n + imp.contact, after:] += imp.P_N
+        Y[2 * n + m + imp.contact, after:] += imp.P_T
+    Q, V = _transposed(Y[:n]), _transposed(Y[n:2 * n])
+    Pc = Y[2 * n:]
+    dP = (Pc[:, 1:] - Pc[:, :-1]).T  # np.diff
     integ.stats.steps = len(phases)
     used = sorted(integ.mode_solver_used)
     return EventResult(t=t_out, q=Q, v=V, p_N=dP[:, :m], p_T=dP[:, m:], modes=MD[:-1] if t_out.size else MD,
