@@ -746,10 +746,9 @@ def _closed_form_output(phases, t, counts, out):
     Y1 = np.concatenate([x for ph in phases for x in (ph.v0, ph.qdd, ph.NF)]).reshape(len(phases), r).T
     if len(phases) == 1:
         dt = t - phases[0].t0
-        Y0, Y1 = np.broadcast_to(Y0, out.shape), np.broadcast_to(Y1, out.shape)
     else:
-        dt = t - np.repeat([ph.t0 for ph in phases], counts)
-        Y0, Y1 = np.repeat(Y0, counts, axis=1), np.repeat(Y1, counts, axis=1)
+        dt = t - np.array([ph.t0 for ph in phases]).repeat(counts)
+        Y0, Y1 = Y0.repeat(counts, axis=1), Y1.repeat(counts, axis=1)
     h = 0.5 * dt
     h *= dt
     quad = h * Y1[n:2 * n]  # dt^2/2 qdd
@@ -1227,6 +1226,10 @@ class _Integrator:
         solution of their acceleration-level problem (None if there are none) and that problem;
         raises _Inconsistent when no motion can be continued.
         """
+        if self.model.polynomial:
+            out = self._decide_memo(q, v)
+            if out is not None:
+                return out
         for _ in range(8):
             data = self.model.data(t, q, v)
             closed, approaching, ul = self.classify(q, v)
@@ -1241,7 +1244,8 @@ class _Integrator:
                 continue
             if not closed:
                 return q, v, closed, None, None
-            slide = self.slide_signs(closed, ul)
+            m, vtol = self.m, self.vel_tol  # slide_signs, inline
+            slide = tuple([0.0 if abs(x) <= vtol else (1.0 if x > 0 else -1.0) for x in [ul[m + j] for j in closed]])
             groups, acc = self.solve_modes(data, closed, slide)
             if len(groups) == 1:
                 group = groups[0]
@@ -1268,6 +1272,43 @@ class _Integrator:
                 return q, v, closed, groups[0][0], acc
             raise _Inconsistent(f"at t = {t:.17g}: {why}; the impulsive fallback gives no impulse")
         raise _Inconsistent(f"at t = {t:.17g}: impulses did not lead to a consistent contact mode")
+
+    def _decide_memo(self, q, v):
+        """:meth:`decide` of a polynomial system in its common case: no contact approaching and
+        an acceleration problem already solved (``_Model.mode_memo``) with a unique solution.
+        The same steps as classify, slide_signs and solve_modes, inlined; None otherwise
+        (nothing done: decide then takes its general path)."""
+        model, m = self.model, self.m
+        gtol, vtol = self.gap_tol, self.vel_tol
+        gap = (model.gap0 + model.HN @ q).tolist()  # model.gaps(q)
+        ul = (model.H @ v).tolist()
+        closed = []
+        for j in range(m):
+            if gap[j] <= gtol:
+                if abs(ul[j]) <= vtol:
+                    closed.append(j)
+                elif ul[j] < -vtol:
+                    return None  # an impact first
+        closed = tuple(closed)
+        if not closed:
+            return q, v, closed, None, None
+        slide = tuple([0.0 if abs(x) <= vtol else (1.0 if x > 0 else -1.0) for x in [ul[m + j] for j in closed]])
+        n_branches = 1
+        for s in slide:
+            n_branches *= 2 if s != 0 else 4
+        o = self.o
+        use_enum = (o.mode_solver is _ENUMERATE or (o.mode_solver is _AUTO_SOLVER and n_branches <= o.max_branches))
+        entry = model.mode_memo.get((closed, slide, None, use_enum))
+        if entry is None or len(entry[0]) != 1:
+            return None
+        sols, acc, used, iterations, max_iterations, max_residual = entry
+        st = self.stats  # as solve_modes
+        st.solver_calls += 1
+        self.mode_solver_used.add(used)
+        st.iterations += iterations
+        st.max_iterations = max(st.max_iterations, max_iterations)
+        st.max_residual = max(st.max_residual, max_residual)
+        return q, v, closed, sols[0], acc
 
     # --- main loop
     def run(self, q0, v0):
@@ -1423,7 +1464,7 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     (0.0, 1.0, -2.0, [('stick',)])
     """
     opts = EventOptions.from_kwargs(**options)
-    if not (isinstance(t_end, (int, float, np.floating)) and np.isfinite(t_end) and t_end > 0):
+    if not (isinstance(t_end, (int, float, np.floating)) and math.isfinite(t_end) and t_end > 0):
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
     t_end = float(t_end)
     q0, v0 = _check_state(system, q0, v0)

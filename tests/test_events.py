@@ -314,3 +314,68 @@ def test_lift_off_when_the_normal_force_reaches_zero():
     after = res.t > t_lift
     assert np.all(res.q[after, 1] > 0) and np.all(res.force_N[after] == 0.0)
     assert np.all(res.force_N[~after, 0] > 0)
+
+
+# ------------------------------------------------------------------------ per-system caches (constant systems)
+def _same_result(a, b):
+    for name in ("t", "q", "v", "p_N", "p_T", "modes", "force_N", "force_T"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    assert (a.status, a.message, a.solver, a.t_events) == (b.status, b.message, b.solver, b.t_events)
+    assert (a.events, a.impulses, a.phases, a.stats) == (b.events, b.impulses, b.phases, b.stats)
+
+
+@pytest.mark.parametrize("coordinates", ["reduced", "full"])
+def test_a_warm_system_gives_the_results_of_a_fresh_one(coordinates):
+    """The mode problems, phase data, projections and the mass check are kept per System object;
+    a System used for other states, horizons and options before gives exactly the results of a
+    fresh one."""
+    kw = dict(coordinates=coordinates, t_end=0.5)
+    warm = lcp.scenes.jean_pratt(**kw)
+    for phi, v0, R in ((0.0, 1.0, 2.5), (12.0, -1.0, 0.5), (5.0, 0.0, 0.5), (-12.0, 1.0, 0.5), (0.0, -1.0, 1.9)):
+        sc = lcp.scenes.jean_pratt(phi=phi, v0=v0, R=R, **kw)
+        for opts in ({}, {"mode_solver": "lemke", "n_eval": 37}, {"t_eval": [0.0, 0.01, 0.2, 0.5]}):
+            fresh = lcp.scenes.jean_pratt(phi=phi, v0=v0, R=R, **kw)
+            a = lcp.simulate(fresh, method="event", **opts)
+            # the warm system: same mass matrix and contact, other forces -> a System of its own;
+            # reuse this scene's system for another initial state first, then for this one
+            lcp.simulate(sc.system, sc.t_end, method="event", q0=sc.q0, v0=-sc.v0, **opts)
+            b = lcp.simulate(sc, method="event", **opts)
+            c = lcp.simulate(sc, method="event", **opts)
+            _same_result(a, b)
+            _same_result(b, c)
+    lcp.simulate(warm, method="event")
+    _same_result(lcp.simulate(warm, method="event"), lcp.simulate(lcp.scenes.jean_pratt(**kw), method="event"))
+
+
+def test_a_warm_system_still_checks_the_initial_state():
+    sc = lcp.scenes.jean_pratt()
+    assert run(sc).success  # the mass matrix is now known to be fine: only q0 and v0 are checked
+    with pytest.raises(ValueError, match="q0 must be finite"):
+        event_driven(sc.system, [float("nan"), 0.0], sc.v0, 0.3)
+    with pytest.raises(ValueError, match="v0 must be finite"):
+        event_driven(sc.system, sc.q0, [float("inf"), 0.0], 0.3)
+    with pytest.raises(ValueError, match=r"q0 must have shape \(2,\)"):
+        event_driven(sc.system, np.zeros(3), sc.v0, 0.3)
+    with pytest.raises(ValueError, match="penetrates"):
+        event_driven(sc.system, np.array([0.0, -1e-3]), sc.v0, 0.3)
+    with pytest.raises(ValueError, match="t_eval must be a non-empty array of finite times"):
+        event_driven(sc.system, sc.q0, sc.v0, 0.3, t_eval=[0.0, float("nan"), 0.2])
+    with pytest.raises(ValueError, match="t_eval must be strictly increasing"):
+        event_driven(sc.system, sc.q0, sc.v0, 0.3, t_eval=[0.0, 0.2, 0.2])
+    with pytest.raises(ValueError, match="t_eval must be strictly increasing"):
+        event_driven(sc.system, sc.q0, sc.v0, 0.3, t_eval=[-0.1, 0.2])
+    with pytest.raises(ValueError, match="impact_solver|unknown solver"):
+        event_driven(sc.system, sc.q0, sc.v0, 0.3, impact_solver="newton")
+
+
+def test_results_are_independent_arrays():
+    """Cached per-system data are never handed out: results can be modified freely."""
+    sc = lcp.scenes.jean_pratt()
+    a = run(sc)
+    ref = run(sc)
+    for name in ("t", "q", "v", "p_N", "p_T", "modes", "force_N", "force_T"):
+        arr = getattr(a, name)
+        assert arr.flags.writeable, name
+        arr[...] = 0
+    _same_result(run(sc), ref)
+    assert ref.q.flags.c_contiguous and ref.v.flags.c_contiguous
