@@ -11,8 +11,8 @@ f = -R N tanh(xd / eps) with N = (m + M) g - M tan(alpha) xdd, which is linear i
     xdd = (phi - R (m + M) g tanh(xd/eps)) / (A - R M tan(alpha) tanh(xd/eps)),
 
 integrated by ``solve_ivp(method="LSODA")``. eps and rtol (atol = rtol * 1e-3) are tuned over a
-grid to LSODA's best error against the exact solution; that setting is then timed against the
-event-driven integrator. The two are timed in alternation (rounds of one LSODA call and a batch
+grid to LSODA's best error against the exact solution (among the settings that reach it, the
+fastest, timed again with repeats); that setting is then timed against the event-driven integrator. The two are timed in alternation (rounds of one LSODA call and a batch
 of event-driven calls), and each time is the median over the rounds of the time per call, so a
 change of load on a shared machine hits both alike and the speed-up is meaningful. The load
 average is printed and written with the results. Target: the event-driven integrator at least
@@ -66,7 +66,14 @@ def compare(name, scene, quick):
         ok = sol.success and sol.y.shape[1] == t_eval.size
         err = float(np.max(np.abs(sol.y[0] - x_exact))) if ok else np.inf
         grid.append(dict(scene=name, eps=eps, rtol=rtol, error=err, time_s=t1, nfev=sol.nfev))
-    best = min(grid, key=lambda r: (r["error"], r["time_s"]))
+    # the best error; among the settings that reach it, the fastest (timed again: one run each
+    # is too noisy to pick the baseline by)
+    err_best = min(r["error"] for r in grid)
+    tied = [r for r in grid if r["error"] == err_best]
+    if len(tied) > 1:
+        for r in tied:
+            r["time_s"], _ = timed(lambda r=r: lsoda_tanh(scene, t_eval, r["eps"], r["rtol"]), 3 if quick else 7)
+    best = min(tied, key=lambda r: r["time_s"])
     lsoda = lambda: lsoda_tanh(scene, t_eval, best["eps"], best["rtol"])  # noqa: E731
     sol = lsoda()
     err_lsoda = float(np.max(np.abs(sol.y[0] - x_exact)))

@@ -54,6 +54,15 @@ branch that Moreau-Jean's problem selects for a vanishing step (free velocity H_
 delta -> 0+) and re-solving that branch at delta = 0. The impulse (a tangential impact) is recorded
 with its time in :attr:`EventResult.impulses`.
 
+Cost on constant systems
+------------------------
+With constant mass matrix, kinematics and forces (``System.is_constant`` and no state dependence
+of the forces) the acceleration-level problems, the phases' accelerations and forces, the
+projection matrices and the check of the mass matrix depend on the System only: they are built
+on first use and kept per System object (``_Model``), so that a later call only classifies the
+contacts, finds the event times, projects the state at events and evaluates the quadratic phases
+at the output times (all at once, with NumPy). The results are those of a fresh System.
+
 Behaviour at the shock limit (Jean-Pratt, v0 > 0): for kappa < 1 the block slides with
 N0 = (m+M) g / (1 - kappa) and stops at tau0 = |v0| A (1 - kappa) / (R (m+M) g); as kappa -> 1-,
 tau0 -> 0, the stop distance -> 0 and the integral of the contact forces over the slide tends to
@@ -193,12 +202,17 @@ class EventOptions:
         set_(self, "mode_solver", _enum_value(ModeSolver, "mode_solver", self.mode_solver))
         if self.ode_method not in _ODE_METHODS:
             raise ValueError(f"ode_method must be one of {list(_ODE_METHODS)}, got {self.ode_method!r}")
+        defaults = _OPTION_DEFAULTS
         for name in ("rtol", "atol", "tol"):
             val = getattr(self, name)
+            if val is defaults[name]:
+                continue  # the default, valid
             if not isinstance(val, (int, float, np.floating)) or not math.isfinite(val) or val <= 0:
                 raise ValueError(f"{name} must be finite and > 0, got {val!r}")
         for name, low in (("n_eval", 2), ("max_branches", 1), ("max_events", 1)):
             val = getattr(self, name)
+            if val is defaults[name]:
+                continue
             if not isinstance(val, (int, np.integer)) or isinstance(val, bool) or val < low:
                 raise ValueError(f"{name} must be an integer >= {low}, got {val!r}")
         if not (isinstance(self.impact_solver, str) and self.impact_solver in _VALID_SOLVER_NAMES):
@@ -236,6 +250,7 @@ class EventOptions:
 
 
 _OPTION_NAMES = frozenset(f.name for f in fields(EventOptions))
+_OPTION_DEFAULTS = {f.name: f.default for f in fields(EventOptions)}
 _VALID_SOLVER_NAMES: set = set()  # impact-solver names make_solver accepted (no need to build one again)
 
 
@@ -252,6 +267,14 @@ class Event:
     t: float
     kind: str
     contact: int
+
+
+def _record(cls, *values):
+    """``cls(*values)`` for the frozen record dataclasses (Event, Phase), without the per-field
+    ``object.__setattr__`` of their generated ``__init__`` (they have no ``__post_init__``)."""
+    obj = object.__new__(cls)
+    obj.__dict__.update(zip(_RECORD_FIELDS[cls], values))
+    return obj
 
 
 @dataclass(frozen=True)
@@ -279,6 +302,9 @@ class Phase:
     modes: tuple
     integrator: str
     nfev: int = 0
+
+
+_RECORD_FIELDS = {cls: tuple(f.name for f in fields(cls)) for cls in (Event, Phase)}
 
 
 @dataclass(repr=False)
@@ -1357,7 +1383,7 @@ class _Integrator:
                 status, message = -2, f"{EVENT_STATUS_MESSAGES[-2]} Phase from t = {t:.10g}: {exc}"
                 break
             run_phases.append(ph)
-            self.phases.append(Phase(float(ph.t0), float(ph.t1), ph.names(), ph.integrator, int(ph.nfev)))
+            self.phases.append(_record(Phase, float(ph.t0), float(ph.t1), ph.names(), ph.integrator, int(ph.nfev)))
             counts = self.stats.mode_counts
             for name in ph.names():
                 counts[name] += 1
@@ -1373,7 +1399,7 @@ class _Integrator:
             if not (_finite(q) and _finite(v)):
                 status, message = -2, f"{EVENT_STATUS_MESSAGES[-2]} At t = {te:.10g}."
                 break
-            self.events.append(Event(float(te), kind, int(j)))
+            self.events.append(_record(Event, float(te), kind, int(j)))
             short = short + 1 if te - t <= 64 * _EPS * max(1.0, abs(te)) else 0
             t = te
             if len(self.events) > o.max_events or short > 50:
@@ -1382,7 +1408,7 @@ class _Integrator:
                            + (f" ({short} consecutive phases of zero length)" if short > 50 else ""))
                 break
         self.stats.steps = len(run_phases)
-        self.stats.free_steps = sum(1 for ph in run_phases if ph.idx.size == 0)
+        self.stats.free_steps = sum(1 for ph in run_phases if not ph.idx_t)
         return run_phases, status, message, t
 
 
