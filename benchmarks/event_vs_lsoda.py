@@ -132,7 +132,7 @@ def main(argv=None):
         for r in rows:
             w.writerow({k: (repr(v) if isinstance(v, float) else v) for k, v in r.items()})
         fh.write(f"# {load}\n")
-        fh.write("\n# LSODA tuning grid (one run each)\n")
+        fh.write("\n# LSODA tuning grid (one run each; the settings tied at the best error: median of repeats)\n")
         w2 = csv.DictWriter(fh, fieldnames=["scene", "eps", "rtol", "error", "time_s", "nfev"])
         w2.writeheader()
         for r in grid:
