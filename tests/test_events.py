@@ -165,9 +165,14 @@ def test_random_jean_pratt_against_exact(m, M, alpha, kappa, v0, sign, load):
     res = run(sc)
     ex = sc.exact(res.t)
     scale = max(1.0, float(np.max(np.abs(ex["x"]))))
-    assert np.max(np.abs(res.q[:, 0] - ex["x"])) <= 1e-12 * scale
+    # a loaded slide's acceleration is a difference phi -+ R (m+M) g: near |load| = 1 it cancels,
+    # and both the exact formula and the integrator lose digits in proportion
+    RN = R * (m + M) * g
+    cond = max([1.0] + [(abs(phi) + RN) / abs(phi - math.copysign(RN, sg.v0 if sg.v0 else phi))
+                        for sg in sol.segments if sg.mode != "stick" and sg.a != 0])
+    assert np.max(np.abs(res.q[:, 0] - ex["x"])) <= 1e-12 * scale * max(1.0, cond / 10)
     assert np.max(np.abs(res.q[:, 1])) <= 1e-12 * scale
-    np.testing.assert_allclose(res.t_events, tau, rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(res.t_events, tau, rtol=1e-13 * max(1.0, cond / 10), atol=1e-15)
 
 
 # ------------------------------------------------------------------------ the general model
