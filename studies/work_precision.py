@@ -390,10 +390,12 @@ def mujoco_available() -> tuple[bool, str]:
 
 
 def mujoco_model_xml(scene, h: float, cone: str = "elliptic", solref: str | None = None) -> str:
-    """The Jean-Pratt scene for MuJoCo: block (joints x, y), guided body (joint Y), the slide
-    Y = y - x tan(alpha) as a fixed-tendon equality, the block a sphere-free box on a plane with
-    friction R. The applied horizontal load is phi (the -M g tan(alpha) of the paper is built in
-    by the slide: here M's weight acts through the constraint, so the load on m is phi - 0)."""
+    """The Jean-Pratt scene for MuJoCo: block m (slide joints x, y), guided body M (slide joint Y),
+    the slide Y - y + x tan(alpha) = const as a fixed-tendon equality, the block a box on a plane
+    with friction R (condim 3). M's weight reaches x through the slide as + M g tan(alpha); a motor
+    on x supplies phi - M g tan(alpha) (the paper's applied force when phi = 0), so that the
+    reduced model is that of physics.md section 2. MuJoCo's contact and equality are soft
+    (default solref/solimp)."""
     p = scene.params
     m, M, R, g, phi = p["m"], p["M"], p["R"], p["g"], p["phi"]
     t = scene.tan
