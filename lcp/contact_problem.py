@@ -168,7 +168,7 @@ class ContactProblem:
     mu: np.ndarray
     key: object = None
 
-    def __post_init__(self):
+    def __post_init__(self, rho=None):
         self.W = np.asarray(self.W, dtype=float)
         self.q = np.asarray(self.q, dtype=float)
         self.mu = np.atleast_1d(np.asarray(self.mu, dtype=float))
@@ -176,11 +176,21 @@ class ContactProblem:
         if self.W.shape != (2 * k, 2 * k) or self.q.shape != (2 * k,):
             raise ValueError(f"W must be ({2 * k}, {2 * k}) and q ({2 * k},) for {k} contacts, "
                              f"got {self.W.shape} and {self.q.shape}")
-        d = np.diag(self.W)
-        # natural-map weights rho = 1/W_ii make the residual an impulse; guard empty/zero diagonals
-        self.rho = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 1.0)
+        if rho is None:
+            d = np.diag(self.W)
+            # natural-map weights rho = 1/W_ii make the residual an impulse; guard zero diagonals
+            rho = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 1.0)
+        self.rho = rho
         # impulse scale of this problem: the impulse that cancels the free velocity contact by contact
         self.scale = max(float(np.max(np.abs(self.q) * self.rho)) if k else 0.0, 1e-300)
+
+    def with_q(self, q: np.ndarray) -> "ContactProblem":
+        """The same operator with another free velocity (cheap: W's derived data is reused)."""
+        new = object.__new__(ContactProblem)
+        new.W, new.mu, new.key, new.k, new.rho = self.W, self.mu, self.key, self.k, self.rho
+        new.q = q
+        new.scale = max(float(np.max(np.abs(q) * self.rho)) if self.k else 0.0, 1e-300)
+        return new
 
     # ----------------------------------------------------------------- the Coulomb law
     def velocity(self, p: np.ndarray) -> np.ndarray:

@@ -15,6 +15,7 @@ solver implements one method, ``_solve``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import functools
 
 import numpy as np
 import scipy.sparse as sp
@@ -140,6 +141,14 @@ class LemkeSolver(OneStepSolver):
         return StepSolution(p, 0, "solved", res.pivots)
 
 
+@functools.lru_cache(maxsize=None)
+def _triu_csc(n: int):
+    """Row and column indices of the full upper triangle of an n x n matrix, in CSC order."""
+    rows, cols = np.triu_indices(n)
+    order = np.lexsort((rows, cols))
+    return rows[order], cols[order]
+
+
 class OsqpSolver(OneStepSolver):
     """Tresca fixed point on the friction bound, each QP solved by OSQP, with exact branch solves.
 
@@ -193,14 +202,13 @@ class OsqpSolver(OneStepSolver):
         import osqp
 
         n = 2 * pb.k
-        rows, cols = np.triu_indices(n)
-        order = np.lexsort((rows, cols))  # CSC order of the full upper triangle
-        rows, cols = rows[order], cols[order]
         key = pb.key if pb.key is not None else ("size", n)
         solver = self._cache.get(key)
+        if solver is not None and pb.key is not None:
+            return solver
+        rows, cols = _triu_csc(n)
         if solver is not None:
-            if pb.key is None:
-                solver.update(Px=pb.W[rows, cols])
+            solver.update(Px=pb.W[rows, cols])
             return solver
         # the full triangle is kept as the pattern, explicit zeros included, so that later
         # Px updates stay valid whatever W's zeros are

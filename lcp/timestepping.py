@@ -176,7 +176,8 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     status, message = 0, STATUS_MESSAGES[0]
     q, v = q0.copy(), v0.copy()
     cq, cv = np.zeros(n), np.zeros(n)
-    keyed = asm.constant  # constant W: solvers may cache per active set
+    keyed = asm.matrices_constant  # constant W: solvers and this loop may cache per active set
+    cache = {}
     fallbacks = {}
     first_fallback = None
     k_done = 0
@@ -202,13 +203,21 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             dv = dvf
             stats.free_steps += 1
         else:
-            idx = np.concatenate([active, m + active])
-            Wa = W[np.ix_(idx, idx)]
-            qa = H[idx] @ vfree
+            key = active.tobytes()
+            local = cache.get(key) if keyed else None
+            if local is None:  # the active set's slices of the (constant) operators, built once
+                idx = np.concatenate([active, m + active])
+                local = (idx, H[idx], SHt[:, idx], e[active],
+                         ContactProblem(W[np.ix_(idx, idx)], np.zeros(idx.size), mu[active],
+                                        key=tuple(active) if keyed else None))
+                if keyed:
+                    cache[key] = local
+            idx, Ha, SHta, ea, template = local
+            qa = Ha @ vfree
             # Newton restitution u_N+ >= -e u_N- acts only on approaching contacts: with a
             # separating one (u_N- > 0) it would pull the body back and create energy
-            qa[: active.size] += e[active] * np.minimum(uN_minus[active], 0.0)
-            pb = ContactProblem(Wa, qa, mu[active], key=tuple(active) if keyed else None)
+            qa[: active.size] += ea * np.minimum(uN_minus[active], 0.0)
+            pb = template.with_q(qa)
             sol = solver.solve(pb)
             stats.solver_calls += 1
             stats.iterations += sol.iterations
@@ -233,16 +242,16 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             stats.ambiguous_steps += int(sol.ambiguous)
             stats.max_residual = max(stats.max_residual, sol.residual)
             p = sol.p
-            dv = dvf + SHt[:, idx] @ p
+            dv = dvf + SHta @ p
             md = pb.modes(p)
             # one refinement on the branch: with an ill-conditioned mass matrix the solve leaves
             # cond(W) eps in the velocities, which would let a stuck block creep and a pressed one sink
-            r = H[idx] @ (v + dv)
-            r[: active.size] += e[active] * np.minimum(uN_minus[active], 0.0)
-            dp = ContactProblem(Wa, r, mu[active]).solve_branch(md)
+            r = Ha @ (v + dv)
+            r[: active.size] += ea * np.minimum(uN_minus[active], 0.0)
+            dp = pb.with_q(r).solve_branch(md)
             if dp is not None and np.all(np.isfinite(dp)):
                 p = p + dp
-                dv = dv + SHt[:, idx] @ dp
+                dv = dv + SHta @ dp
             if row >= 0:
                 PN[row, active] = p[: active.size]
                 PT[row, active] = p[active.size:]
