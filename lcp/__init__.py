@@ -4,6 +4,7 @@ Main entry point: :func:`simulate`. Scenes with exact solutions: :mod:`lcp.scene
 """
 from . import scenes
 from .contact_problem import ContactProblem
+from .events import EventResult
 from .exact import JeanPrattExact
 from .result import SimulationResult, SolverStats
 from .simulation import METHODS, simulate
@@ -11,4 +12,4 @@ from .solvers import SOLVERS, make_solver
 from .system import Contact, System
 
 __all__ = ["simulate", "scenes", "System", "Contact", "ContactProblem", "JeanPrattExact",
-           "SimulationResult", "SolverStats", "SOLVERS", "METHODS", "make_solver"]
+           "SimulationResult", "EventResult", "SolverStats", "SOLVERS", "METHODS", "make_solver"]

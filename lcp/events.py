@@ -93,11 +93,8 @@ __all__ = ["EVENT_STATUS_MESSAGES", "SmoothIntegrator", "ModeSolver", "EventOpti
 
 _EPS = np.finfo(float).eps
 
-#: status codes of the event integrator: those of :data:`lcp.result.STATUS_MESSAGES` plus -4
-EVENT_STATUS_MESSAGES = {
-    **STATUS_MESSAGES,
-    -4: "Too many events (Zeno behaviour or chattering between contact modes).",
-}
+#: status codes of the event integrator (the package's one table, :data:`lcp.result.STATUS_MESSAGES`)
+EVENT_STATUS_MESSAGES = STATUS_MESSAGES
 
 
 class SmoothIntegrator(str, Enum):

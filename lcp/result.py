@@ -13,6 +13,7 @@ STATUS_MESSAGES = {
     -1: "The one-step contact solver failed.",
     -2: "The state became non-finite.",
     -3: "No consistent contact mode exists (Painleve inconsistency).",
+    -4: "Too many events (Zeno behaviour or chattering between contact modes).",
 }
 
 

@@ -3,21 +3,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from .events import event_driven
 from .result import SimulationResult
+from .scenes import Scene
+from .system import System
 from .timestepping import MoreauJeanOptions, moreau_jean
 
 __all__ = ["METHODS", "simulate"]
 
 
-def _event(system, q0, v0, t_end, scene=None, **options):
-    # imported lazily: the event-driven branch is optional for users who only time-step
-    from .events import event_driven
-
-    return event_driven(system, q0, v0, t_end, scene=scene, **options)
-
-
 #: integration methods by name
-METHODS = {"moreau-jean": moreau_jean, "event": _event}
+METHODS = {"moreau-jean": moreau_jean, "event": event_driven}
 
 
 def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 0.5,
@@ -71,9 +67,6 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
     >>> res.success, round(res.q[-1, 0], 6), round(scene.x_stop, 6)
     (True, 0.076453, 0.076453)
     """
-    from .scenes import Scene
-    from .system import System
-
     if isinstance(scene, Scene):
         system = scene.system
         q0 = scene.q0 if q0 is None else q0
