@@ -69,6 +69,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 import scipy.sparse as sp
 from scipy.integrate import solve_ivp
+from scipy.linalg import expm
 from scipy.optimize import minimize
 from scipy.sparse.linalg import expm_multiply
 
@@ -908,7 +909,7 @@ def moment_system(fun, degree: int, *, centre=None, t: float = 0.0, outputs=None
     """
     _check_int("degree", degree, 1)
     f = as_field(fun, n)
-    c = np.zeros(f.n) if centre is None else _finite_vector("centre", centre, f.n, allow_exact=True)
+    c = [0] * f.n if centre is None else _finite_vector("centre", centre, f.n, allow_exact=True)
     outs = _check_outputs(outputs, f.n)
     exp = f.expansion(t, list(c), degree)
     exact = bool(getattr(f, "exact", False)) and all(_is_exact_number(x) for x in c)
@@ -1177,23 +1178,38 @@ class _IVPFailure(Exception):
 
 
 def _propagate(S: MomentSystem, B: np.ndarray, taus: np.ndarray, t_c: float, opts: LEMOptions,
-               stats: LEMStats) -> np.ndarray:
-    """Moments' output rows at each tau (relative to t_c): shape (len(taus), n_out, ncols)."""
+               stats: LEMStats) -> tuple:
+    """Moments' output rows at each tau (relative to t_c), shape (len(taus), n_out, ncols), and the
+    rounding level of the first column there, shape (len(taus),), in units of the scaled moments.
+
+    The rounding level is what the propagation itself cannot resolve: about eps times the number
+    of matrix-vector products (~ ||A||_1 tau) times what feeds the output rows, |v_i| + tau
+    (|A| |V|)_i (for solve_ivp: its rtol instead of eps). Differences between truncations below
+    it are noise, not a trend.
+    """
     out = np.empty((taus.size, S.outputs.size, B.shape[1]))
+    noise = np.empty(taus.size)
     t0 = time.perf_counter()
     if not S.varying:
+        absA = abs(S.A).tocsr()
+        anorm = float(absA.sum(axis=0).max()) if S.A.nnz else 0.0
         V, prev = B, 0.0
         for i, tau in enumerate(taus):
             dt = tau - prev
             if dt != 0.0:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", RuntimeWarning)
-                    V = expm_multiply(S.A * dt, V, traceA=S.A.diagonal().sum() * dt)
+                    # traceA=0 turns off expm_multiply's shift by trace(A)/n: for moment matrices
+                    # (diagonal ~ degree x growth rate) the shift costs digits, 3e-13 instead of
+                    # 1e-16 on the logistic equation at degree 60
+                    V = expm_multiply(S.A * dt, V, traceA=0.0)
                 stats.n_propagations += 1
                 if not np.all(np.isfinite(V)):
                     stats.solve_time += time.perf_counter() - t0
                     raise _Blowup(t_c + tau)
             out[i] = V[S.outputs]
+            feed = np.abs(V[S.outputs, 0]) + abs(tau) * (absA[S.outputs] @ np.abs(V[:, 0]))
+            noise[i] = _EPS * (16.0 + 4.0 * anorm * abs(tau)) * feed.max(initial=0.0)
             prev = tau
     else:
         ncols = B.shape[1]
@@ -1216,8 +1232,9 @@ def _propagate(S: MomentSystem, B: np.ndarray, taus: np.ndarray, t_c: float, opt
             stats.solve_time += time.perf_counter() - t0
             raise _Blowup(t_c + taus[-1])
         out[:] = Y[:, S.outputs, :]
+        noise[:] = 10.0 * opts.ivp_rtol * np.abs(Y[:, S.outputs, 0]).max(axis=1)
     stats.solve_time += time.perf_counter() - t0
-    return out
+    return out, noise
 
 
 @dataclass
@@ -1242,11 +1259,13 @@ def _scales(exp: _Expansion, w0: np.ndarray, h: float, t_c: float, N: int) -> np
       v_0 = 1 (the slide q'' = -1 lost its -t**2/2 that way); if rho << |w| the high moments
       (w/rho)**N swamp them. Hence rho_i lies between |w0_i| and a two-term estimate
       r = |w0| + h a0 + h J (|w0| + h a0) of the displacement over the segment (a0 = f(centre),
-      J = |Jacobian|), within a factor 4 below r;
+      J = |Jacobian|), and as close to r as the next point allows;
     * its cost grows with the norm of A: unscaled, large Taylor coefficients of f (sinh(lambda y)
       with z ~ 1e5 near a pole of Troesch's solution) need 1e4-1e5 matrix-vector products per
-      segment. Within the bounds, rho minimises the row-sum bound max_j sum_mu |a_jmu| rho**mu /
-      rho_j of A / |gamma| (convex in log rho).
+      segment. Within [max(|w0|, r / 2**20), r], rho is the largest scale whose row-sum bound
+      max_j sum_mu |a_jmu| rho**mu / rho_j (of A / |gamma|, convex in log rho) is within a factor
+      4 of the smallest: it drops below r only when that tames large coefficients (tanh beyond
+      its radius pi/2, where r overestimates the displacement).
     """
     n = exp.n
     comp = [exp.comp] + [c for _, c, _, _ in exp.varying]
@@ -1263,12 +1282,15 @@ def _scales(exp: _Expansion, w0: np.ndarray, h: float, t_c: float, N: int) -> np
     np.add.at(a0, comp[deg == 0], vals[deg == 0])
     one = deg == 1
     np.add.at(J, (comp[one], np.argmax(exps[one], axis=1)), vals[one])
-    r1 = np.abs(w0) + abs(h) * a0
-    r = r1 + abs(h) * (J @ r1)
+    # |w(t)| <= expm(t |J|) (|w0| + t a0) to first order: the growth of the linearization matters,
+    # since the top moments of a truncation grow like exp(N lambda t) (w0/rho)**N when rho is small
+    with np.errstate(over="ignore", invalid="ignore"):
+        r = expm(np.minimum(abs(h) * J, 700.0 / n)) @ (np.abs(w0) + abs(h) * a0)
+    r = np.where(np.isfinite(r), r, np.finfo(float).max)
     B = max(1, int(600 // max(N, 1)))
     with np.errstate(divide="ignore"):
         up = np.where(r > 0, np.ceil(np.log2(np.where(r > 0, r, 1.0))), 0.0)
-        lo = np.where(w0 != 0, np.ceil(np.log2(np.where(w0 != 0, np.abs(w0), 1.0))), up - 2)
+        lo = np.where(w0 != 0, np.ceil(np.log2(np.where(w0 != 0, np.abs(w0), 1.0))), up - 20)
     up, lo = np.clip(up, -B, B), np.clip(lo, -B, B)
     lo = np.minimum(lo, up)
     if np.all(lo == up):
@@ -1278,7 +1300,7 @@ def _scales(exp: _Expansion, w0: np.ndarray, h: float, t_c: float, N: int) -> np
     comps = np.unique(comp)
     members = [np.flatnonzero(comp == j) for j in comps]
     sizes = up - lo + 1
-    if np.prod(sizes) <= 4096:
+    if np.prod(sizes) <= 20000:
         # few candidates (the usual case): evaluate the exact bound on the whole grid
         axes = [np.arange(l, u + 1) for l, u in zip(lo, up)]
         U = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, n)
@@ -1288,8 +1310,9 @@ def _scales(exp: _Expansion, w0: np.ndarray, h: float, t_c: float, N: int) -> np
             Xj = X[:, mem]
             m = Xj.max(axis=1)
             F = np.maximum(F, m + np.log2(np.exp2(Xj - m[:, None]).sum(axis=1)) - U[:, j])
-        best = np.flatnonzero(F <= F.min() + 1e-9)
-        # ties: the largest scales (closest to the displacement estimate)
+        # the largest scales (closest to the displacement estimate) whose bound is within a
+        # factor 4 of the best: a smaller rho is only worth it when it tames big coefficients
+        best = np.flatnonzero(F <= F.min() + 2.0)
         return np.exp2(U[best[np.argmax(U[best].sum(axis=1))]])
     beta = 8.0  # smooth max over components; convex in u = log2(rho), so a local solver suffices
 
@@ -1313,6 +1336,15 @@ def _scales(exp: _Expansion, w0: np.ndarray, h: float, t_c: float, N: int) -> np
     res = minimize(objective, up.copy(), jac=True, method="L-BFGS-B",
                    bounds=list(zip(lo.tolist(), up.tolist())), options={"maxiter": 100})
     u = np.clip(np.round(res.x if np.all(np.isfinite(res.x)) else up), lo, up)
+    # as on the grid: move up towards the displacement estimate while the bound stays within 4x
+    fmin = objective(u)[0]
+    for i in range(n):
+        while u[i] < up[i]:
+            trial = u.copy()
+            trial[i] += 1
+            if objective(trial)[0] > fmin + 2.0:
+                break
+            u = trial
     return np.exp2(u)
 
 
@@ -1344,6 +1376,7 @@ def _segment(fld, t_c: float, state: np.ndarray, centre, taus: np.ndarray, outs,
     w0[:n] = np.asarray(state, dtype=float) - np.asarray([float(c) for c in centre])
     rho = _scales(full, w0, float(taus[-1]), t_c, max(degrees))
     values, jac, dim, nnz = {}, None, 0, 0
+    noise = np.zeros((len(outs), taus.size))
     for D in degrees:
         t0 = time.perf_counter()
         exp = full.truncated(D if opts.taylor_degree is None else min(opts.taylor_degree, D))
@@ -1368,7 +1401,9 @@ def _segment(fld, t_c: float, state: np.ndarray, centre, taus: np.ndarray, outs,
             stats.taylor_degree = exp.exps.sum(axis=1).max(initial=0)
         else:
             B = (V0 / scale)[:, None]
-        P = _propagate(S_run, B, taus, t_c, opts, stats) * rho[list(outs)][None, :, None]
+        P, nz = _propagate(S_run, B, taus, t_c, opts, stats)
+        P = P * rho[list(outs)][None, :, None]
+        noise = np.maximum(noise, rho[list(outs)][:, None] * nz[None, :])
         c_out = np.array([float(centre[i]) for i in outs])
         values[D] = P[:, :, 0].T + c_out[:, None]
         if D == N:
@@ -1383,7 +1418,7 @@ def _segment(fld, t_c: float, state: np.ndarray, centre, taus: np.ndarray, outs,
         d3 = np.abs(values[N + k] - yN)
         d2 = np.abs(yN - values[N - k]) if (N - k) in values else None
         d1 = np.abs(values[N - k] - values[N - 2 * k]) if (N - 2 * k) in values else None
-        floor = _NOISE * np.maximum(1.0, np.abs(yN))
+        floor = np.maximum(_NOISE * np.maximum(1.0, np.abs(yN)), noise)
         local = d3.copy()
         if d2 is not None:
             with np.errstate(divide="ignore", invalid="ignore"):
@@ -1396,6 +1431,9 @@ def _segment(fld, t_c: float, state: np.ndarray, centre, taus: np.ndarray, outs,
                 with np.errstate(divide="ignore", invalid="ignore"):
                     expected = np.where(d1 > 0, d2 * d2 / np.where(d1 > 0, d1, 1.0), 0.0)
                 local = np.maximum(local, np.where(d2 > floor, expected, 0.0))
+            # moments so large that rounding alone exceeds the solution: the series has blown up
+            # even if the differences cannot show a trend any more
+            grow |= noise > np.maximum(np.abs(yN), opts.atol)
             diverging = np.any(grow, axis=0)
             ratio = np.max(r32, axis=0)
             # geometric tail of the remaining degrees: slow convergence (ratio near 1) must not
@@ -1604,7 +1642,12 @@ def _solve_restarted(fld, x0, x1, direction, y0, te, outs, opts, degrees, stats)
     order = 2 * opts.degree
     just_rejected = False
     t_c, state = x0, y0.copy()
-    E = np.zeros(n)                      # propagated error estimate of the state
+    # Error propagation: the local error delta_k made in segment k reaches time t as
+    # Phi(t, t_k) delta_k (signs unknown). Phi(t, t_k) = J(t) M_k is kept exactly for every earlier
+    # segment (M_k = product of later segments' Jacobians): bounding with |J_m|...|J_1| instead
+    # would grow like sqrt(2)**m for a mere rotation (an oscillator) and drown the estimate.
+    Ms = np.zeros((0, n, n))
+    deltas = np.zeros((0, n))
     S_tot = np.eye(n)                     # d state / d y0
     T_list, Y_list, E_list, J_list, R_list, D_list = [x0], [y0.copy()], [np.zeros(n)], [np.eye(n)], [np.nan], [False]
     restart_points = [x0]
@@ -1666,12 +1709,14 @@ def _solve_restarted(fld, x0, x1, direction, y0, te, outs, opts, degrees, stats)
             Ji = seg.jac[:, :, i]
             T_list.append(p)
             Y_list.append(seg.y[:, i].copy())
-            E_list.append(np.abs(Ji) @ E + np.nan_to_num(loc[:, i], nan=0.0))
+            carried = np.einsum("kij,kj->i", np.abs(np.matmul(Ji, Ms)), deltas) if deltas.size else 0.0
+            E_list.append(carried + np.nan_to_num(loc[:, i], nan=0.0))
             J_list.append(Ji @ S_tot)
             R_list.append(seg.ratio[i])
             D_list.append(bool(seg.diverging[i]))
         state = seg.y[:, -1].copy()
-        E = E_list[-1].copy()
+        Ms = np.concatenate([np.matmul(seg.jac[:, :, -1], Ms), np.eye(n)[None]], axis=0)
+        deltas = np.vstack([deltas, np.nan_to_num(loc[:, -1], nan=0.0)[None]])
         S_tot = J_list[-1].copy()
         t_c = t_end
         restart_points.append(t_c)
