@@ -102,8 +102,9 @@ STATUS_MESSAGES = {
     1: ("Successive truncations converge, but the error estimate exceeds atol + rtol*|y| at some "
         "output point: raise the degree or restart more often."),
     2: "Computed without an error estimate (check=False): the result is not verified.",
-    -1: ("Successive truncations diverge: the data lie outside the radius of the series, so the "
-         "result cannot be trusted; restart more often (restart=...) or shorten the interval."),
+    -1: ("Successive truncations diverge, or the state leaves the disc where the Taylor series of "
+         "f converges (radius_ratio >= 0.9): the result cannot be trusted; restart more often "
+         "(restart=...) or shorten the interval."),
     -2: "The truncated moment system produced non-finite values (blow-up).",
     -3: "The restart step fell below min_step: the solution may have a singularity ahead.",
     -4: "The maximum number of restart segments was reached.",
@@ -119,6 +120,11 @@ _EPS = np.finfo(float).eps
 # Differences between truncations below this (relative to max(1, |y|)) are rounding noise, not a
 # trend: they never count as divergence. Measured noise of the degree-61 tanh system is ~1e-15.
 _NOISE = 1e3 * _EPS
+#: Small systems whose ||A|| dt exceeds this use a dense matrix exponential instead of expm_multiply.
+_DENSE_NORM, _DENSE_DIM = 500.0, 600
+#: A state whose singular arguments (tanh(v/eps), 1/u, log u, ...) move this fraction of the way to
+#: the nearest singularity of f is outside what f's Taylor series can be trusted to represent.
+RADIUS_TRUST = 0.9
 
 
 # --------------------------------------------------------------------------------------------
@@ -239,6 +245,32 @@ def _univariate(name: str, u0: float, D: int, p: float = 0.0) -> np.ndarray:
     raise ValueError(f"unknown univariate function {name!r}")
 
 
+def _merge(a: "Jet", b: "Jet") -> tuple:
+    if not b.sing or b.sing is a.sing:
+        return a.sing
+    if not a.sing:
+        return b.sing
+    seen = {id(x[0]) for x in a.sing}
+    return a.sing + tuple(x for x in b.sing if id(x[0]) not in seen)
+
+
+def _singularity_distance(name: str, u0: float, p: float = 0.0) -> float:
+    """Distance from the real point u0 to the nearest complex singularity of the function: the
+    radius of convergence of its Taylor series at u0 (inf for entire functions)."""
+    if name in ("exp", "sinh", "cosh", "sin", "cos"):
+        return math.inf
+    if name == "tanh":
+        return math.hypot(u0, math.pi / 2)       # poles at +-i pi/2 (+ i k pi)
+    if name == "tan":
+        d = (u0 - math.pi / 2) % math.pi          # poles at pi/2 + k pi
+        return min(d, math.pi - d)
+    if name == "arctan":
+        return math.hypot(1.0, u0)                # branch points at +-i
+    if name == "power" and p == int(p) and p >= 0:
+        return math.inf
+    return abs(u0)                                # log, sqrt, 1/u, u**p: singular at 0
+
+
 class Jet:
     """A truncated power series in the displacement w from an expansion centre.
 
@@ -255,12 +287,15 @@ class Jet:
     raise ``TypeError``: LEM cannot expand them.
     """
 
-    __slots__ = ("space", "c")
+    __slots__ = ("space", "c", "sing")
     __array_priority__ = 1000
 
-    def __init__(self, space: _Space, coeffs: np.ndarray):
+    def __init__(self, space: _Space, coeffs: np.ndarray, sing: tuple = ()):
         self.space = space
         self.c = coeffs
+        # singularities met on the way: (|coefficients of the argument's displacement|, R), the
+        # argument's distance R to the nearest singularity of the function applied to it
+        self.sing = sing
 
     # construction ------------------------------------------------------------------------------
     @classmethod
@@ -326,29 +361,29 @@ class Jet:
 
     def __add__(self, other):
         o = self._coerce(other)
-        return NotImplemented if o is None else Jet(self.space, self.c + o.c)
+        return NotImplemented if o is None else Jet(self.space, self.c + o.c, _merge(self, o))
 
     __radd__ = __add__
 
     def __sub__(self, other):
         o = self._coerce(other)
-        return NotImplemented if o is None else Jet(self.space, self.c - o.c)
+        return NotImplemented if o is None else Jet(self.space, self.c - o.c, _merge(self, o))
 
     def __rsub__(self, other):
         o = self._coerce(other)
-        return NotImplemented if o is None else Jet(self.space, o.c - self.c)
+        return NotImplemented if o is None else Jet(self.space, o.c - self.c, _merge(self, o))
 
     def __mul__(self, other):
         if isinstance(other, (numbers.Real, np.number)):
-            return Jet(self.space, self.c * float(other))
+            return Jet(self.space, self.c * float(other), self.sing)
         o = self._coerce(other)
-        return NotImplemented if o is None else Jet(self.space, self._mulc(o))
+        return NotImplemented if o is None else Jet(self.space, self._mulc(o), _merge(self, o))
 
     __rmul__ = __mul__
 
     def __truediv__(self, other):
         if isinstance(other, (numbers.Real, np.number)):
-            return Jet(self.space, self.c / float(other))
+            return Jet(self.space, self.c / float(other), self.sing)
         o = self._coerce(other)
         return NotImplemented if o is None else self * o.reciprocal()
 
@@ -357,7 +392,7 @@ class Jet:
         return NotImplemented if o is None else o * self.reciprocal()
 
     def __neg__(self):
-        return Jet(self.space, -self.c)
+        return Jet(self.space, -self.c, self.sing)
 
     def __pos__(self):
         return self
@@ -390,6 +425,11 @@ class Jet:
             r.c[0] += gk
         if not np.all(np.isfinite(r.c)):
             raise ValueError(f"{name} of a jet with value {u0!r} is not finite")
+        R = _singularity_distance(name, u0, p)
+        sing = self.sing
+        if np.isfinite(R):
+            sing = sing + ((np.abs(delta.c), R),)
+        r.sing = sing
         return r
 
     def reciprocal(self):
@@ -479,6 +519,9 @@ class _Expansion:
     vals: np.ndarray             # (T,) float or object (Fraction) coefficients
     varying: list = field(default_factory=list)  # [(a(t), comp, exps, vals)]: a(t) * polynomial
     time_augmented: bool = False
+    # [(exps over (y, t), |coefficients|, R)]: an argument of f whose displacement (majorant
+    # sum |a| |w|**e, in y and t) must stay below R, the distance to a singularity of f
+    radii: list = field(default_factory=list)
 
     def truncated(self, D: int) -> "_Expansion":
         keep = self.exps.sum(axis=1) <= D
@@ -487,7 +530,21 @@ class _Expansion:
             k = e.sum(axis=1) <= D
             var.append((a, c[k], e[k], v[k]))
         return _Expansion(self.n, self.comp[keep], self.exps[keep], self.vals[keep], var,
-                          self.time_augmented)
+                          self.time_augmented, self.radii)
+
+    def radius_ratio(self, w: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """max over singular arguments of |their displacement| / R at displacements w (n, m) of
+        the state after times tau (m,); 0 for polynomial and entire fields."""
+        m = tau.size
+        if not self.radii:
+            return np.zeros(m)
+        W = np.vstack([np.abs(w), np.abs(tau)[None, :]])
+        out = np.zeros(m)
+        with np.errstate(over="ignore", invalid="ignore"):
+            for exps, a, R in self.radii:
+                mono = np.prod(W[None, :, :] ** exps[:, :, None], axis=1)
+                out = np.maximum(out, (a @ mono) / R)
+        return np.where(np.isfinite(out), out, np.inf)
 
     @property
     def has_constant(self) -> bool:
@@ -691,14 +748,23 @@ class AnalyticField:
                                  f"are not finite")
             coefs.append(c)
         coefs = np.array(coefs)
+        radii, seen = [], set()
+        for o in out:
+            for a, R in (o.sing if isinstance(o, Jet) else ()):
+                nz = np.flatnonzero(a)
+                if id(a) in seen or nz.size == 0:
+                    continue  # an argument that does not move cannot reach its singularity
+                seen.add(id(a))
+                radii.append((space.exps[nz], a[nz], R))
         t_dep = bool(np.any(coefs[:, space.exps[:, n] > 0] != 0))
         jj, ii = np.nonzero(coefs)
         if t_dep:
             comp = np.concatenate([jj, [n]])
             exps = np.vstack([space.exps[ii], np.zeros((1, n + 1), dtype=np.int64)])
             vals = np.concatenate([coefs[jj, ii], [1.0]])
-            return _Expansion(n + 1, comp.astype(np.int64), exps, vals, [], True)
-        return _Expansion(n, jj.astype(np.int64), space.exps[ii][:, :n].copy(), coefs[jj, ii])
+            return _Expansion(n + 1, comp.astype(np.int64), exps, vals, [], True, radii)
+        return _Expansion(n, jj.astype(np.int64), space.exps[ii][:, :n].copy(), coefs[jj, ii],
+                          radii=radii)
 
 
 def as_field(fun, n: int | None = None):
@@ -991,6 +1057,9 @@ class LEMOptions:
         Refuse to build larger moment systems (ValueError).
     max_segments : int
         Give up (status -4) after this many restart segments.
+    radius_fraction : float
+        With restart="auto", a segment may carry f's singular arguments at most this fraction of
+        the way to the nearest singularity of f (0 < radius_fraction < 0.9; default 0.5).
     first_step, min_step, max_step : float or None
         Segment lengths of the auto restart (defaults: 1/(1 + |Jacobian of f|), 1e-12 of the
         interval, the whole interval).
@@ -1011,6 +1080,7 @@ class LEMOptions:
     prune: bool = True
     max_dimension: int = 200_000
     max_segments: int = 10_000
+    radius_fraction: float = 0.5
     first_step: float | None = None
     min_step: float | None = None
     max_step: float | None = None
@@ -1046,6 +1116,9 @@ class LEMOptions:
         if self.ivp_method not in ("DOP853", "RK45", "Radau", "BDF", "LSODA"):
             raise ValueError(f"ivp_method must be one of DOP853, RK45, Radau, BDF, LSODA, "
                              f"got {self.ivp_method!r}")
+        _check_float("radius_fraction", self.radius_fraction, 0.0, strict=True)
+        if not self.radius_fraction < RADIUS_TRUST:
+            raise ValueError(f"radius_fraction must be < {RADIUS_TRUST}, got {self.radius_fraction!r}")
         if self.restart == "auto" and not self.check:
             raise ValueError("restart='auto' needs check=True (segments are chosen from the estimate)")
         for name in ("check", "prune", "warn"):
@@ -1133,6 +1206,12 @@ class LEMResult:
     restart_points : ndarray
         Centres' times (segment starts) and the final time.
     stats : LEMStats
+    radius_ratio : ndarray, shape (m,)
+        How far the state has moved towards the nearest singularity of f seen from the expansion
+        centre (the displacement of each singular argument of f, such as v/eps in tanh(v/eps),
+        over its distance to the singularity); from :data:`RADIUS_TRUST` = 0.9 on, f's Taylor
+        series no longer represents f and the point counts as diverging. 0 for polynomial and
+        entire f.
     """
 
     t: np.ndarray
@@ -1149,6 +1228,7 @@ class LEMResult:
     n_restarts: int
     restart_points: np.ndarray
     stats: LEMStats
+    radius_ratio: np.ndarray | None = None
 
     @property
     def success(self) -> bool:
@@ -1199,10 +1279,15 @@ def _propagate(S: MomentSystem, B: np.ndarray, taus: np.ndarray, t_c: float, opt
             if dt != 0.0:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", RuntimeWarning)
-                    # traceA=0 turns off expm_multiply's shift by trace(A)/n: for moment matrices
-                    # (diagonal ~ degree x growth rate) the shift costs digits, 3e-13 instead of
-                    # 1e-16 on the logistic equation at degree 60
-                    V = expm_multiply(S.A * dt, V, traceA=0.0)
+                    if anorm * abs(dt) > _DENSE_NORM and S.dimension <= _DENSE_DIM:
+                        # stiff segment (a smoothed friction law after the stop: rates ~ 1/eps):
+                        # expm_multiply needs ~||A|| dt products, scaling and squaring log2 of it
+                        V = expm(S.A.toarray() * dt) @ V
+                    else:
+                        # traceA=0 turns off expm_multiply's shift by trace(A)/n: for moment
+                        # matrices (diagonal ~ degree x growth rate) the shift costs digits, 3e-13
+                        # instead of 1e-16 on the logistic equation at degree 60
+                        V = expm_multiply(S.A * dt, V, traceA=0.0)
                 stats.n_propagations += 1
                 if not np.all(np.isfinite(V)):
                     stats.solve_time += time.perf_counter() - t0
@@ -1246,6 +1331,7 @@ class _Segment:
     diverging: np.ndarray  # (m,) bool
     dim: int
     nnz: int
+    radius: np.ndarray   # (m,) displacement of f's singular arguments / distance to singularity
 
 
 def _scales(exp: _Expansion, w0: np.ndarray, h: float, t_c: float, N: int) -> np.ndarray:
@@ -1438,9 +1524,17 @@ def _segment(fld, t_c: float, state: np.ndarray, centre, taus: np.ndarray, outs,
             ratio = np.max(r32, axis=0)
             # geometric tail of the remaining degrees: slow convergence (ratio near 1) must not
             # pass for accuracy (the ratio is capped so a freak value cannot make it infinite)
-            rho = np.clip(np.where(d2 > floor, r32, 0.0), 0.0, 0.95)
-            local = local / (1.0 - rho)
-    return _Segment(yN, local, jac, ratio, diverging, dim, nnz)
+            q_tail = np.clip(np.where(d2 > floor, r32, 0.0), 0.0, 0.95)
+            local = local / (1.0 - q_tail)
+    # Truncation differences cannot see a singularity of f whose Taylor coefficients are tiny at
+    # the centre (tanh(v/eps) saturated: sech**2 underflows, every truncation agrees, and the state
+    # slides across v = 0 where tanh turns). The jets know where each singularity is: beyond
+    # RADIUS_TRUST of the distance, f's own series no longer represents f.
+    W = np.zeros((n, m))
+    W[list(outs)] = yN - c_out[:, None]
+    radius = full.radius_ratio(W, taus)
+    diverging = diverging | (radius >= RADIUS_TRUST)
+    return _Segment(yN, local, jac, ratio, diverging, dim, nnz, radius)
 
 
 # --------------------------------------------------------------------------------------------
@@ -1578,6 +1672,7 @@ def _solve_plain(fld, x0, y0, centre, t_out, outs, opts, degrees, stats) -> LEMR
     err = np.zeros((len(outs), m))
     jac = np.zeros((len(outs), n, m))
     ratio = np.full(m, np.nan)
+    rad = np.zeros(m)
     div = np.zeros(m, dtype=bool)
     y[:, ~nz] = y0[list(outs)][:, None]
     jac[:, :, ~nz] = np.eye(n)[list(outs)][:, :, None]
@@ -1587,7 +1682,7 @@ def _solve_plain(fld, x0, y0, centre, t_out, outs, opts, degrees, stats) -> LEMR
         try:
             seg = _segment(fld, x0, y0, centre, taus[nz], outs, opts, degrees, stats)
             y[:, nz], err[:, nz], jac[:, :, nz] = seg.y, seg.local, seg.jac
-            ratio[nz], div[nz] = seg.ratio, seg.diverging
+            ratio[nz], div[nz], rad[nz] = seg.ratio, seg.diverging, seg.radius
             dim, nnz = seg.dim, seg.nnz
         except _Blowup as exc:
             status_nf = exc.args[0]
@@ -1596,7 +1691,7 @@ def _solve_plain(fld, x0, y0, centre, t_out, outs, opts, degrees, stats) -> LEMR
         except _IVPFailure as exc:
             y[:, nz] = np.nan
             res = LEMResult(t_out, y, -5, f"{STATUS_MESSAGES[-5]} ({exc.args[0]})", err, div, ratio,
-                            jac, opts.degree, degrees, dim, 0, np.array([x0, t_out[-1]]), stats)
+                            jac, opts.degree, degrees, dim, 0, np.array([x0, t_out[-1]]), stats, rad)
             return _finish(res, opts)
     if not opts.check:
         err[:, nz] = np.nan
@@ -1604,7 +1699,7 @@ def _solve_plain(fld, x0, y0, centre, t_out, outs, opts, degrees, stats) -> LEMR
     stats.max_nnz = nnz
     status, msg = _status_from(y, err, div, opts, t_out, status_nf)
     res = LEMResult(t_out, y, status, msg, err, div, ratio, jac, opts.degree, degrees, dim, 0,
-                    np.array([x0, t_out[-1]]), stats)
+                    np.array([x0, t_out[-1]]), stats, rad)
     return _finish(res, opts)
 
 
@@ -1649,7 +1744,8 @@ def _solve_restarted(fld, x0, x1, direction, y0, te, outs, opts, degrees, stats)
     Ms = np.zeros((0, n, n))
     deltas = np.zeros((0, n))
     S_tot = np.eye(n)                     # d state / d y0
-    T_list, Y_list, E_list, J_list, R_list, D_list = [x0], [y0.copy()], [np.zeros(n)], [np.eye(n)], [np.nan], [False]
+    T_list, Y_list, E_list, J_list = [x0], [y0.copy()], [np.zeros(n)], [np.eye(n)]
+    R_list, D_list, Q_list = [np.nan], [False], [0.0]
     restart_points = [x0]
     status_override = None
     dim_max = nnz_max = 0
@@ -1678,16 +1774,25 @@ def _solve_restarted(fld, x0, x1, direction, y0, te, outs, opts, degrees, stats)
         if auto:
             if seg is not None:
                 q = _auto_ratio(seg, h, span, opts)
-                ok = (not np.any(seg.diverging)) and np.isfinite(q) and q <= 1.0
+                reach = float(seg.radius.max(initial=0.0))
+                ok = (not np.any(seg.diverging)) and np.isfinite(q) and q <= 1.0 \
+                    and reach <= opts.radius_fraction
             else:
-                ok, q = False, np.inf
+                ok, q, reach = False, np.inf, 0.0
             if not ok:
                 stats.n_rejected += 1
                 if failed is not None and failed[0] == "ivp":
                     status_override = (-5, f"{STATUS_MESSAGES[-5]} ({failed[1]})")
                     break
-                fac = 0.3 if not np.isfinite(q) or seg is None or np.any(seg.diverging) else \
-                    max(0.2, min(0.7, 0.9 * q ** (-1.0 / order)))
+                if not np.isfinite(q) or seg is None or np.any(seg.diverging):
+                    fac = 0.3
+                elif q > 1.0:
+                    fac = max(0.2, min(0.7, 0.9 * q ** (-1.0 / order)))
+                else:
+                    fac = 0.7
+                if reach > opts.radius_fraction:
+                    # the displacement grows about linearly with the segment
+                    fac = min(fac, max(0.1, 0.9 * opts.radius_fraction / reach))
                 h *= fac
                 just_rejected = True
                 if h < min_step:
@@ -1714,6 +1819,7 @@ def _solve_restarted(fld, x0, x1, direction, y0, te, outs, opts, degrees, stats)
             J_list.append(Ji @ S_tot)
             R_list.append(seg.ratio[i])
             D_list.append(bool(seg.diverging[i]))
+            Q_list.append(float(seg.radius[i]))
         state = seg.y[:, -1].copy()
         Ms = np.concatenate([np.matmul(seg.jac[:, :, -1], Ms), np.eye(n)[None]], axis=0)
         deltas = np.vstack([deltas, np.nan_to_num(loc[:, -1], nan=0.0)[None]])
@@ -1731,6 +1837,9 @@ def _solve_restarted(fld, x0, x1, direction, y0, te, outs, opts, degrees, stats)
             q = _auto_ratio(seg, h, span, opts)
             cap = 1.0 if just_rejected else 2.0
             grow = cap if q <= 0 else min(cap, max(1.0, 0.9 * q ** (-1.0 / order)))
+            reach = float(seg.radius.max(initial=0.0))
+            if reach > 0:
+                grow = min(grow, max(1.0, 0.9 * opts.radius_fraction / reach))
             h = min(h * grow, max_step)
             just_rejected = False
     T = np.array(T_list)
@@ -1739,10 +1848,12 @@ def _solve_restarted(fld, x0, x1, direction, y0, te, outs, opts, degrees, stats)
     Jv = np.transpose(np.array(J_list), (1, 2, 0))
     Rv = np.array(R_list)
     Dv = np.array(D_list)
+    Qv = np.array(Q_list)
     if te is not None:
         wanted = set(te.tolist())
         keep = [i for i, tt in enumerate(T.tolist()) if tt in wanted]
-        T, Y, Ev, Jv, Rv, Dv = T[keep], Y[:, keep], Ev[:, keep], Jv[:, :, keep], Rv[keep], Dv[keep]
+        T, Y, Ev, Jv, Rv, Dv, Qv = (T[keep], Y[:, keep], Ev[:, keep], Jv[:, :, keep], Rv[keep],
+                                    Dv[keep], Qv[keep])
     sel = list(outs)
     Y, Ev, Jv = Y[sel], Ev[sel], Jv[sel]
     if not opts.check:
@@ -1753,7 +1864,7 @@ def _solve_restarted(fld, x0, x1, direction, y0, te, outs, opts, degrees, stats)
     else:
         status, msg = status_override
     res = LEMResult(T, Y, status, msg, Ev, Dv, Rv, Jv, opts.degree, degrees, dim_max,
-                    max(0, stats.n_segments - 1), np.array(restart_points), stats)
+                    max(0, stats.n_segments - 1), np.array(restart_points), stats, Qv)
     return _finish(res, opts)
 
 

@@ -237,6 +237,30 @@ def test_never_silently_wrong(y0, z0, x, N, which):
             assert r.status == 0
 
 
+@pytest.mark.parametrize("eps", [1e-2, 1e-4, 1e-8])
+def test_saturated_tanh_friction_is_not_crossed_silently(eps):
+    # Jean-Pratt slide with friction R N tanh(v/eps): at v = 1, tanh(v/eps) is 1 to the last bit and
+    # its derivatives underflow, so every truncation agrees and the differences say "exact". The
+    # jets know tanh's poles at v = +-i pi eps/2: restarts must approach v = 0 through them.
+    def f(t, y):
+        th = np.tanh(y[1] / eps)
+        return [y[1], -9.81 * th / (2.0 - 0.5 * th)]
+
+    te = np.linspace(0.0, 0.3, 7)
+    Y = reference(f, (0.0, 0.3), [0.0, 1.0], te) if eps >= 1e-4 else None
+    tau0, B = 1.0 / 6.54, 6.54
+    exact_x = np.where(te < tau0, te - B * te**2 / 2, 1.0 / (2 * B))
+    r = solve(f, (0.0, 0.3), [0.0, 1.0], degree=12, restart="auto", t_eval=te)
+    assert r.status == 0 and np.all(r.radius_ratio <= 0.5)
+    if Y is not None:
+        assert np.max(np.abs(r.y - Y)) <= 1e-10
+    assert np.max(np.abs(r.y[0] - exact_x)) <= 3 * eps  # Coulomb's stop, up to the smoothing
+    # a fixed restart longer than the stop distance allows is reported, not trusted
+    with pytest.warns(LEMWarning):
+        bad = solve(f, (0.0, 0.3), [0.0, 1.0], degree=12, restart=0.1, t_eval=te)
+    assert bad.status == -1 and bad.diverging
+
+
 def test_pendulum_long_horizon_with_restarts():
     f = lambda t, y: [y[1], -np.sin(y[0])]  # noqa: E731
     te = np.linspace(0.0, 30.0, 7)
