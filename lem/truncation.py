@@ -23,8 +23,12 @@ gives the truncated system ``V' = A_N(t) V``; ``y`` is read off the degree-1 mom
 * re-centres the expansion on the current state (``restart=h`` or ``restart="auto"``), which makes
   the method converge on long horizons and beyond the first series' radius;
 * reports how far each result can be trusted: the degree-``N`` answer is compared with degrees
-  ``N - 2k, N - k, N + k``; the difference is the error estimate, and growing differences mean the
-  series diverges (``status = -1`` and a :class:`LEMWarning`, never a silent answer).
+  ``N - 2k, N - k, N + k``; the difference is the error estimate (carried across restarts through
+  the propagators' own sensitivities), and growing differences mean the series diverges. Since
+  differences cannot see a singularity of f whose Taylor coefficients underflow at the centre
+  (tanh(v/eps) with v >> eps), the jets also record the distance to every singularity of f, and a
+  state that moves 0.9 of the way there counts as diverging too (``status = -1`` and a
+  :class:`LEMWarning`, never a silent answer).
 
 It also returns Taylor coefficients of the solution in ``x`` (:func:`taylor_coefficients`) and in
 the initial data (:func:`initial_data_coefficients`, :func:`double_series`), exactly in rational
@@ -75,6 +79,7 @@ from scipy.sparse.linalg import expm_multiply
 
 __all__ = [
     "STATUS_MESSAGES",
+    "RADIUS_TRUST",
     "LEMWarning",
     "Jet",
     "PolynomialField",
@@ -1624,7 +1629,7 @@ def solve(fun, x_span, y0, *, t_eval=None, outputs=None, **options) -> LEMResult
             raise ValueError("t_eval must be strictly ordered from x0 to x1")
     else:
         te = None
-    if opts.restart is not None and isinstance(opts.centre, str) is False:
+    if opts.restart is not None and not isinstance(opts.centre, str):
         raise ValueError("centre applies only to the plain engine (restart=None); restarts "
                          "re-centre on the current state")
 
