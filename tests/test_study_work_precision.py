@@ -96,9 +96,6 @@ def test_lem_engine_fixed_restart_meets_its_estimate(study):
             assert abs(r["e_max"] - t["e_max"]) <= 1e-3 * t["e_max"] + r["err_vs_reg"]
 
 
-@pytest.mark.xfail(strict=False, reason="lem.truncation restart='auto' accepts a whole-interval segment when "
-                   "tanh(xd/eps) is saturated (its Taylor coefficients underflow), so the block slides through "
-                   "xd = 0 with status 0 and an error estimate of 0")
 def test_lem_engine_auto_restart_is_never_silently_wrong(study):
     res, _ = study
     auto = [r for r in rows_of(res, family="lem-engine") if r["restart"] == "auto"]
