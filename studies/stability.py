@@ -203,6 +203,95 @@ def cases(quick: bool) -> list[Case]:
     return [c for c in out if c.quick or not quick]
 
 
+# ----------------------------------------------------------------------------- LEM cases
+LEM_METHOD = "LEM engine"
+
+
+def _tanh_reference(x_end, z0=1.0):
+    from scipy.integrate import solve_ivp
+
+    sol = solve_ivp(lambda _, y: [y[1], math.tanh(y[0])], (0.0, x_end), [0.0, z0], rtol=1e-13, atol=1e-15)
+    return float(sol.y[0, -1])
+
+
+def lem_cases(quick: bool):
+    """(group, name, run) for the LEM engine; run() -> (status, success, y, estimate, reference)."""
+    import warnings
+
+    from lem.truncation import solve
+
+    def tanh_ode(x_end, restart=None, degree=61):
+        def run():
+            f = lambda _, y: [y[1], np.tanh(y[0])]  # noqa: E731
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                kw = dict(degree=degree, rtol=1e-9)  # the accuracy the issue asks of it (1e-10 absolute)
+                if restart is not None:
+                    kw["restart"] = restart
+                res = solve(f, (0.0, x_end), [0.0, 1.0], **kw)
+            return res.status, res.success, float(res.y[0, -1]), float(res.error_estimate[0, -1]), \
+                _tanh_reference(x_end), res.message
+        return run
+
+    def saturated_friction(eps):
+        def run():
+            from scipy.integrate import solve_ivp
+
+            B = 6.54  # the default scene's deceleration: qdd = -B tanh(qd / eps)
+            f = lambda _, y: [y[1], -B * np.tanh(y[1] / eps)]  # noqa: E731
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                res = solve(f, (0.0, 0.3), [0.0, 1.0], degree=12, restart="auto")
+            ref = solve_ivp(lambda _, y: [y[1], -B * math.tanh(y[1] / eps)], (0.0, 0.3), [0.0, 1.0],
+                            method="Radau", rtol=1e-12, atol=1e-14)
+            return res.status, res.success, float(res.y[0, -1]), float(res.error_estimate[0, -1]), \
+                float(ref.y[0, -1]), res.message
+        return run
+
+    def troesch(lam):
+        def run():
+            from lem.troesch import TROESCH_REFERENCE, solve_troesch
+
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                res = solve_troesch(lam)
+            est = getattr(res, "error_estimate", 0.0)
+            return res.status, res.success, float(res.slope), float(np.max(est)) if np.size(est) else 0.0, \
+                TROESCH_REFERENCE[lam], res.message
+        return run
+
+    out = [("LEM (smooth ODEs)", "y'' = tanh y, x = 1, N = 61", tanh_ode(1.0)),
+           ("LEM (smooth ODEs)", "y'' = tanh y, x = 2, N = 61, no restart", tanh_ode(2.0)),
+           ("LEM (smooth ODEs)", "y'' = tanh y, x = 2, N = 61, restarted", tanh_ode(2.0, "auto")),
+           ("LEM (smooth ODEs)", "qdd = -B tanh(qd/eps), eps = 0.01, auto restarts", saturated_friction(0.01)),
+           ("LEM (smooth ODEs)", "Troesch, lambda = 1", troesch(1.0))]
+    if not quick:
+        out.append(("LEM (smooth ODEs)", "Troesch, lambda = 10", troesch(10.0)))
+    return out
+
+
+def run_lem_case(group, name, fn) -> Row:
+    row = Row(group, name, LEM_METHOD, "correct")
+    t0 = time.perf_counter()
+    try:
+        status, success, y, est, ref, message = fn()
+    except ValueError as exc:
+        row.outcome, row.reason = "reported failure", f"ValueError: {exc}"
+        return row
+    row.seconds = time.perf_counter() - t0
+    row.status, row.message = status, message
+    row.nan_inf = not math.isfinite(y)
+    err = abs(y - ref)
+    row.x_error = err
+    # trust what the result claims: its own estimate (never below rounding) must cover the error
+    row.x_tol = max(10 * est, 1e-12 * max(1.0, abs(ref)))
+    if not success or status != 0:
+        row.outcome, row.reason = "reported failure", message
+    elif not err <= row.x_tol:
+        row.outcome, row.reason = "silently wrong", f"error {err:.2e} > claimed {row.x_tol:.2e}"
+    return row
+
+
 # ----------------------------------------------------------------------------- checks
 def _energy(scene, res):
     """Total energy along the result for Jean-Pratt (reduced/full) and the bouncing block / chain."""
@@ -385,13 +474,21 @@ def run(out=None, quick: bool = False) -> dict:
                 rows.append(Row(case.group, case.name, method, "not applicable"))
                 continue
             rows.append(run_case(case, method, ref_cache))
+    for group, name, fn in lem_cases(quick):
+        for method in METHODS:
+            rows.append(Row(group, name, method, "not applicable"))
+        rows.append(run_lem_case(group, name, fn))
+    for case in cases(quick):  # the simulators have nothing to say about the LEM-only cases
+        rows.append(Row(case.group, case.name, LEM_METHOD, "not applicable"))
     fields_ = ["group", "case", "method", "outcome", "reason", "steps", "seconds", "peak_mb", "nan_inf",
                "residual", "max_gap", "bilateral_drift", "energy_rise", "x_error", "x_tol", "status", "message"]
     write_csv(outdir / "stability.csv", fields_, [[getattr(r, f) for f in fields_] for r in rows])
     counts = {o: sum(r.outcome == o for r in rows) for o in OUTCOMES}
-    per_method = {mth: {o: sum(r.outcome == o and r.method == mth for r in rows) for o in OUTCOMES} for mth in METHODS}
+    all_methods = list(METHODS) + [LEM_METHOD]
+    per_method = {mth: {o: sum(r.outcome == o and r.method == mth for r in rows) for o in OUTCOMES}
+                  for mth in all_methods}
     write_csv(outdir / "summary.csv", ["method"] + list(OUTCOMES),
-              [[mth] + [per_method[mth][o] for o in OUTCOMES] for mth in METHODS])
+              [[mth] + [per_method[mth][o] for o in OUTCOMES] for mth in all_methods])
     _figure(rows, outdir)
     return dict(rows=rows, counts=counts, per_method=per_method, out=str(outdir),
                 files=sorted(p.name for p in outdir.iterdir()))
@@ -399,14 +496,14 @@ def run(out=None, quick: bool = False) -> dict:
 
 def _figure(rows, outdir):
     case_names = list(dict.fromkeys((r.group, r.case) for r in rows))
-    methods = list(METHODS)
+    methods = list(METHODS) + [LEM_METHOD]
     code = {"correct": 0, "reported failure": 1, "silently wrong": 2, "not applicable": 3}
     grid = np.full((len(case_names), len(methods)), 3)
     for r in rows:
         grid[case_names.index((r.group, r.case)), methods.index(r.method)] = code[r.outcome]
     from matplotlib.colors import ListedColormap
     cmap = ListedColormap(["#4daf4a", "#ffbf00", "#e41a1c", "#dddddd"])
-    fig, ax = plt.subplots(figsize=(8.5, 0.24 * len(case_names) + 1.8))
+    fig, ax = plt.subplots(figsize=(9.5, 0.24 * len(case_names) + 1.8))
     ax.imshow(grid, cmap=cmap, vmin=-0.5, vmax=3.5, aspect="auto")
     ax.set_xticks(range(len(methods)), methods, rotation=20, ha="right", fontsize=8)
     ax.set_yticks(range(len(case_names)), [f"{g}: {c}" for g, c in case_names], fontsize=7)
