@@ -234,7 +234,9 @@ def test_never_silently_wrong(y0, z0, x, N, which):
         if r.status in (0, 1):
             assert np.all(err <= 3 * r.error_estimate[:, -1] + 1e-12)
         if restart == "auto":
-            assert r.status == 0
+            # local errors are controlled; their sum, amplified by the flow, may exceed the
+            # tolerance (status 1), but the result is never rejected as diverging
+            assert r.status in (0, 1) and not r.diverging
 
 
 @pytest.mark.parametrize("eps", [1e-2, 1e-4, 1e-8])
