@@ -18,7 +18,7 @@ as a time-dependent force, which reproduces the optimizer's trajectory step for 
 The discrete Coulomb law of each contact is the LCP of
 :meth:`lcp.contact_problem.ContactProblem.to_lcp`, with p_T = beta+ - beta-:
 
-    0 <= p_N    perp  u_N + e u_N-            >= 0,
+    0 <= p_N    perp  u_N + e min(u_N-, 0)    >= 0,
     0 <= beta+  perp  lambda + u_T            >= 0,
     0 <= beta-  perp  lambda - u_T            >= 0,
     0 <= lambda perp  mu p_N - beta+ - beta-  >= 0,      u = H(q_k) v_{k+1}, u_N- = H_N(q_k) v_k.
@@ -55,6 +55,7 @@ import casadi as ca
 import numpy as np
 
 from .contact_problem import MODE_NAMES, ContactProblem
+from .result import StepImpulses
 from .system import System
 
 __all__ = ["HomotopyOptions", "Step", "HomotopyStage", "OCPGuess", "OCPResult", "ReplayResult",
@@ -242,7 +243,7 @@ class OCPGuess:
 
 
 @dataclass
-class OCPResult:
+class OCPResult(StepImpulses):
     """The solution of an :class:`OptimalControlProblem`.
 
     Attributes
@@ -307,20 +308,6 @@ class OCPResult:
     solve_time: float
     build_time: float
     problem: "OptimalControlProblem" = field(repr=False, default=None)
-
-    @property
-    def success(self) -> bool:
-        return self.status >= 0
-
-    @property
-    def N(self) -> np.ndarray:
-        """Mean normal force per step, p_N / h, shape (N, m)."""
-        return self.p_N / self.h
-
-    @property
-    def f(self) -> np.ndarray:
-        """Mean friction force per step, p_T / h, shape (N, m)."""
-        return self.p_T / self.h
 
     @property
     def homotopy_steps(self) -> int:

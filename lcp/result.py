@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["STATUS_MESSAGES", "SolverStats", "SimulationResult"]
+__all__ = ["STATUS_MESSAGES", "SolverStats", "StepImpulses", "SimulationResult"]
 
 #: status code -> meaning; success is ``status >= 0``.
 STATUS_MESSAGES = {
@@ -57,8 +57,26 @@ class SolverStats:
     fallbacks: int = 0
 
 
+class StepImpulses:
+    """What every result with impulses ``p_N``, ``p_T`` over steps of size ``h`` and a ``status`` shares."""
+
+    @property
+    def success(self) -> bool:
+        return self.status >= 0
+
+    @property
+    def N(self) -> np.ndarray:
+        """Mean normal force over each step, p_N / h, shape (steps, m)."""
+        return self.p_N / self.h
+
+    @property
+    def f(self) -> np.ndarray:
+        """Mean tangential (friction) force over each step, p_T / h, shape (steps, m)."""
+        return self.p_T / self.h
+
+
 @dataclass
-class SimulationResult:
+class SimulationResult(StepImpulses):
     """Trajectory and diagnostics, in the style of ``scipy.integrate.solve_ivp``.
 
     Attributes
@@ -100,20 +118,6 @@ class SimulationResult:
     h: float = float("nan")
     theta: float = float("nan")
     t_events: list = field(default_factory=list)
-
-    @property
-    def success(self) -> bool:
-        return self.status >= 0
-
-    @property
-    def N(self) -> np.ndarray:
-        """Mean normal force over each step, p_N / h, shape (n_points - 1, m)."""
-        return self.p_N / self.h
-
-    @property
-    def f(self) -> np.ndarray:
-        """Mean tangential (friction) force over each step, p_T / h, shape (n_points - 1, m)."""
-        return self.p_T / self.h
 
     def __repr__(self) -> str:
         return (f"SimulationResult(method={self.method!r}, solver={self.solver!r}, h={self.h:g}, "
