@@ -11,11 +11,9 @@ stop time of a slide-then-stick motion), and the largest |gap| seen (lift-off or
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-import functools
 import math
 import time
 
-import casadi as ca
 import numpy as np
 
 from . import compiled

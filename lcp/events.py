@@ -1335,7 +1335,7 @@ class _Integrator:
 
     # --- main loop
     def run(self, q0, v0):
-        o, m, n = self.o, self.m, self.n
+        o, m = self.o, self.m
         t, q, v = 0.0, q0.copy(), v0.copy()
         P = np.zeros(2 * m)
         status, message = 0, EVENT_STATUS_MESSAGES[0]

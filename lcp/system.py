@@ -229,7 +229,7 @@ class System:
         ``SHt = S H'`` maps contact impulses to velocity, and ``W = H S H'`` is the Delassus
         operator of the local velocities u = W p + H v_free.
         """
-        n, m, nb = self.n, self.n_contacts, self.n_bilateral
+        n, nb = self.n, self.n_bilateral
         t, h, th = ca.MX.sym("t"), ca.MX.sym("h"), ca.MX.sym("theta")
         q, v = ca.MX.sym("q", n), ca.MX.sym("v", n)
         A, F, K, C, G, _, gap, H = self.step_data_fn(t, q, v)

@@ -397,7 +397,7 @@ def mujoco_model_xml(scene, h: float, cone: str = "elliptic", solref: str | None
     reduced model is that of physics.md section 2. MuJoCo's contact and equality are soft
     (default solref/solimp)."""
     p = scene.params
-    m, M, R, g, phi = p["m"], p["M"], p["R"], p["g"], p["phi"]
+    m, M, R, g = p["m"], p["M"], p["R"], p["g"]
     t = scene.tan
     sref = f'solref="{solref}"' if solref else ""
     return f"""
@@ -598,7 +598,6 @@ def creep(quick: bool, **overrides) -> dict:
     tau0 = scene.tau0
     t1 = tau0 + 0.05  # the drift is measured from here
     te = np.unique(np.concatenate([np.geomspace(t1, T, 60), np.linspace(0.0, T, 201), [t1]]))
-    x_ex = scene.exact(te)["x"]
     p = scene.params
     N = (p["m"] + p["M"]) * p["g"]
     rate_per_eps = math.atanh(LOADED_PHI / (p["R"] * N))  # creep velocity / eps
@@ -701,7 +700,7 @@ def figure(rows, summary, metric, path, ylabel):
         ax.set_xlabel("wall time (s)")
         ax.set_ylabel(ylabel)
         ax.grid(True, which="major", alpha=0.3)
-    handles, labels = {}, {}
+    handles = {}
     for ax in axes.ravel():
         for hnd, lab in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(lab, hnd)

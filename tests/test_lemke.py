@@ -4,7 +4,6 @@ import itertools
 import numpy as np
 import pytest
 from hypothesis import given, strategies as st
-from hypothesis.extra.numpy import arrays
 
 from lcp.lemke import lemke
 
