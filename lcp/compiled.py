@@ -209,8 +209,12 @@ def build_library(name: str, code: bytes, openmp: bool = False) -> Path | None:
     key = hashlib.sha256(code + " ".join(flags).encode() + sys.version.encode()
                          + ca.__version__.encode()).hexdigest()[:16]
     lib = cache_dir() / f"{name}_{key}.so"
-    if not lib.exists():
+    try:
         lib.parent.mkdir(parents=True, exist_ok=True)
+    except OSError:  # a read-only home: keep the cache in the temporary folder instead
+        lib = Path(tempfile.gettempdir()) / f"lcp-lem-{os.getuid() if hasattr(os, 'getuid') else 0}" / lib.name
+        lib.parent.mkdir(parents=True, exist_ok=True)
+    if not lib.exists():
         with tempfile.TemporaryDirectory() as tmp:
             src = Path(tmp) / f"{name}.c"
             src.write_bytes(code)
