@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import math
 import os
 from pathlib import Path
 import shutil
@@ -234,69 +235,86 @@ def _compile(fn: ca.Function) -> ca.Function:
     return ca.external(fn.name(), str(lib)) if lib is not None else fn
 
 
-_DRIVER = r"""
-#include <stdlib.h>
-#include <string.h>
-#ifndef casadi_int
-#define casadi_int long long int
-#endif
-int STEP(const double** arg, double** res, casadi_int* iw, double* w, int mem);
-int STEP_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#: C of each SX operation the lean step uses; comparisons give 0/1 like CasADi's
+_C_OPS = {ca.OP_ADD: "{0} + {1}", ca.OP_SUB: "{0} - {1}", ca.OP_MUL: "{0} * {1}", ca.OP_DIV: "{0} / {1}",
+          ca.OP_NEG: "-{0}", ca.OP_FABS: "fabs({0})", ca.OP_SQ: "{0} * {0}", ca.OP_TWICE: "2.0 * {0}",
+          # select form (not fmax/fmin calls) so that gcc vectorizes; same value for a finite or
+          # NaN first argument, which is how the step uses them
+          ca.OP_FMAX: "({0} > {1} ? {0} : {1})", ca.OP_FMIN: "({0} < {1} ? {0} : {1})",
+          ca.OP_LE: "(double)({0} <= {1})", ca.OP_LT: "(double)({0} < {1})", ca.OP_EQ: "(double)({0} == {1})",
+          ca.OP_NE: "(double)({0} != {1})", ca.OP_NOT: "(double)(!{0})",
+          ca.OP_IF_ELSE_ZERO: "({0} != 0 ? {1} : 0.0)"}
 
-/* Advance nscenes scenes (rows of Z, nz values each, constants rows of C, nc each) by steps
-   steps; scenes are independent, so OpenMP threads share them out. */
-int lcp_batch_run(double* Z, const double* C, long nz, long nc, long nscenes, long steps) {
-  casadi_int sz_arg, sz_res, sz_iw, sz_w;
-  int fail = 0;
-  STEP_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
-  #pragma omp parallel
-  {
-    const double** arg = malloc((sz_arg + 2) * sizeof(double*));
-    double** res = malloc((sz_res + 1) * sizeof(double*));
-    casadi_int* iw = malloc((sz_iw + 1) * sizeof(casadi_int));
-    double* w = malloc((sz_w + 1) * sizeof(double));
-    double* tmp = malloc(nz * sizeof(double));
-    if (!arg || !res || !iw || !w || !tmp) {
-      #pragma omp atomic write
-      fail = 1;
-    } else {
-      long j, k;
-      #pragma omp for schedule(static)
-      for (j = 0; j < nscenes; ++j) {
-        double* z = Z + j * nz;
-        arg[0] = z; arg[1] = C + j * nc; res[0] = tmp;
-        for (k = 0; k < steps; ++k) {
-          STEP(arg, res, iw, w, 0);
-          memcpy(z, tmp, nz * sizeof(double));
-        }
-      }
-    }
-    free(arg); free(res); free(iw); free(w); free(tmp);
-  }
-  return fail;
-}
+
+def _c_constant(x: float) -> str:
+    if x != x:
+        return "NAN"
+    if math.isinf(x):
+        return "INFINITY" if x > 0 else "-INFINITY"
+    return repr(float(x))
+
+
+def soa_source(fn: ca.Function, name: str) -> str:
+    """C for advancing many scenes by ``fn: (z, c) -> z_next`` (an SX Function), in structure-of-arrays
+    layout: ``name(Z, C, N, steps, B)`` with Z (nz, N) and C (nc, N) row-major, N scenes.
+
+    The step's SX instructions are written out as straight-line C in the body of a loop over scenes
+    (``omp simd``), inside the loop over steps, for blocks of B scenes that stay in cache, shared out
+    to threads (``omp parallel for``). The closed form is still the one of ``planar_enum``: only
+    its expression graph is transcribed, so results equal the CasADi evaluation bit for bit.
+    """
+    body = []
+    n_out = fn.nnz_out(0)
+    for k in range(fn.n_instructions()):
+        op, i, o = fn.instruction_id(k), fn.instruction_input(k), fn.instruction_output(k)
+        if op == ca.OP_INPUT:
+            body.append(f"w{o[0]} = {'Z' if i[0] == 0 else 'C'}[{i[1]} * N + j];")
+        elif op == ca.OP_OUTPUT:
+            body.append(f"r{o[1]} = w{i[0]};")
+        elif op == ca.OP_CONST:
+            body.append(f"w{o[0]} = {_c_constant(fn.instruction_constant(k))};")
+        elif op in _C_OPS:
+            body.append(f"w{o[0]} = " + _C_OPS[op].format(*(f"w{a}" for a in i)) + ";")
+        else:
+            raise NotImplementedError(f"SX operation {op} has no C transcription here")
+    ind = "\n" + " " * 8
+    return f"""#include <math.h>
+void {name}(double* restrict Z, const double* restrict C, long N, long steps, long B) {{
+  long nb = (N + B - 1) / B;
+  #pragma omp parallel for schedule(static)
+  for (long b = 0; b < nb; ++b) {{
+    long j0 = b * B, j1 = j0 + B < N ? j0 + B : N;
+    for (long k = 0; k < steps; ++k) {{
+      #pragma omp simd
+      for (long j = j0; j < j1; ++j) {{
+        double {", ".join(f"w{m}" for m in range(fn.sz_w()))};
+        double {", ".join(f"r{m}" for m in range(n_out))};{ind}{ind.join(body)}{ind}{ind.join(f"Z[{m} * N + j] = r{m};" for m in range(n_out))}
+      }}
+    }}
+  }}
+}}
 """
 
 
 @functools.lru_cache(maxsize=None)
 def batch_library(n: int, affine: bool = False):
-    """The lean step compiled with a C driver looping over scenes (OpenMP when available).
+    """The lean step as a compiled structure-of-arrays kernel (:func:`soa_source`), OpenMP threads
+    when the compiler has them.
 
-    Returns a ctypes function ``lcp_batch_run(Z, C, nz, nc, nscenes, steps)`` or None without a
-    working compiler.
+    Returns a ctypes function ``(Z, C, N, steps, B)`` or None without a working compiler.
     """
     import ctypes
 
     step = step_function(n, affine, True)
-    code = generate_c(step) + _DRIVER.replace("STEP", step.name()).encode()
+    name = f"lcp_batch_soa_{n}_{int(affine)}"
     openmp = openmp_available()
-    lib = build_library(f"lcp_batch_{n}_{int(affine)}", code, openmp=openmp)
+    lib = build_library(name, soa_source(step, name).encode(), openmp=openmp)
     if lib is None:
         return None
-    fn = ctypes.CDLL(str(lib)).lcp_batch_run
+    fn = getattr(ctypes.CDLL(str(lib)), name)
     dp = ctypes.POINTER(ctypes.c_double)
-    fn.argtypes = [dp, dp, ctypes.c_long, ctypes.c_long, ctypes.c_long, ctypes.c_long]
-    fn.restype = ctypes.c_int
+    fn.argtypes = [dp, dp, ctypes.c_long, ctypes.c_long, ctypes.c_long]
+    fn.restype = None
     fn.openmp = openmp
     return fn
 
