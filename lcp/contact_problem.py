@@ -207,6 +207,15 @@ class ContactProblem:
         if self.k == 0:
             return 0.0
         k = self.k
+        if k == 1:  # the same natural map in floats: NumPy calls on 2-vectors cost more than the math
+            (W00, W01), (W10, W11) = self.W.tolist()
+            qN, qT = self.q.tolist()
+            pN, pT = p.tolist()
+            rhoN, rhoT = self.rho.tolist()
+            uN, uT = W00 * pN + W01 * pT + qN, W10 * pN + W11 * pT + qT
+            s = float(self.mu[0]) * max(pN, 0.0)
+            rT = pT - min(max(pT - rhoT * uT, -s), s)
+            return max(abs(min(pN, rhoN * uN)), abs(rT))
         u = self.velocity(p)
         pN, pT = p[:k], p[k:]
         rN = np.minimum(pN, self.rho[:k] * u[:k])
@@ -217,8 +226,14 @@ class ContactProblem:
     def modes(self, p: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
         """Mode of each contact in the solution p (OPEN, STICK, SLIDE_POS, SLIDE_NEG)."""
         k = self.k
-        u = self.velocity(p)
         tol_p = rtol * self.scale
+        if k == 1:  # floats, as in residual()
+            (W10, W11) = self.W[1].tolist()
+            pN, pT = p.tolist()
+            uT = (W10 * pN + W11 * pT + float(self.q[1])) * float(self.rho[1])
+            mode = OPEN if pN <= tol_p else (SLIDE_POS if uT > tol_p else (SLIDE_NEG if uT < -tol_p else STICK))
+            return np.array([mode], dtype=np.int8)
+        u = self.velocity(p)
         out = np.full(k, STICK, dtype=np.int8)
         uT = u[k:] * self.rho[k:]  # impulse units, comparable with tol_p
         out[uT > tol_p] = SLIDE_POS
@@ -234,6 +249,8 @@ class ContactProblem:
         slide-: p_T = +mu p_N. The result satisfies the Coulomb law iff :meth:`admissible`.
         """
         k = self.k
+        if k == 1:  # one contact: the closed form, without assembling a 2 x 2 system
+            return self._solve_branch_planar(int(modes[0]))
         E = np.zeros((2 * k, 2 * k))
         r = np.zeros(2 * k)
         for j, md in enumerate(modes):
@@ -257,21 +274,42 @@ class ContactProblem:
             return None
         return p
 
+    def _solve_branch_planar(self, mode: int) -> np.ndarray | None:
+        (W00, W01), (W10, W11) = self.W.tolist()
+        qN, qT = self.q.tolist()
+        mu = float(self.mu[0])
+        if mode == OPEN:
+            return np.zeros(2)
+        if mode == STICK:
+            det = W00 * W11 - W01 * W10
+            if det == 0.0:
+                return None
+            return np.array([(-qN * W11 + qT * W01) / det, (-qT * W00 + qN * W10) / det])
+        sgn = 1.0 if mode == SLIDE_POS else -1.0
+        a = W00 - sgn * mu * W01
+        if a == 0.0:
+            return None
+        pN = -qN / a
+        return np.array([pN, -sgn * mu * pN])
+
     def admissible(self, p: np.ndarray, modes, rtol: float = 1e-11) -> bool:
         """Whether a branch solution p satisfies the inequalities of its modes (within rtol * scale)."""
         k = self.k
-        tol = rtol * max(self.scale, float(np.max(np.abs(p))) if k else 0.0)
-        u = self.velocity(p)
+        # plain floats: this runs once or more per step, on a handful of numbers
+        pl = p.tolist()
+        u = self.velocity(p).tolist()
+        rho, mu = self.rho.tolist(), self.mu.tolist()
+        tol = rtol * max(self.scale, max(map(abs, pl)) if k else 0.0)
         for j, md in enumerate(modes):
-            pN, pT = p[j], p[k + j]
+            pN, pT = pl[j], pl[k + j]
             if md == OPEN:
-                if u[j] * self.rho[j] < -tol:
+                if u[j] * rho[j] < -tol:
                     return False
                 continue
             if pN < -tol:
                 return False
-            uT = u[k + j] * self.rho[k + j]
-            if md == STICK and abs(pT) > self.mu[j] * pN + tol:
+            uT = u[k + j] * rho[k + j]
+            if md == STICK and abs(pT) > mu[j] * pN + tol:
                 return False
             if md == SLIDE_POS and uT < -tol:
                 return False

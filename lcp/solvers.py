@@ -141,6 +141,9 @@ class LemkeSolver(OneStepSolver):
         return StepSolution(p, 0, "solved", res.pivots)
 
 
+_OSQP_INFTY = 1e30  # osqp's OSQP_INFTY
+
+
 @functools.lru_cache(maxsize=None)
 def _triu_csc(n: int):
     """Row and column indices of the full upper triangle of an n x n matrix, in CSC order."""
@@ -222,8 +225,9 @@ class OsqpSolver(OneStepSolver):
 
     @staticmethod
     def _bounds(pb, s):
+        # OSQP's own infinity (the public update clips to it; the direct call below does not)
         k = pb.k
-        return (np.concatenate([np.zeros(k), -s]), np.concatenate([np.full(k, np.inf), s]))
+        return (np.concatenate([np.zeros(k), -s]), np.concatenate([np.full(k, _OSQP_INFTY), s]))
 
     def _solve(self, pb):
         import osqp
@@ -237,14 +241,12 @@ class OsqpSolver(OneStepSolver):
         qp_solves = 0
         for it in range(1, self.max_iter + 1):
             l, u = self._bounds(pb, s)
-            solver.update(q=pb.q, l=l, u=u)
-            res = solver.solve(raise_error=False)  # the status is checked below, every time
+            status_val, status, x = self._qp(solver, pb.q, l, u)
             qp_solves += 1
-            if res.info.status_val != osqp.SolverStatus.OSQP_SOLVED:
+            if status_val != osqp.SolverStatus.OSQP_SOLVED:
                 return StepSolution(np.full(2 * k, np.nan), -1,
-                                    f"OSQP status '{res.info.status}' at fixed-point iteration {it} "
+                                    f"OSQP status '{status}' at fixed-point iteration {it} "
                                     f"(bound s = {s})", it, qp_solves)
-            x = res.x
             # the QP names a branch; a few exact active-set corrections finish it
             p, modes = pb.refine_branch(self._branch(pb, x, s))
             if p is not None:
@@ -269,17 +271,44 @@ class OsqpSolver(OneStepSolver):
                             it, qp_solves)
 
     @staticmethod
+    def _qp(solver, q, l, u):
+        """Update and solve one QP: (status value, status text, x).
+
+        osqp-python's public ``solve`` copies every info field into a new namespace on each call,
+        which costs more than the solve of these tiny QPs; its extension object has the same
+        update/solve/status/solution calls without that, so it is used when present (checked, with
+        the public API as the fallback). The status is checked by the caller every time.
+        """
+        low = getattr(solver, "_solver", None)
+        if low is not None and hasattr(low, "update_data_vec"):
+            try:
+                low.update_data_vec(q=q, l=l, u=u)
+                low.solve()
+                info = low.info
+                return info.status_val, info.status, np.array(low.solution.x)
+            except (AttributeError, TypeError):
+                pass
+        solver.update(q=q, l=l, u=u)
+        res = solver.solve(raise_error=False)
+        return res.info.status_val, res.info.status, res.x
+
+    @staticmethod
     def _branch(pb: ContactProblem, x: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Read the branch from a QP solution: open, stick (bound inactive) or the bound's side."""
         k = pb.k
-        tol = 1e-7 * max(pb.scale, float(np.max(np.abs(x))))
-        modes = np.full(k, STICK, dtype=np.int8)
-        pN, pT = x[:k], x[k:]
-        at_upper = pT >= s - tol  # p_T = +s opposes u_T < 0
-        at_lower = pT <= -s + tol
-        modes[at_upper & (s > tol)] = SLIDE_NEG
-        modes[at_lower & (s > tol)] = SLIDE_POS
-        modes[pN <= tol] = OPEN
+        xl, sl = x.tolist(), s.tolist()  # floats: a few comparisons per contact
+        tol = 1e-7 * max(pb.scale, max(map(abs, xl)))
+        modes = np.empty(k, dtype=np.int8)
+        for j in range(k):
+            pN, pT, sj = xl[j], xl[k + j], sl[j]
+            if pN <= tol:
+                modes[j] = OPEN
+            elif sj > tol and pT >= sj - tol:  # p_T = +s opposes u_T < 0
+                modes[j] = SLIDE_NEG
+            elif sj > tol and pT <= -sj + tol:
+                modes[j] = SLIDE_POS
+            else:
+                modes[j] = STICK
         return modes
 
 
