@@ -189,7 +189,12 @@ class ContactProblem:
         new = object.__new__(ContactProblem)
         new.W, new.mu, new.key, new.k, new.rho = self.W, self.mu, self.key, self.k, self.rho
         new.q = q
-        new.scale = max(float(np.max(np.abs(q) * self.rho)) if self.k else 0.0, 1e-300)
+        if self.k == 1:  # floats: cheaper than three NumPy calls on a 2-vector
+            qN, qT = q.tolist()
+            rN, rT = self.rho.tolist()
+            new.scale = max(abs(qN) * rN, abs(qT) * rT, 1e-300)
+        else:
+            new.scale = max(float(np.max(np.abs(q) * self.rho)) if self.k else 0.0, 1e-300)
         return new
 
     # ----------------------------------------------------------------- the Coulomb law

@@ -227,6 +227,9 @@ class OsqpSolver(OneStepSolver):
     def _bounds(pb, s):
         # OSQP's own infinity (the public update clips to it; the direct call below does not)
         k = pb.k
+        if k == 1:
+            s0 = float(s[0])
+            return np.array([0.0, -s0]), np.array([_OSQP_INFTY, s0])
         return (np.concatenate([np.zeros(k), -s]), np.concatenate([np.full(k, _OSQP_INFTY), s]))
 
     def _solve(self, pb):

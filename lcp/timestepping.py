@@ -81,6 +81,7 @@ class _Assembly:
         self.sys, self.h, self.theta = system, h, theta
         self.n, self.m = system.n, system.n_contacts
         self.constant = system.is_constant
+        self.dv_const = None
         # the matrices (S, W, ...) are constant also when only an additive F(t) varies: then the
         # forces are evaluated per step and nothing else is rebuilt
         self.matrices_constant = (system.mass_is_constant and system.kinematics_is_constant
@@ -96,6 +97,10 @@ class _Assembly:
             _, G, phi_t = (np.array(x, dtype=float) for x in system.constraints_fn(0.0, z))
             self.G, self.phi_t = G.reshape(system.n_bilateral, self.n), phi_t.ravel()
             self.force_constant = not system.force_depends_on_state
+            # constant forces, no springs, no bilateral constraints: the free velocity increment
+            # itself is constant
+            self.dv_const = (self.S @ (h * self.F0) if self.constant and self.force_constant
+                             and not self.Kq.any() and not self.T.shape[1] else None)
 
     def _eval(self, t, q, v):
         """CasADi's one-step data (System.one_step_fn) as NumPy arrays, checked."""
@@ -110,6 +115,8 @@ class _Assembly:
 
     def at(self, t, q, v):
         """(v_free - v, SHt, W, gap, H) at the start of a step from (t, q, v)."""
+        if self.dv_const is not None:
+            return self.dv_const, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
         if self.constant:
             h, th = self.h, self.theta
             F = self.F0 if self.force_constant else self.F0 + self.Kq @ q + self.Cv @ v
@@ -208,16 +215,19 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             local = cache.get(key) if keyed else None
             if local is None:  # the active set's slices of the (constant) operators, built once
                 idx = np.concatenate([active, m + active])
-                local = (idx, H[idx], SHt[:, idx], e[active],
+                ea = e[active]
+                local = (idx, H[idx], SHt[:, idx], ea if np.any(ea) else None,
                          ContactProblem(W[np.ix_(idx, idx)], np.zeros(idx.size), mu[active],
                                         key=tuple(active) if keyed else None))
                 if keyed:
                     cache[key] = local
             idx, Ha, SHta, ea, template = local
             qa = Ha @ vfree
-            # Newton restitution u_N+ >= -e u_N- acts only on approaching contacts: with a
-            # separating one (u_N- > 0) it would pull the body back and create energy
-            qa[: active.size] += ea * np.minimum(uN_minus[active], 0.0)
+            if ea is not None:
+                # Newton restitution u_N+ >= -e u_N- acts only on approaching contacts: with a
+                # separating one (u_N- > 0) it would pull the body back and create energy
+                shift = ea * np.minimum(uN_minus[active], 0.0)
+                qa[: active.size] += shift
             pb = template.with_q(qa)
             sol = solver.solve(pb)
             stats.solver_calls += 1
@@ -248,9 +258,10 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             # one refinement on the branch: with an ill-conditioned mass matrix the solve leaves
             # cond(W) eps in the velocities, which would let a stuck block creep and a pressed one sink
             r = Ha @ (v + dv)
-            r[: active.size] += ea * np.minimum(uN_minus[active], 0.0)
+            if ea is not None:
+                r[: active.size] += shift
             dp = pb.with_q(r).solve_branch(md)
-            if dp is not None and np.all(np.isfinite(dp)):
+            if dp is not None and math.isfinite(float(dp.sum())):
                 p = p + dp
                 dv = dv + SHta @ dp
             if row >= 0:
