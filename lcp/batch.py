@@ -20,7 +20,7 @@ import numpy as np
 from . import compiled
 from .contact_problem import NUMPY_OPS, planar_enum, planar_refine
 from .scenes import Scene
-from .timestepping import MoreauJeanOptions, _Assembly
+from .timestepping import MoreauJeanOptions, _Assembly, _kahan
 
 __all__ = ["BatchResult", "jean_pratt_constants", "simulate_batch"]
 
@@ -127,25 +127,21 @@ def _numpy_step(Z, c, n):
     uT_free = np.einsum("ij,ij->j", H[1], vfree)
     gap = gap0 + np.einsum("ij,ij->j", H[0], q)
     active = gap + h * ((1 - th) * uN_minus + th * uN_free) <= 0
+    restitution = e * np.minimum(uN_minus, 0.0)  # approaching contacts only
     with np.errstate(divide="ignore", invalid="ignore"):
-        pN, pT, mode, _ = planar_enum(W[0], W[1], W[2], W[3], uN_free + e * np.minimum(uN_minus, 0.0), uT_free, mu, ops=NUMPY_OPS)
+        pN, pT, mode, _ = planar_enum(W[0], W[1], W[2], W[3], uN_free + restitution, uT_free, mu, ops=NUMPY_OPS)
     pN = np.where(active, pN, 0.0)
     pT = np.where(active, pT, 0.0)
     inc = a + SHt[:, 0] * pN + SHt[:, 1] * pT
     v_try = v + inc
     with np.errstate(divide="ignore", invalid="ignore"):
         dpN, dpT = planar_refine(W[0], W[1], W[2], W[3],
-                                 np.einsum("ij,ij->j", H[0], v_try) + e * np.minimum(uN_minus, 0.0),
+                                 np.einsum("ij,ij->j", H[0], v_try) + restitution,
                                  np.einsum("ij,ij->j", H[1], v_try), mu, np.where(active, mode, -2), ops=NUMPY_OPS)
     inc = inc + SHt[:, 0] * dpN + SHt[:, 1] * dpT
-    y = inc - cv
-    t_ = v + y
-    cv = (t_ - v) - y
-    v_new = t_
-    y = h * ((1 - th) * v + th * v_new) - cq
-    t_ = q + y
-    cq = (t_ - q) - y
-    Z[:n], Z[n:2 * n], Z[2 * n:3 * n], Z[3 * n:4 * n] = t_, v_new, cq, cv
+    v_new, cv = _kahan(v, inc, cv)
+    q_new, cq = _kahan(q, h * ((1 - th) * v + th * v_new), cq)
+    Z[:n], Z[n:2 * n], Z[2 * n:3 * n], Z[3 * n:4 * n] = q_new, v_new, cq, cv
     Z[4 * n] += active * (mode >= 2)
     Z[4 * n + 1] = np.maximum(Z[4 * n + 1], np.abs(gap))
 

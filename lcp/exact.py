@@ -96,7 +96,6 @@ class JeanPrattExact:
         self.N0 = (m + M) * g * A / den if den > 0 else math.inf
         self.B = R * self.N0 / A
         self.consistent = True
-        self.t_inconsistent = math.inf
         self._build()
         stops = [sg.t1 for sg in self.segments if sg.mode != "stick"]
         self.tau0 = 0.0 if (self.shocks and self.shocks[0][0] == 0.0) else (stops[0] if stops else

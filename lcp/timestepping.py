@@ -117,19 +117,16 @@ class _Assembly:
         """(v_free - v, SHt, W, gap, H) at the start of a step from (t, q, v)."""
         if self.dv_const is not None:
             return self.dv_const, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
-        if self.constant:
+        if self.matrices_constant:
             h, th = self.h, self.theta
-            F = self.F0 if self.force_constant else self.F0 + self.Kq @ q + self.Cv @ v
-            # the theta-weighted affine force, linearized exactly (as in System.one_step_fn)
-            dv = self.S @ (h * F + h * h * th * self.Kq @ v)
-            if self.T.shape[1]:
-                dv = dv + self.T @ (-self.phi_t - self.G @ v)
-            return dv, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
-        if self.matrices_constant:  # time-dependent forces with constant matrices
-            h, th, f = self.h, self.theta, self.sys.force_fn
-            F = np.array(f(t, q, v), dtype=float).ravel()
-            F1 = np.array(f(t + h, q, v), dtype=float).ravel()
-            dv = self.S @ (h * ((1 - th) * F + th * F1) + h * h * th * self.Kq @ v)
+            if self.constant:  # affine, time-independent: F(t + h) = F(t) in the theta weighting
+                Fth = self.F0 if self.force_constant else self.F0 + self.Kq @ q + self.Cv @ v
+            else:  # an additive F(t): only the forces are evaluated per step
+                f = self.sys.force_fn
+                Fth = ((1 - th) * np.array(f(t, q, v), dtype=float).ravel()
+                       + th * np.array(f(t + h, q, v), dtype=float).ravel())
+            # the theta-weighted force, linearized exactly (as in System.one_step_fn)
+            dv = self.S @ (h * Fth + h * h * th * self.Kq @ v)
             if self.T.shape[1]:
                 dv = dv + self.T @ (-self.phi_t - self.G @ v)
             return dv, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
