@@ -17,6 +17,8 @@ import time
 
 import numpy as np
 
+from lem.jean_pratt import check_parameters, tan_alpha
+
 from . import compiled
 from .contact_problem import NUMPY_OPS, planar_enum, planar_refine
 from .scenes import Scene
@@ -70,14 +72,6 @@ class BatchResult:
         return self.q.shape[0] * self.steps / self.run_time if self.run_time > 0 else math.inf
 
 
-def _tan(alpha):
-    # exact tangent at +-pi/4 (kappa = 1 must not be decided by rounding), as lem.series.tan_alpha
-    t = np.tan(alpha)
-    t = np.where(alpha == math.pi / 4, 1.0, t)
-    t = np.where(alpha == -math.pi / 4, -1.0, t)
-    return np.where(alpha == 0.0, 0.0, t)
-
-
 def jean_pratt_constants(m, M, alpha, R, v0=1.0, g=9.81, phi=0.0, *, h: float, theta: float = 0.5):
     """Packed per-scene constants and initial states of many Jean-Pratt scenes (vectorized).
 
@@ -86,17 +80,12 @@ def jean_pratt_constants(m, M, alpha, R, v0=1.0, g=9.81, phi=0.0, *, h: float, t
     """
     arrs = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (m, M, alpha, R, v0, g, phi)))
     m, M, alpha, R, v0, g, phi = (a.ravel() for a in arrs)
-    for name, a in (("m", m), ("M", M), ("alpha", alpha), ("R", R), ("v0", v0), ("g", g), ("phi", phi)):
+    check_parameters(m, M, alpha, R, g)
+    for name, a in (("v0", v0), ("phi", phi)):
         if not np.all(np.isfinite(a)):
             raise ValueError(f"{name} must be finite")
-    if np.any(m <= 0) or np.any(M < 0):
-        raise ValueError("m must be > 0 and M >= 0")
-    if np.any(R < 0):
-        raise ValueError("R (friction coefficient) must be >= 0")
-    if np.any(np.abs(alpha) >= math.pi / 2):
-        raise ValueError("alpha must lie strictly inside (-pi/2, pi/2)")
     MoreauJeanOptions(h=h, theta=theta)  # validates h and theta
-    t = _tan(alpha)
+    t = tan_alpha(alpha)
     A00, A01, A11 = m + M * t * t, -M * t, m + M
     det = A00 * A11 - A01 * A01
     S00, S01, S11 = A11 / det, -A01 / det, A00 / det

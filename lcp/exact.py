@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from lem.series import tan_alpha
+from lem.jean_pratt import tan_alpha
 
 __all__ = ["Segment", "JeanPrattExact"]
 

@@ -13,7 +13,7 @@ from typing import Callable
 import casadi as ca
 import numpy as np
 
-from lem.series import check_parameters, tan_alpha
+from lem.jean_pratt import check_parameters, tan_alpha
 
 from .exact import JeanPrattExact
 from .system import Contact, System

@@ -7,7 +7,7 @@
   generation; :func:`lem.truncation.solve` is its entry point.
 - :mod:`lem.troesch`: Troesch's problem by shooting over the engine's propagator.
 """
-from . import series, troesch, truncation
+from . import jean_pratt, series, troesch, truncation
 from .troesch import solve_troesch
 from .truncation import AnalyticField, LEMResult, LEMWarning, PolynomialField, solve
 

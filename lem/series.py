@@ -1,7 +1,7 @@
 """The paper's printed formulas for the Jean-Pratt smooth-sliding branch, and the true series beside them.
 
 Everything whose name ends in ``_printed`` reproduces a formula *as printed* in the seed paper
-(section 2 and 4), including its mistakes; ``physics.md`` section 5 lists the errata. The functions
+(section 2 and 4), including its mistakes; the docs' errata page lists them. The functions
 without that suffix give what is actually true, so that the two can be set side by side.
 
 Notation (paper): ``t = tan(alpha)``, ``A = m + M t**2``, friction coefficient ``R``,
@@ -26,10 +26,9 @@ import math
 
 import numpy as np
 
+from . import jean_pratt
+
 __all__ = [
-    "check_parameters",
-    "tan_alpha",
-    "kappa",
     "N0_printed",
     "B_printed",
     "tau0_printed",
@@ -46,56 +45,16 @@ __all__ = [
 ]
 
 
-def tan_alpha(alpha: float) -> float:
-    """tan(alpha), exact where rounding would otherwise decide the physics.
-
-    ``math.tan(pi/4)`` is 0.9999999999999999, which puts the paper's R = 2 (kappa = 1 exactly for
-    m = M = 1) on the wrong side of the shock limit; the angles with an exact rational tangent
-    (0, +-pi/4) are returned exactly.
-    """
-    if alpha == 0.0:
-        return 0.0
-    if alpha == math.pi / 4:
-        return 1.0
-    if alpha == -math.pi / 4:
-        return -1.0
-    return math.tan(alpha)
-
-
-def check_parameters(m, M, alpha, R, g=9.81):
-    """ValueError naming the first Jean-Pratt parameter out of range (shared with lcp.scenes)."""
-    for name, val in (("m", m), ("M", M), ("alpha", alpha), ("R", R), ("g", g)):
-        if not isinstance(val, (int, float, np.floating, np.integer)) or not np.isfinite(val):
-            raise ValueError(f"{name} must be a finite number, got {val!r}")
-    if m <= 0:
-        raise ValueError(f"m must be > 0, got {m!r}")
-    if M < 0:
-        raise ValueError(f"M must be >= 0, got {M!r}")
-    if R < 0:
-        raise ValueError(f"R (friction coefficient) must be >= 0, got {R!r}")
-    if not abs(alpha) < math.pi / 2:
-        raise ValueError(f"alpha must lie strictly inside (-pi/2, pi/2), got {alpha!r}")
-    if g < 0:
-        raise ValueError(f"g must be >= 0, got {g!r}")
-
-
-def kappa(m: float, M: float, alpha: float, R: float) -> float:
-    """Shock number kappa = R M tan(alpha) / (m + M tan(alpha)^2)."""
-    check_parameters(m, M, alpha, R)
-    t = tan_alpha(alpha)
-    return R * M * t / (m + M * t * t)
-
-
 def N0_printed(m: float, M: float, alpha: float, R: float, g: float = 9.81, v0_sign: int = +1) -> float:
     """Sliding normal force N0 = g (m+M) A / (A -+ R M tan(alpha)), paper (2.7) and section 4.
 
     The sign ``-`` is for v0 > 0 and ``+`` for v0 < 0, as printed (this formula is correct).
     For v0 > 0 and kappa >= 1 it is negative or infinite: no sliding motion exists.
     """
-    check_parameters(m, M, alpha, R, g)
+    jean_pratt.check_parameters(m, M, alpha, R, g)
     if v0_sign not in (-1, 1):
         raise ValueError(f"v0_sign must be +1 or -1, got {v0_sign!r}")
-    t = tan_alpha(alpha)
+    t = jean_pratt.tan_alpha(alpha)
     A = m + M * t * t
     den = A - v0_sign * R * M * t
     if den == 0.0:
@@ -105,7 +64,7 @@ def N0_printed(m: float, M: float, alpha: float, R: float, g: float = 9.81, v0_s
 
 def B_printed(m: float, M: float, alpha: float, R: float, g: float = 9.81, v0_sign: int = +1) -> float:
     """Deceleration B = R N0 / A, paper (2.8) and (4.1) (correct as printed)."""
-    t = tan_alpha(alpha)
+    t = jean_pratt.tan_alpha(alpha)
     return R * N0_printed(m, M, alpha, R, g, v0_sign) / (m + M * t * t)
 
 
@@ -122,10 +81,10 @@ def tau0(v0: float, B: float) -> float:
 def condition_2_2_printed(m: float, M: float, alpha: float, R: float) -> bool:
     """Condition (2.2) for the Jean-Pratt scene as printed: R M tan(alpha) / A < 1, i.e. kappa < 1.
 
-    The paper states it backwards (physics.md section 5): it is the condition for a sliding
+    The paper states it backwards: it is the condition for a sliding
     solution with v0 > 0; for v0 < 0 (and tan(alpha) > 0) one always exists.
     """
-    return kappa(m, M, alpha, R) < 1.0
+    return jean_pratt.kappa(m, M, alpha, R) < 1.0
 
 
 def series_3_20_printed_coefficients(z0: float, terms: int = 5) -> np.ndarray:
@@ -231,3 +190,15 @@ def coulomb_slide(t, v0: float, B: float) -> np.ndarray:
     ts = abs(v0) / B
     tc = np.minimum(t, ts)
     return v0 * tc - np.sign(v0) * B * tc**2 / 2
+
+
+_MOVED = ("tan_alpha", "check_parameters", "kappa")
+
+
+def __getattr__(name):
+    # the scene's parameters moved to lem.jean_pratt; the old names keep working for a while
+    if name in _MOVED:
+        import warnings
+        warnings.warn(f"lem.series.{name} moved to lem.jean_pratt.{name}", DeprecationWarning, stacklevel=2)
+        return getattr(jean_pratt, name)
+    raise AttributeError(f"module 'lem.series' has no attribute {name!r}")

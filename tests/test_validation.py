@@ -8,7 +8,7 @@ import pytest
 import lcp
 from lcp.scenes import block_chain, jean_pratt
 from lcp.system import Contact, System
-from lem import series
+from lem import jean_pratt as jean_pratt_parameters, series
 
 
 @pytest.mark.parametrize("kw,name", [
@@ -106,7 +106,7 @@ def test_block_chain_bad_parameters():
 
 def test_series_bad_parameters():
     with pytest.raises(ValueError, match="alpha"):
-        series.kappa(1.0, 1.0, math.pi / 2, 0.5)
+        jean_pratt_parameters.kappa(1.0, 1.0, math.pi / 2, 0.5)
     with pytest.raises(ValueError, match="R"):
         series.N0_printed(1.0, 1.0, 0.5, -0.5)
     with pytest.raises(ValueError, match="v0"):
