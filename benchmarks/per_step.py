@@ -41,7 +41,7 @@ import scipy.sparse as sp
 
 import lcp
 from lcp.contact_problem import PY_OPS, SLIDE_NEG, SLIDE_POS, STICK, OPEN, planar_enum, planar_refine
-from lcp.timestepping import _Assembly
+from lcp.assembly import StepAssembly
 
 TARGETS = {"compiled": 1.0, "osqp": 60.0}  # microseconds per step (issue 7)
 
@@ -53,7 +53,7 @@ def lean_osqp_loop(scene, T, h, theta=0.5, eps=1e-10):
     Returns (t, q, v, qp_solves, fallbacks)."""
     import osqp
 
-    asm = _Assembly(scene.system, h, theta)
+    asm = StepAssembly(scene.system, h, theta)
     mu = float(scene.system.mu[0])
     e = float(scene.system.e[0])
     n = asm.n

@@ -22,7 +22,8 @@ from lem.jean_pratt import check_parameters, tan_alpha
 from . import compiled
 from .contact_problem import NUMPY_OPS, planar_enum, planar_refine
 from .scenes import Scene
-from .timestepping import MoreauJeanOptions, _Assembly, _kahan
+from .assembly import StepAssembly, kahan_add
+from .timestepping import MoreauJeanOptions
 
 __all__ = ["BatchResult", "jean_pratt_constants", "simulate_batch"]
 
@@ -128,8 +129,8 @@ def _numpy_step(Z, c, n):
                                  np.einsum("ij,ij->j", H[0], v_try) + restitution,
                                  np.einsum("ij,ij->j", H[1], v_try), mu, np.where(active, mode, -2), ops=NUMPY_OPS)
     inc = inc + SHt[:, 0] * dpN + SHt[:, 1] * dpT
-    v_new, cv = _kahan(v, inc, cv)
-    q_new, cq = _kahan(q, h * ((1 - th) * v + th * v_new), cq)
+    v_new, cv = kahan_add(v, inc, cv)
+    q_new, cq = kahan_add(q, h * ((1 - th) * v + th * v_new), cq)
     Z[:n], Z[n:2 * n], Z[2 * n:3 * n], Z[3 * n:4 * n] = q_new, v_new, cq, cv
     Z[4 * n] += active * (mode >= 2)
     Z[4 * n + 1] = np.maximum(Z[4 * n + 1], np.abs(gap))
@@ -221,7 +222,7 @@ def _pack_scenes(scenes, h, theta):
         s = sc.system
         if not compiled.applicable(s):
             raise ValueError(f"scene '{sc.name}' is not a constant single-contact system")
-        asm = _Assembly(s, h, theta)
+        asm = StepAssembly(s, h, theta)
         if compiled.needs_affine(asm):
             raise ValueError(f"scene '{sc.name}' has state-dependent forces: the batch path needs constant ones")
         if n is None:

@@ -88,18 +88,17 @@ def _unpack(c, n, affine):
     return (out["a"], Bq, Bv, SHt, out["W"], H, out["gap0"], out["mu"], out["e"], out["h"], out["theta"])
 
 
-def _kahan(s, inc, comp):
-    """s + inc by Kahan's compensated sum: (new sum, new compensation).
+def _kahan_sx(s, inc, comp):
+    """s + inc by Kahan's compensated sum on CasADi expressions: (new sum, new compensation).
 
-    fmax(., -1e308) hides the sum from CasADi's simplifier, which would cancel (t - s) - y to 0
-    (it knows fmax(x, -inf) = x, so the bound must be finite).
+    Unlike :func:`lcp.assembly.kahan_add`, fmax(., -1e308) hides the sum from CasADi's simplifier,
+    which would cancel (t - s) - y to 0 (it knows fmax(x, -inf) = x, so the bound must be finite).
     """
     y = inc - comp
     t = ca.fmax(s + y, -1e308)
     return t, (t - s) - y
 
 
-@functools.lru_cache(maxsize=None)
 def step_function(n: int, affine: bool = True, lean: bool = False) -> ca.Function:
     """One Moreau-Jean step x = (q, v, c_q, c_v) -> x+ for a constant single-contact system with n
     coordinates (c_q, c_v: the compensations of the Kahan sums of q and v).
@@ -140,8 +139,8 @@ def step_function(n: int, affine: bool = True, lean: bool = False) -> ca.Functio
     pN, pT = pN + dpN, pT + dpT
     dv = dv + ca.mtimes(SHt, ca.vertcat(dpN, dpT))
     # compensated (Kahan) sums of v and q, as in the Python loop: over 1e6 steps plain sums drift
-    v_new, cv_new = _kahan(v, dv, cv)
-    q_new, cq_new = _kahan(q, h * ((1 - th) * v + th * v_new), cq)
+    v_new, cv_new = _kahan_sx(v, dv, cv)
+    q_new, cq_new = _kahan_sx(q, h * ((1 - th) * v + th * v_new), cq)
     x_new = ca.vertcat(q_new, v_new, cq_new, cv_new)
     if lean:
         sliding = active * (mode >= 2)

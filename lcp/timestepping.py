@@ -17,6 +17,7 @@ import math
 import numpy as np
 
 from . import compiled
+from .assembly import StepAssembly, kahan_add
 from .contact_problem import MODE_NAMES, ContactProblem
 from .result import STATUS_MESSAGES, SimulationResult, SolverStats
 from .solvers import make_solver
@@ -70,77 +71,6 @@ class MoreauJeanOptions:
             raise ValueError(f"save_every must be an integer >= 1, got {self.save_every!r}")
 
 
-class _Assembly:
-    """The per-step matrices, built once when they are constant.
-
-    Gives, for a state (t, q, v): the free velocity v_free, S H' (so v+ = v_free + S H' p), the
-    Delassus operator W = H S H', the gaps and H.
-    """
-
-    def __init__(self, system, h: float, theta: float):
-        self.sys, self.h, self.theta = system, h, theta
-        self.n, self.m = system.n, system.n_contacts
-        self.constant = system.is_constant
-        self.dv_const = None
-        # the matrices (S, W, ...) are constant also when only an additive F(t) varies: then the
-        # forces are evaluated per step and nothing else is rebuilt
-        self.matrices_constant = (system.mass_is_constant and system.kinematics_is_constant
-                                  and system.force_is_affine)
-        if self.matrices_constant:
-            z = np.zeros(self.n)
-            _, S, T, SHt, W, gap0, H = self._eval(0.0, z, z)
-            self.S, self.T, self.SHt, self.W, self.H = S, T, SHt, W, H
-            self.gap0 = gap0  # gaps are affine here: g(q) = g(0) + H_N q
-            K, C = (np.array(x, dtype=float).reshape(self.n, self.n) for x in system.force_jac_fn(0.0, z, z))
-            self.F0 = system.force(z, z)
-            self.Kq, self.Cv = -K, -C  # F = F0 + Kq q + Cv v (affine, no t)
-            _, G, phi_t = (np.array(x, dtype=float) for x in system.constraints_fn(0.0, z))
-            self.G, self.phi_t = G.reshape(system.n_bilateral, self.n), phi_t.ravel()
-            self.force_constant = not system.force_depends_on_state
-            # constant forces, no springs, no bilateral constraints: the free velocity increment
-            # itself is constant
-            self.dv_const = (self.S @ (h * self.F0) if self.constant and self.force_constant
-                             and not self.Kq.any() and not self.T.shape[1] else None)
-
-    def _eval(self, t, q, v):
-        """CasADi's one-step data (System.one_step_fn) as NumPy arrays, checked."""
-        n, m = self.n, self.m
-        out = self.sys.one_step_fn(t, q, v, self.h, self.theta)
-        vfree, S, T, SHt, W, gap, H = (np.array(x, dtype=float) for x in out)
-        if not (np.all(np.isfinite(S)) and np.all(np.isfinite(vfree))):
-            raise FloatingPointError("singular iteration matrix: the mass matrix is singular on the "
-                                     "constraint manifold")
-        return (vfree.ravel(), S.reshape(n, n), T.reshape(n, -1), SHt.reshape(n, 2 * m),
-                W.reshape(2 * m, 2 * m), gap.ravel(), H.reshape(2 * m, n))
-
-    def at(self, t, q, v):
-        """(v_free - v, SHt, W, gap, H) at the start of a step from (t, q, v)."""
-        if self.dv_const is not None:
-            return self.dv_const, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
-        if self.matrices_constant:
-            h, th = self.h, self.theta
-            if self.constant:  # affine, time-independent: F(t + h) = F(t) in the theta weighting
-                Fth = self.F0 if self.force_constant else self.F0 + self.Kq @ q + self.Cv @ v
-            else:  # an additive F(t): only the forces are evaluated per step
-                f = self.sys.force_fn
-                Fth = ((1 - th) * np.array(f(t, q, v), dtype=float).ravel()
-                       + th * np.array(f(t + h, q, v), dtype=float).ravel())
-            # the theta-weighted force, linearized exactly (as in System.one_step_fn)
-            dv = self.S @ (h * Fth + h * h * th * self.Kq @ v)
-            if self.T.shape[1]:
-                dv = dv + self.T @ (-self.phi_t - self.G @ v)
-            return dv, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
-        vfree, _, _, SHt, W, gap, H = self._eval(t, q, v)
-        return vfree - v, SHt, W, gap, H
-
-
-def _kahan(s, inc, comp):
-    """s + inc by Kahan's compensated sum: (new sum, new compensation)."""
-    y = inc - comp
-    t = s + y
-    return t, (t - s) - y
-
-
 def _fallback_for(solver, k: int):
     """The other exact solver that retries a step on which ``solver`` failed (k active contacts)."""
     name = {"auto": "osqp", "enum": "lemke", "lemke": "enum" if k == 1 else "osqp",
@@ -160,7 +90,7 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
         raise ValueError(f"h = {h!r} needs {n_steps} steps to reach t_end = {t_end!r}: too many")
     every = int(options.save_every)
     try:
-        asm = _Assembly(system, h, th)
+        asm = StepAssembly(system, h, th)
     except FloatingPointError as exc:
         raise ValueError(str(exc)) from exc
     if options.fast and solver.name in ("auto", "enum") and compiled.applicable(system):
@@ -268,8 +198,8 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             for code in md:
                 stats.mode_counts[MODE_NAMES[int(code)]] += 1
         # compensated (Kahan) sums: over 1e6 steps plain sums would drift by rounding
-        v_new, cv = _kahan(v, dv, cv)
-        q, cq = _kahan(q, h * ((1 - th) * v + th * v_new), cq)
+        v_new, cv = kahan_add(v, dv, cv)
+        q, cq = kahan_add(q, h * ((1 - th) * v + th * v_new), cq)
         v = v_new
         if not math.isfinite(float(q.sum()) + float(v.sum())):  # one test for both (NaN/inf propagate)
             status = -2

@@ -1,0 +1,112 @@
+"""The per-step assembly of Moreau-Jean: free velocity, Delassus operator and contact Jacobian.
+
+Shared by the time-stepping loop (:mod:`lcp.timestepping`) and the batch path (:mod:`lcp.batch`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["StepAssembly", "kahan_add"]
+
+
+class StepAssembly:
+    """The data of one Moreau-Jean step, built once when it is constant.
+
+    For a state (t, q, v) at the start of a step of size h, the theta-method's velocity update with
+    the bilateral constraints eliminated is
+
+        v+ = v_free + S H' p,    u = H v+ = W p + H v_free,    W = H S H',
+
+    where p stacks the contact impulses ``[p_N, p_T]`` and u the local velocities; :meth:`at`
+    returns ``(v_free - v, S H', W, gaps, H)``. When the mass matrix and the contact and constraint
+    kinematics are constant and the forces affine (``matrices_constant``), S, W and H are computed
+    once here and only the forces are evaluated per step; when moreover nothing depends on time or
+    on the state, the free-velocity increment itself is a constant. Otherwise every call evaluates
+    :attr:`lcp.system.System.one_step_fn`. Time stepping and the batch path share this object.
+
+    Parameters
+    ----------
+    system : lcp.system.System
+    h : float
+        Step size.
+    theta : float
+        Theta of the theta-method, in [1/2, 1].
+
+    Examples
+    --------
+    >>> import numpy as np, lcp
+    >>> from lcp.assembly import StepAssembly
+    >>> scene = lcp.scenes.jean_pratt()
+    >>> asm = StepAssembly(scene.system, h=1e-3, theta=0.5)
+    >>> dv, SHt, W, gap, H = asm.at(0.0, np.zeros(2), np.array([1.0, 0.0]))
+    >>> W.shape, asm.matrices_constant
+    ((2, 2), True)
+    """
+
+    def __init__(self, system, h: float, theta: float):
+        self.sys, self.h, self.theta = system, h, theta
+        self.n, self.m = system.n, system.n_contacts
+        self.constant = system.is_constant
+        self.dv_const = None
+        # the matrices (S, W, ...) are constant also when only an additive F(t) varies: then the
+        # forces are evaluated per step and nothing else is rebuilt
+        self.matrices_constant = (system.mass_is_constant and system.kinematics_is_constant
+                                  and system.force_is_affine)
+        if self.matrices_constant:
+            z = np.zeros(self.n)
+            _, S, T, SHt, W, gap0, H = self._eval(0.0, z, z)
+            self.S, self.T, self.SHt, self.W, self.H = S, T, SHt, W, H
+            self.gap0 = gap0  # gaps are affine here: g(q) = g(0) + H_N q
+            K, C = (np.array(x, dtype=float).reshape(self.n, self.n) for x in system.force_jac_fn(0.0, z, z))
+            self.F0 = system.force(z, z)
+            self.Kq, self.Cv = -K, -C  # F = F0 + Kq q + Cv v (affine, no t)
+            _, G, phi_t = (np.array(x, dtype=float) for x in system.constraints_fn(0.0, z))
+            self.G, self.phi_t = G.reshape(system.n_bilateral, self.n), phi_t.ravel()
+            self.force_constant = not system.force_depends_on_state
+            # constant forces, no springs, no bilateral constraints: the free velocity increment
+            # itself is constant
+            self.dv_const = (self.S @ (h * self.F0) if self.constant and self.force_constant
+                             and not self.Kq.any() and not self.T.shape[1] else None)
+
+    def _eval(self, t, q, v):
+        """CasADi's one-step data (System.one_step_fn) as NumPy arrays, checked."""
+        n, m = self.n, self.m
+        out = self.sys.one_step_fn(t, q, v, self.h, self.theta)
+        vfree, S, T, SHt, W, gap, H = (np.array(x, dtype=float) for x in out)
+        if not (np.all(np.isfinite(S)) and np.all(np.isfinite(vfree))):
+            raise FloatingPointError("singular iteration matrix: the mass matrix is singular on the "
+                                     "constraint manifold")
+        return (vfree.ravel(), S.reshape(n, n), T.reshape(n, -1), SHt.reshape(n, 2 * m),
+                W.reshape(2 * m, 2 * m), gap.ravel(), H.reshape(2 * m, n))
+
+    def at(self, t, q, v):
+        """(v_free - v, SHt, W, gap, H) at the start of a step from (t, q, v)."""
+        if self.dv_const is not None:
+            return self.dv_const, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
+        if self.matrices_constant:
+            h, th = self.h, self.theta
+            if self.constant:  # affine, time-independent: F(t + h) = F(t) in the theta weighting
+                Fth = self.F0 if self.force_constant else self.F0 + self.Kq @ q + self.Cv @ v
+            else:  # an additive F(t): only the forces are evaluated per step
+                f = self.sys.force_fn
+                Fth = ((1 - th) * np.array(f(t, q, v), dtype=float).ravel()
+                       + th * np.array(f(t + h, q, v), dtype=float).ravel())
+            # the theta-weighted force, linearized exactly (as in System.one_step_fn)
+            dv = self.S @ (h * Fth + h * h * th * self.Kq @ v)
+            if self.T.shape[1]:
+                dv = dv + self.T @ (-self.phi_t - self.G @ v)
+            return dv, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
+        vfree, _, _, SHt, W, gap, H = self._eval(t, q, v)
+        return vfree - v, SHt, W, gap, H
+
+
+def kahan_add(s, inc, comp):
+    """s + inc by Kahan's compensated sum: returns (new sum, new compensation).
+
+    Works on floats, NumPy arrays and CasADi expressions alike, so that the Python loop, the batch
+    path and the compiled step sum positions and velocities the same way (1e6 steps stay at rounding
+    level).
+    """
+    y = inc - comp
+    t = s + y
+    return t, (t - s) - y
