@@ -99,6 +99,7 @@ def _kahan_sx(s, inc, comp):
     return t, (t - s) - y
 
 
+@functools.lru_cache(maxsize=None)
 def step_function(n: int, affine: bool = True, lean: bool = False) -> ca.Function:
     """One Moreau-Jean step x = (q, v, c_q, c_v) -> x+ for a constant single-contact system with n
     coordinates (c_q, c_v: the compensations of the Kahan sums of q and v).
