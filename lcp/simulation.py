@@ -19,7 +19,7 @@ METHODS = {"moreau-jean": moreau_jean, "event": event_driven}
 def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 0.5,
              solver: str = "auto", method: str = "moreau-jean", q0=None, v0=None,
              solver_options: dict | None = None, fallback: bool = True, save_every: int = 1,
-             fast: bool = True, **method_options) -> SimulationResult:
+             fast: bool = True, allow_large_step: bool = False, **method_options) -> SimulationResult:
     """Simulate a scene (or a bare :class:`~lcp.system.System` with ``q0`` and ``v0``).
 
     Parameters
@@ -50,6 +50,9 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
     fast : bool
         Use the compiled path when it applies (constant system, one contact, ``"auto"`` or
         ``"enum"``); the results are the same.
+    allow_large_step : bool
+        Moreau-Jean only: accept a step h larger than the horizon (one step then overshoots
+        ``t_end``). Without it such an h is taken for a mistake and raises.
     **method_options
         Options of the chosen method other than Moreau-Jean's (see :mod:`lcp.events`).
 
@@ -82,11 +85,15 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
         raise ValueError(f"unknown method {method!r}; known methods: {sorted(METHODS)}")
     if not isinstance(t_end, (int, float, np.floating)) or not np.isfinite(t_end) or t_end <= 0:
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
+    # options a method ignores are still validated: a typo must not pass silently
+    opts = MoreauJeanOptions(h=h, theta=theta, solver=solver, solver_options=solver_options,
+                             fallback=fallback, save_every=save_every, fast=fast)
     if method == "moreau-jean":
+        if h > t_end and not allow_large_step:
+            raise ValueError(f"h = {h!r} is larger than the horizon t_end = {t_end!r}; pass "
+                             "allow_large_step=True if one step beyond t_end is what you want")
         if method_options:
             raise ValueError(f"unknown options for method 'moreau-jean': {sorted(method_options)}")
-        opts = MoreauJeanOptions(h=h, theta=theta, solver=solver, solver_options=solver_options,
-                                 fallback=fallback, save_every=save_every, fast=fast)
         return moreau_jean(system, q0, v0, float(t_end), opts)
     return METHODS[method](system, q0, v0, float(t_end), scene=scene if isinstance(scene, Scene) else None,
                            **method_options)

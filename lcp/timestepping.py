@@ -20,7 +20,7 @@ from . import compiled
 from .assembly import StepAssembly, kahan_add
 from .contact_problem import MODE_NAMES, ContactProblem
 from .result import STATUS_MESSAGES, SimulationResult, SolverStats
-from .solvers import make_solver
+from .solvers import SOLVERS, OneStepSolver, make_solver
 
 __all__ = ["MoreauJeanOptions", "moreau_jean"]
 
@@ -69,6 +69,12 @@ class MoreauJeanOptions:
             raise ValueError(f"theta must lie in [1/2, 1], got {th!r}")
         if not isinstance(self.save_every, (int, np.integer)) or self.save_every < 1:
             raise ValueError(f"save_every must be an integer >= 1, got {self.save_every!r}")
+        if isinstance(self.solver, str) and self.solver not in SOLVERS:
+            raise ValueError(f"unknown solver {self.solver!r}; known solvers: {sorted(SOLVERS)}")
+        if not isinstance(self.solver, (str, OneStepSolver)):
+            raise ValueError(f"solver must be a solver name or a OneStepSolver, got {self.solver!r}")
+        if self.solver_options is not None and not isinstance(self.solver_options, dict):
+            raise ValueError(f"solver_options must be a dict, got {self.solver_options!r}")
 
 
 def _fallback_for(solver, k: int):

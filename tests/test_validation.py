@@ -113,3 +113,19 @@ def test_series_bad_parameters():
         series.series_4_1_printed(0.1, 0.0, 1.0)
     with pytest.raises(ValueError, match="z0"):
         series.series_3_20_printed(0.1, 0.0)
+
+
+def test_step_larger_than_horizon_is_rejected_unless_asked():
+    scene = jean_pratt()
+    with pytest.raises(ValueError, match=r"\bh\b"):
+        lcp.simulate(scene, 0.3, h=1.0)
+    res = lcp.simulate(scene, 0.3, h=1.0, allow_large_step=True)
+    assert res.success and res.t[-1] == 1.0
+
+
+@pytest.mark.parametrize("bad, name", [(dict(h=-1), "h"), (dict(h=float("nan")), "h"),
+                                       (dict(theta=2.0), "theta"), (dict(solver="foo"), "solver"),
+                                       (dict(save_every=0), "save_every")])
+def test_event_method_rejects_invalid_ignored_options(bad, name):
+    with pytest.raises(ValueError, match=name):
+        lcp.simulate(jean_pratt(), 0.3, method="event", **bad)
