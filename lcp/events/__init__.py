@@ -1,0 +1,90 @@
+"""Event-driven integration with exact mode switches (the ``method="event"`` branch of :func:`lcp.simulate`).
+
+Between events every contact keeps one mode (open, stick, slide+, slide-) and the motion is smooth.
+Each smooth phase is integrated
+
+- in **closed form** when the phase dynamics is polynomial in t: constant mass matrix, kinematics
+  and forces (``System.is_constant`` and no state dependence of the forces). Each mode then has
+  constant accelerations, so positions are quadratic in t and every event is the root of a linear
+  or quadratic polynomial, computed without cancellation (a stop at ``dt = -u_T / a_T``);
+- otherwise by SciPy's ``solve_ivp`` (DOP853 by default, rtol 1e-12) with event functions
+  (``.terminal``, ``.direction``) located by Brent's method on the dense output.
+
+Which integrator ran is recorded per phase (:attr:`EventResult.phases`).
+
+Events
+------
+- a sliding velocity reaching zero (stop);
+- a normal force reaching zero (lift-off);
+- a stick force reaching the friction bound (stick -> slip);
+- a gap closing (impact).
+
+At each event the next mode comes from the **acceleration-level contact problem**. With the
+closed contacts c (gap 0, normal velocity 0), the contact accelerations are affine in the contact
+forces,
+
+    a = H_c qdd + Hdot_c v = W lam + b,    qdd = qdd_free + S H_c' lam,
+
+with S the inverse mass matrix with the bilateral constraints eliminated (the first block of
+[[A, G'], [G, 0]]^-1), qdd_free the free acceleration and W = H_c S H_c'. The Coulomb law at the
+acceleration level is, per closed contact j:
+
+- normal: 0 <= N_j  perp  a_N,j >= 0;
+- if u_T,j = 0 (stick candidate): |f_j| <= mu_j N_j and f_j = -mu_j N_j sign(a_T,j) if a_T,j != 0,
+  i.e. exactly the complementarity structure of :class:`~lcp.contact_problem.ContactProblem`
+  with impulses replaced by forces and velocities by accelerations;
+- if u_T,j != 0 (sliding): f_j = -mu_j N_j sign(u_T,j), whatever a_T,j.
+
+The sliding contacts are folded into the same :class:`~lcp.contact_problem.ContactProblem`: their
+friction force is carried by the normal force's generalized direction
+``d_j = H_N,j' - mu_j sign(u_T,j) H_T,j'`` (the column of W is ``H_c S d_j``, computed by one solve
+with d_j so that no W_NN - mu W_NT cancellation is left to rounding), and their friction
+coefficient in the problem is 0, which pins their tangential unknown to 0 and leaves only the
+normal complementarity. So the Coulomb law itself stays in one place (``solve_branch``,
+``admissible``, ``residual``); this module only changes variables.
+
+The problem is solved by enumerating every branch (open / stick / slide+ / slide- for stick
+candidates, open / closed for sliding contacts), which finds *all* solutions, or by Lemke's method
+for many contacts. Solutions with the same acceleration are one motion (ties at a mode boundary,
+broken by looking a short time ahead). When the problem has **no solution or several** (the
+Painlevé cases: kappa >= 1 in the Jean-Pratt scene), the integrator applies the **impulsive
+fallback**: the velocity-level impact problem, ContactProblem(W, H_c v, mu), the problem
+Moreau-Jean solves in the limit h -> 0+. Its trivial solution (no impulse) is excluded by taking the
+branch that Moreau-Jean's problem selects for a vanishing step (free velocity H_c v + delta b with
+delta -> 0+) and re-solving that branch at delta = 0. The impulse (a tangential impact) is recorded
+with its time in :attr:`EventResult.impulses`.
+
+Cost on constant systems
+------------------------
+With constant mass matrix, kinematics and forces (``System.is_constant`` and no state dependence
+of the forces) the acceleration-level problems, the phases' accelerations and forces, the
+projection matrices and the check of the mass matrix depend on the System only: they are built
+on first use and kept per System object (``_Model``), so that a later call only classifies the
+contacts, finds the event times, projects the state at events and evaluates the quadratic phases
+at the output times (all at once, with NumPy). The results are those of a fresh System.
+
+Behaviour at the shock limit (Jean-Pratt, v0 > 0): for kappa < 1 the block slides with
+N0 = (m+M) g / (1 - kappa) and stops at tau0 = |v0| A (1 - kappa) / (R (m+M) g); as kappa -> 1-,
+tau0 -> 0, the stop distance -> 0 and the integral of the contact forces over the slide tends to
+(M tan(alpha) v0, -A v0). For kappa >= 1 (kappa = 1 included: its sliding branch has a zero
+effective normal mass, detected without letting rounding decide) the block stops by one tangential
+impact at t = 0 with exactly those impulses, then sticks. The motion is continuous in kappa.
+
+Modules
+-------
+- :mod:`~lcp.events.options`: :class:`EventOptions` and the choices of integrator and solver;
+- :mod:`~lcp.events.records`: :class:`EventResult` and what it lists (events, impulses, phases);
+- :mod:`~lcp.events.model`: the system evaluated at a state, and what is kept per system;
+- :mod:`~lcp.events.modes`: mode selection at the acceleration level;
+- :mod:`~lcp.events.phases`, :mod:`~lcp.events.ode_phase`: smooth phases (closed form, SciPy);
+- :mod:`~lcp.events.event_location`: the events that end a phase;
+- :mod:`~lcp.events.impacts`: the velocity-level impact law;
+- :mod:`~lcp.events.projection`: the projection onto the active constraints at events;
+- :mod:`~lcp.events.integrator`, :mod:`~lcp.events.driver`: the event loop and :func:`event_driven`.
+"""
+from .driver import event_driven
+from .options import EVENT_STATUS_MESSAGES, EventOptions, ModeSolver, SmoothIntegrator
+from .records import Event, EventResult, Impulse, Phase
+
+__all__ = ["EVENT_STATUS_MESSAGES", "SmoothIntegrator", "ModeSolver", "EventOptions", "Event", "Impulse",
+           "Phase", "EventResult", "event_driven"]

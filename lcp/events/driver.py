@@ -1,0 +1,139 @@
+"""The driver of the event-driven integrator: :func:`event_driven` and its output on a time grid."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .integrator import Integrator
+from .model import check_state
+from .options import EventOptions
+from .phases import closed_form_output
+from .records import EventResult
+
+__all__ = ["event_driven"]
+
+
+def _transposed(rows):
+    """C-contiguous copy of rows.T (column by column when there are few: faster than NumPy's)."""
+    k, N = rows.shape
+    if k > 8:
+        return np.ascontiguousarray(rows.T)
+    out = np.empty((N, k))
+    for i in range(k):
+        out[:, i] = rows[i]
+    return out
+
+
+def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventResult:
+    """Integrate a :class:`~lcp.system.System` event by event, with exact mode switches.
+
+    Usually called as ``lcp.simulate(scene, t_end, method="event", **options)``.
+
+    Parameters
+    ----------
+    system : System
+    q0, v0 : array_like, shape (n,)
+        Initial state (consistent with the bilateral constraints, no penetration).
+    t_end : float
+        Horizon, > 0.
+    scene : Scene, optional
+        Only used to name the scene in messages.
+    **options
+        See :class:`EventOptions` (``t_eval``, ``n_eval``, ``smooth``, ``ode_method``, ``rtol``,
+        ``atol``, ``mode_solver``, ``impact_solver``, ``max_branches``, ``max_events``, ``tol``).
+
+    Returns
+    -------
+    EventResult
+        ``t`` (n_points,), ``q`` and ``v`` (n_points, n) at the output times, impulses ``p_N``,
+        ``p_T`` and ``modes`` (n_points - 1, m) per output interval, ``force_N`` and ``force_T``
+        (n_points, m), ``t_events``, ``events``, ``impulses``, ``phases`` (with the integrator of
+        each), ``mode_sequence``, ``status``, ``message``, ``success`` and ``stats``.
+
+    Examples
+    --------
+    The Jean-Pratt block slides and sticks at tau0 = 0.152905... s (physics.md section 2):
+
+    >>> import lcp
+    >>> sc = lcp.scenes.jean_pratt()
+    >>> res = lcp.simulate(sc, 0.3, method="event")
+    >>> res.success, res.mode_sequence, res.integrators
+    (True, [('slide+',), ('stick',)], ['closed-form'])
+    >>> abs(res.t_events[0] - sc.tau0) < 1e-15
+    True
+
+    Past the shock limit (kappa = 1.25) the block stops by a tangential impact at t = 0:
+
+    >>> res = lcp.simulate(lcp.scenes.jean_pratt(R=2.5), 0.3, method="event")
+    >>> imp = res.impulses[0]
+    >>> imp.t, round(imp.P_N, 12), round(imp.P_T, 12), res.mode_sequence
+    (0.0, 1.0, -2.0, [('stick',)])
+    """
+    opts = EventOptions.from_kwargs(**options)
+    if not (isinstance(t_end, (int, float, np.floating)) and math.isfinite(t_end) and t_end > 0):
+        raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
+    t_end = float(t_end)
+    q0, v0 = check_state(system, q0, v0)
+    t_out = opts.output_times(t_end)
+    integ = Integrator(system, q0, v0, t_end, opts)
+    integ.model.state_checked = integ.model.constant  # the mass matrix is the same at every state
+    integ.check_initial(q0, v0)
+    phases, status, message, t_fail = integ.run(q0, v0)
+    n, m = system.n, system.n_contacts
+    if status < 0:
+        t_out = t_out[t_out <= t_fail]
+        if scene is not None:
+            message = f"{message} (scene '{scene.name}')"
+    N_out = t_out.size
+    # rows q (n), v (n), cumulative impulses (2m); one column per output time
+    Y = np.empty((2 * n + 2 * m, N_out))
+    FN = np.empty((N_out, m))
+    FT = np.empty((N_out, m))
+    MD = np.empty((N_out, m), dtype=np.int8)
+
+    def blank(a, b):  # output times no phase covers: no state, no force, no mode
+        Y[:2 * n, a:b] = np.nan
+        Y[2 * n:, a:b] = 0.0
+        FN[a:b] = FT[a:b] = 0.0
+        MD[a:b] = -1
+
+    # output times in [t0, t1) of each phase, [t0, t1] for the last (t_out is increasing)
+    bounds = np.searchsorted(t_out, [ph.t0 for ph in phases] + [ph.t1 for ph in phases]).tolist()
+    n_ph = len(phases)
+    if n_ph and bounds[-1] < N_out and t_out[bounds[-1]] == phases[-1].t1:
+        bounds[-1] += 1
+    # the phases are consecutive in time: their output times are the columns [start, stop)
+    start = bounds[0] if n_ph else 0
+    stop = max(start, bounds[-1]) if n_ph else 0
+    if start > 0:
+        blank(0, start)
+    if stop < N_out:
+        blank(stop, N_out)
+    spans = [(ph, a, b) for ph, a, b in zip(phases, bounds[:n_ph], bounds[n_ph:]) if a < b]
+    if spans and integ.closed_form:
+        ph_s = [ph for ph, _, _ in spans]
+        closed_form_output(ph_s, t_out[start:stop], [b - a for _, a, b in spans], Y[:, start:stop])
+        for ph, a, b in spans:
+            FN[a:b], FT[a:b] = ph.N, ph.f
+            MD[a:b] = ph.full_modes
+    else:
+        for ph, a, b in spans:
+            FN[a:b], FT[a:b] = ph.output(t_out[a:b], Y[:, a:b])
+            MD[a:b] = ph.full_modes
+    # impulses over [t_i, t_{i+1}): the left-limit cumulative impulse, shocks at t_s < t included
+    for imp in integ.impulses:
+        after = int(np.searchsorted(t_out, imp.t, "right"))  # t_out > imp.t
+        Y[2 * n + imp.contact, after:] += imp.P_N
+        Y[2 * n + m + imp.contact, after:] += imp.P_T
+    Q, V = _transposed(Y[:n]), _transposed(Y[n:2 * n])
+    Pc = Y[2 * n:]
+    dP = (Pc[:, 1:] - Pc[:, :-1]).T  # np.diff
+    integ.stats.steps = len(phases)
+    used = sorted(integ.selector.used)
+    return EventResult(t=t_out, q=Q, v=V, p_N=dP[:, :m], p_T=dP[:, m:], modes=MD[:-1] if t_out.size else MD,
+                       status=status, message=message, stats=integ.stats, method="event",
+                       solver="+".join(used) if used else "none",
+                       t_events=[ev.t for ev in integ.events], force_N=FN, force_T=FT,
+                       events=integ.events, impulses=integ.impulses,
+                       phases=integ.phases)

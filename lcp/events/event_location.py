@@ -1,0 +1,71 @@
+"""Locating the events that end a smooth phase.
+
+Events
+------
+- a sliding velocity reaching zero (``"stop"``);
+- a normal force reaching zero (``"lift-off"``);
+- a stick force reaching the friction bound (``"slip"``);
+- a gap closing (``"impact"``).
+
+In a closed-form phase (constant accelerations) the stop and the landing are roots of linear and
+quadratic polynomials, computed without cancellation. In a SciPy phase they are zeros of event
+functions with ``.terminal`` and ``.direction``, located by ``solve_ivp`` on its dense output.
+"""
+from __future__ import annotations
+
+import math
+
+__all__ = ["first_landing", "first_stop", "event_functions"]
+
+
+def first_stop(u0: float, a: float, s: float) -> float:
+    """Time dt > 0 at which a sliding velocity u0 (sign s) under constant acceleration a stops;
+    inf if it does not decelerate. One division: no cancellation."""
+    if s * a < 0 and s * u0 > 0:
+        return -u0 / a
+    return math.inf
+
+
+def first_landing(g0: float, u: float, a: float) -> float:
+    """Smallest dt > 0 with g0 + u dt + a dt^2/2 = 0 and the gap decreasing; inf if none.
+
+    Roots by the cancellation-free pair q/(a/2) and g0/q with q = -(u + sign(u) sqrt(disc))/2.
+    """
+    h = 0.5 * a
+    if h == 0.0:
+        return -g0 / u if u < 0 and g0 >= 0 else math.inf
+    disc = u * u - 4.0 * h * g0
+    if disc < 0:
+        return math.inf
+    qq = -0.5 * (u + math.copysign(math.sqrt(disc), u))
+    roots = [qq / h]
+    if qq != 0.0:
+        roots.append(g0 / qq)
+    good = [r for r in roots if r > 0 and u + a * r <= 0]
+    return min(good) if good else math.inf
+
+
+def event_functions(phase):
+    """Terminal event functions of a SciPy phase (an :class:`~lcp.events.ode_phase.OdePhase`):
+    (functions, (kind, contact) per function). Each decreases through zero at its event."""
+    n, m = phase.model.n, phase.model.m
+    model, evaluate = phase.model, phase.evaluate
+    evs, meta = [], []
+
+    def make(fun, kind, j):
+        fun.terminal, fun.direction = True, -1
+        evs.append(fun)
+        meta.append((kind, int(j)))
+
+    for jj, j in enumerate(phase.idx):
+        s = phase.slide[jj]
+        if s != 0:
+            make(lambda t, y, j=j, s=s: s * float(model.jac(y[:n])[m + j] @ y[n:2 * n]), "stop", j)
+        make(lambda t, y, j=j: float(evaluate(t, y)[1][j]), "lift-off", j)
+        if s == 0:
+            mu = phase.mu[j]
+            make(lambda t, y, j=j, mu=mu: float(mu * evaluate(t, y)[1][j] - evaluate(t, y)[2][j]), "slip", j)
+            make(lambda t, y, j=j, mu=mu: float(mu * evaluate(t, y)[1][j] + evaluate(t, y)[2][j]), "slip", j)
+    for j in phase.open_idx:
+        make(lambda t, y, j=j: float(model.gaps(y[:n])[j]), "impact", j)
+    return evs, meta

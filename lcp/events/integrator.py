@@ -1,0 +1,243 @@
+"""The event loop: decide the modes, integrate a smooth phase to its first event, project, repeat."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..contact_problem import OPEN, STICK
+from ..result import SolverStats
+from .impacts import ImpactLaw
+from .model import EPS, absmax, all_finite, system_model
+from .modes import ModeSelector
+from .ode_phase import OdePhase
+from .options import EVENT_STATUS_MESSAGES, EventOptions, SmoothIntegrator
+from .phases import ClosedFormPhase
+from .projection import StateProjector
+from .records import Event, Impulse, Phase, make_record
+
+__all__ = ["Integrator", "Inconsistent"]
+
+
+class Inconsistent(Exception):
+    """No motion can be continued from the current state (reported as status -3)."""
+
+
+class Integrator:
+    """One event-driven integration of a System from (q0, v0) over [0, t_end]."""
+
+    def __init__(self, system, q0, v0, t_end, options: EventOptions):
+        self.sys = system
+        self.model = system_model(system)
+        self.o = options
+        self.t_end = t_end
+        self.mu, self.e = system.mu, system.e
+        n, m = system.n, system.n_contacts
+        self.n, self.m = n, m
+        if options.smooth is SmoothIntegrator.CLOSED_FORM and not self.model.polynomial:
+            raise ValueError("smooth='closed-form' needs constant mass, kinematics and forces "
+                             "(System.is_constant and forces independent of q and v)")
+        self.closed_form = self.model.polynomial and options.smooth is not SmoothIntegrator.SCIPY
+        self.stats = SolverStats()
+        self.events, self.impulses, self.phases = [], [], []
+        # scales for the zero tests
+        model = self.model
+        if model.polynomial:
+            acc_scale = model.__dict__.get("acc_scale")
+            if acc_scale is None:
+                d = model.data(0.0, q0, v0)
+                acc_scale = model.acc_scale = float(np.max(np.abs(d.qdd_free))) if n else 0.0
+            A_max = model.A_max
+        else:
+            d = model.data(0.0, q0, v0)
+            acc_scale = float(np.max(np.abs(d.qdd_free))) if n else 0.0
+            A_max = float(np.max(np.abs(d.A)))
+        V = max(absmax(v0) if n else 0.0, acc_scale * t_end, 1e-300)
+        self.scales = {"V": V, "L": max(V * t_end, absmax(q0) if n else 0.0, 1e-300),
+                       "A": max(acc_scale, V / t_end),
+                       "P": max(A_max * V, 1e-300)}
+        self.vel_tol = options.tol * V
+        self.gap_tol = options.tol * self.scales["L"]
+        self.selector = ModeSelector(model, options, self.mu, self.stats, self.scales, t_end,
+                                     self.gap_tol, self.vel_tol)
+        self.impacts = ImpactLaw(model, self.mu, self.e, self.stats, options.impact_solver, t_end)
+        self.projector = StateProjector(system, model)
+
+    # --- consistency of the initial state
+    def check_initial(self, q0, v0):
+        sys = self.sys
+        if sys.n_bilateral:
+            phi, G, phi_t = (np.array(x, dtype=float) for x in sys.constraints_fn(0.0, q0))
+            G = G.reshape(sys.n_bilateral, self.n)
+            if np.max(np.abs(phi)) > 1e-9 * self.scales["L"]:
+                raise ValueError(f"q0 violates the bilateral constraints (residual {np.max(np.abs(phi)):.3g})")
+            if np.max(np.abs(G @ v0 + phi_t.ravel())) > 1e-9 * self.scales["V"]:
+                raise ValueError("v0 violates the velocity form of the bilateral constraints")
+        if self.m:
+            gap = self.model.gaps(q0)
+            bad = np.flatnonzero(gap < -self.gap_tol) if min(gap.tolist()) < -self.gap_tol else ()
+            if len(bad):
+                raise ValueError(f"q0 penetrates contact {bad[0]} (gap {gap[bad[0]]:.3g} < 0)")
+
+    # --- the acceleration-level problem and the next mode
+    def classify(self, q, v):
+        """Contacts at the surface: (closed candidates, approaching ones) as tuples of contact
+        indices, and the local velocities H v (a list)."""
+        m = self.m
+        if not m:
+            return (), (), []
+        gap = self.model.gaps(q).tolist()
+        ul = (self.model.jac(q) @ v).tolist()
+        gtol, vtol = self.gap_tol, self.vel_tol
+        closed, approaching = [], []
+        for j in range(m):
+            if gap[j] <= gtol:
+                if abs(ul[j]) <= vtol:
+                    closed.append(j)
+                elif ul[j] < -vtol:
+                    approaching.append(j)
+        return tuple(closed), tuple(approaching), ul
+
+    def record_impulse(self, t, contacts, p, kind, reason):
+        k = len(contacts)
+        for jj, j in enumerate(contacts):
+            if p[jj] != 0.0 or p[k + jj] != 0.0:
+                self.impulses.append(Impulse(float(t), int(j), float(p[jj]), float(p[k + jj]), kind, reason))
+        if not (self.events and self.events[-1].t == t and self.events[-1].kind == kind):
+            self.events.append(Event(float(t), kind, int(contacts[0]) if k == 1 else -1))
+
+    def decide(self, t, q, v):
+        """Apply impulses where needed, then find the modes of the next phase.
+
+        Returns (q, v, closed, solution, problem): the contacts at the surface (a tuple), the chosen
+        solution of their acceleration-level problem (None if there are none) and that problem;
+        raises Inconsistent when no motion can be continued.
+        """
+        if self.model.polynomial:
+            out = self.selector.memo_decision(q, v)
+            if out is not None:
+                return out
+        for _ in range(8):
+            data = self.model.data(t, q, v)
+            closed, approaching, ul = self.classify(q, v)
+            if approaching:
+                at = np.union1d(np.array(closed, dtype=int), np.array(approaching, dtype=int))
+                out = self.impacts.solve(t, q, v, at, data)
+                if out is None:
+                    raise Inconsistent(f"the impact problem at t = {t:.17g} has no solution")
+                dv, p, _ = out
+                v = v + dv
+                self.record_impulse(t, at, p, "impact", "gap closed with approach velocity")
+                continue
+            if not closed:
+                return q, v, closed, None, None
+            m, vtol = self.m, self.vel_tol  # slide_signs, inline
+            slide = tuple([0.0 if abs(x) <= vtol else (1.0 if x > 0 else -1.0) for x in [ul[m + j] for j in closed]])
+            groups, acc = self.selector.solve_modes(data, closed, slide)
+            if len(groups) == 1:
+                group = groups[0]
+                sol = group[0] if len(group) == 1 else self.selector.lookahead(t, q, v, closed, slide, group)
+                return q, v, closed, sol, acc
+            self.stats.ambiguous_steps += int(len(groups) > 1)
+            why = ("no consistent contact mode (Painleve: no solution)" if not groups else
+                   f"{len(groups)} consistent contact modes (Painleve: non-uniqueness)")
+            out = self.impacts.solve(t, q, v, closed, data)
+            if out is None:
+                raise Inconsistent(f"at t = {t:.17g}: {why}, and the impact problem has no solution")
+            dv, p, imodes = out
+            if np.max(np.abs(p)) > 1e-12 * self.scales["P"]:
+                self.stats.fallbacks += 1
+                v = v + dv
+                self.record_impulse(t, closed, p, "tangential impact", why)
+                continue
+            if groups:
+                # several motions and no impulse: follow the one Moreau-Jean's vanishing step picks
+                for g in groups:
+                    for s in g:
+                        if all((im == OPEN) == (sm == OPEN) for im, sm in zip(imodes, s.modes)):
+                            return q, v, closed, s, acc
+                return q, v, closed, groups[0][0], acc
+            raise Inconsistent(f"at t = {t:.17g}: {why}; the impulsive fallback gives no impulse")
+        raise Inconsistent(f"at t = {t:.17g}: impulses did not lead to a consistent contact mode")
+
+    def new_phase(self, t, q, v, P, closed, sol, acc):
+        """The smooth phase that starts at (t, q, v) with the closed contacts and modes of ``sol``
+        (None: no closed contact); P holds the cumulative contact impulses."""
+        m = self.m
+        if self.closed_form:
+            # The phase's modes, accelerations and forces depend on the solution only (a
+            # polynomial system's mode problems are the same at every state): kept with it.
+            cache = sol.ready if sol is not None else self.model.free_ready
+            ready = cache.get(closed)
+            if ready is None:
+                closed_a = np.array(closed, dtype=int)
+                modes = sol.modes if sol is not None else ()
+                keep = [i for i, md in enumerate(modes) if md != OPEN]
+                args = (self.model, t, q, v, P, closed_a[keep], tuple(modes[i] for i in keep), self.mu)
+                Nm, fm = np.zeros(m), np.zeros(m)
+                if sol is not None:
+                    Nm[closed_a], fm[closed_a] = acc.forces(sol.p)  # zero for the contacts that open
+                    start = (sol.qdd, Nm[closed_a[keep]], fm[closed_a[keep]])
+                else:
+                    start = (self.model.data(t, q, v).qdd_free, Nm[:0], fm[:0])
+                ph = ClosedFormPhase(*args, start=start)
+                cache[closed] = ph.ready()
+            else:
+                ph = ClosedFormPhase.from_ready(self.model, t, q, v, P, self.mu, ready)
+        else:
+            closed_a = np.array(closed, dtype=int)
+            modes = sol.modes if sol is not None else ()
+            keep = [i for i, md in enumerate(modes) if md != OPEN]
+            args = (self.model, t, q, v, P, closed_a[keep], tuple(modes[i] for i in keep), self.mu)
+            ph = OdePhase(*args, options=self.o, scales=self.scales)
+        return ph
+
+    def run(self, q0, v0):
+        o, m = self.o, self.m
+        t, q, v = 0.0, q0.copy(), v0.copy()
+        P = np.zeros(2 * m)
+        status, message = 0, EVENT_STATUS_MESSAGES[0]
+        run_phases = []
+        short = 0
+        while True:
+            try:
+                q, v, closed, sol, acc = self.decide(t, q, v)
+            except Inconsistent as exc:
+                status, message = -3, f"{EVENT_STATUS_MESSAGES[-3]} {exc}"
+                break
+            ph = self.new_phase(t, q, v, P, closed, sol, acc)
+            closed, modes = ph.idx_t, ph.modes
+            try:
+                ev = ph.run(self.t_end)
+            except FloatingPointError as exc:
+                status, message = -2, f"{EVENT_STATUS_MESSAGES[-2]} Phase from t = {t:.10g}: {exc}"
+                break
+            run_phases.append(ph)
+            self.phases.append(make_record(Phase, float(ph.t0), float(ph.t1), ph.names(), ph.integrator, int(ph.nfev)))
+            counts = self.stats.mode_counts
+            for name in ph.names():
+                counts[name] += 1
+            if ev is None:
+                break
+            te, kind, j = ev
+            q, v, P = ph.end_state()
+            stick = tuple(c for c, md in zip(closed, modes) if md == STICK)
+            if kind == "stop":
+                stick += (j,)
+            gap_rows = closed if kind != "impact" else closed + (j,)
+            q, v = self.projector.project(te, q, v, gap_rows, closed, stick)
+            if not (all_finite(q) and all_finite(v)):
+                status, message = -2, f"{EVENT_STATUS_MESSAGES[-2]} At t = {te:.10g}."
+                break
+            self.events.append(make_record(Event, float(te), kind, int(j)))
+            short = short + 1 if te - t <= 64 * EPS * max(1.0, abs(te)) else 0
+            t = te
+            if len(self.events) > o.max_events or short > 50:
+                status = -4
+                message = (f"{EVENT_STATUS_MESSAGES[-4]} {len(self.events)} events by t = {t:.10g}"
+                           + (f" ({short} consecutive phases of zero length)" if short > 50 else ""))
+                break
+        self.stats.steps = len(run_phases)
+        self.stats.free_steps = sum(1 for ph in run_phases if not ph.idx_t)
+        return run_phases, status, message, t
+
+
+

@@ -1,0 +1,202 @@
+"""The system as the event integrator evaluates it: state data, the per-system cache, projections.
+
+A constant system (``System.is_constant``) is assembled once; for a polynomial one (constant forces
+as well) everything the mode decisions need depends on the System only and is kept per System
+object (:class:`SystemModel`), so a later integration only classifies contacts, finds event times
+and projects states.
+"""
+from __future__ import annotations
+
+import math
+import weakref
+
+import casadi as ca
+import numpy as np
+
+__all__ = ["EPS", "StateData", "SystemModel", "system_model", "check_state", "mass_projection",
+           "all_finite", "absmax", "accel_function"]
+
+EPS = np.finfo(float).eps
+
+
+def all_finite(x) -> bool:
+    """np.isfinite(x).all() for a 1-D array, without NumPy's per-call overhead when small."""
+    if x.size <= 16:
+        return all(map(math.isfinite, x.tolist()))
+    return bool(np.isfinite(x).all())
+
+
+def absmax(x) -> float:
+    """float(np.max(np.abs(x))) for a non-empty 1-D array, without NumPy's per-call overhead when small."""
+    if x.size <= 16:
+        return float(max(map(abs, x.tolist())))
+    return float(np.max(np.abs(x)))
+
+
+ACCEL_FUNCTIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def accel_function(system) -> ca.Function:
+    """CasADi Function (t, q, v) -> (A, F, G, zeta, H, Hdot v, gap), built once per system.
+
+    zeta is the velocity-dependent part of the bilateral constraints' second time derivative:
+    d2/dt2 phi(t, q) = G qdd + zeta.
+    """
+    fn = ACCEL_FUNCTIONS.get(system)
+    if fn is None:
+        t, q, v = system.t_sym, system.q_sym, system.v_sym
+        c = system.constraints_expr
+        G = ca.jacobian(c, q)
+        phi_t = ca.jacobian(c, t)
+        Gv = ca.mtimes(G, v)
+        zeta = (ca.jtimes(Gv, q, v) + ca.jacobian(Gv, t) + ca.jtimes(phi_t, q, v) + ca.jacobian(phi_t, t))
+        H = system.H_expr
+        Hdv = ca.jtimes(ca.mtimes(H, v), q, v)
+        fn = ca.Function("event_accel_data", [t, q, v],
+                         [system.mass_expr, system.force_expr, G, zeta, H, Hdv, system.gap_expr])
+        ACCEL_FUNCTIONS[system] = fn
+    return fn
+
+
+class StateData:
+    """Everything the contact problems need at one state, with the KKT matrix factorized once."""
+
+    def __init__(self, A, F, G, zeta, H, Hdv, gap, check: bool = False):
+        self.A, self.F, self.G, self.zeta, self.H, self.Hdv, self.gap = A, F, G, zeta, H, Hdv, gap
+        n, nb = A.shape[0], G.shape[0]
+        self.n, self.nb = n, nb
+        self.K = K = np.block([[A, G.T], [G, np.zeros((nb, nb))]]) if nb else A
+        # LU with partial pivoting per solve (LAPACK gesv): for these tiny systems it is faster than
+        # reusing a factorization through scipy.linalg.lu_solve, whose multi-column path is slow
+        if check:
+            import scipy.linalg as sla  # only for the one-off check (keeps `import lcp` cheap)
+
+            d = np.abs(sla.lu_factor(K, check_finite=False)[0].diagonal())
+            if not np.all(np.isfinite(d)) or np.any(d <= 1e-14 * max(1.0, float(np.max(np.abs(K))))):
+                raise ValueError("the mass matrix is singular on the constraint manifold")
+        self._qdd_free = None
+
+    def solve_dirs(self, D: np.ndarray) -> np.ndarray:
+        """S D: accelerations produced by generalized forces D (columns), bilateral constraints held."""
+        if self.nb:
+            D = np.vstack([D, np.zeros((self.nb, D.shape[1]))])
+        return np.linalg.solve(self.K, D)[: self.n]
+
+    @property
+    def qdd_free(self) -> np.ndarray:
+        """Acceleration with no contact force (bilateral constraints held)."""
+        if self._qdd_free is None:
+            rhs = np.concatenate([self.F, -self.zeta]) if self.nb else self.F
+            self._qdd_free = np.linalg.solve(self.K, rhs)[: self.n]
+        return self._qdd_free
+
+
+class SystemModel:
+    """Evaluates the system; when it is constant, assembles once and never calls CasADi again.
+
+    For a constant system it also keeps what depends on the system only, built on first use and
+    reused by every later integration of the same System object:
+
+    - ``state_checked``: the mass matrix was validated (``System.check_state``) once; it is the same
+      at every state, so later calls only check the shapes and finiteness of q0 and v0;
+    - ``projector(key, J)``: the mass-metric correction matrix A^-1 J' (J A^-1 J')^+ of a set of
+      constraint rows (the projections after an event apply it to a rounding-level residual);
+    - for polynomial systems (constant forces as well), the contact problems of the mode decision
+      do not depend on the state at all: ``mode_memo`` keeps their solutions per (closed contacts,
+      slide signs, allowed modes, solver), with the solver statistics to replay, and ``phase_memo``
+      the per-mode data of a closed-form phase.
+    """
+
+    def __init__(self, system):
+        self.sys = system
+        self.n, self.m, self.nb = system.n, system.n_contacts, system.n_bilateral
+        self.all_contacts = tuple(range(self.m))
+        self.constant = system.is_constant
+        # polynomial (quadratic) phases: constant mass, kinematics and forces
+        self.polynomial = self.constant and not system.force_depends_on_state
+        self.state_checked = False
+        if self.constant:
+            n, m = self.n, self.m
+            z = np.zeros(n)
+            A, F0, K, C, G, phi_t, gap0, H = (np.array(x, dtype=float) for x in system.step_data_fn(0.0, z, z))
+            self.A, self.G = A.reshape(n, n), G.reshape(system.n_bilateral, n)
+            self.phi_t = phi_t.ravel()
+            self.F0, self.Kq, self.Cv = F0.ravel(), -K.reshape(n, n), -C.reshape(n, n)
+            self.H, self.gap0 = H.reshape(2 * m, n), gap0.ravel()
+            self.HN = np.ascontiguousarray(self.H[:m])
+            self.A_max = float(np.max(np.abs(self.A))) if n else 0.0
+            self._const_data = StateData(self.A, self.F0, self.G, np.zeros(system.n_bilateral), self.H,
+                                     np.zeros(2 * m), self.gap0, check=True)
+            self._proj = {}
+            self.mode_memo = {}
+            self.phase_memo = {}
+            self.impact_memo = {}
+            self.free_ready = {}  # closed-form phase data with no closed contact (ClosedFormPhase.ready)
+        else:
+            self.fn = accel_function(system)
+
+    def data(self, t, q, v) -> StateData:
+        if self.constant:
+            if self.polynomial:
+                return self._const_data  # nothing depends on the state (gaps: see gaps())
+            d = StateData.__new__(StateData)
+            d.__dict__.update(self._const_data.__dict__)  # shares the factorization
+            d.gap = self.gap0 + self.HN @ q
+            d.F = self.F0 + self.Kq @ q + self.Cv @ v
+            d._qdd_free = None
+            return d
+        n, m, nb = self.n, self.m, self.sys.n_bilateral
+        A, F, G, zeta, H, Hdv, gap = (np.array(x, dtype=float) for x in self.fn(t, q, v))
+        return StateData(A.reshape(n, n), F.ravel(), G.reshape(nb, n), zeta.ravel(), H.reshape(2 * m, n),
+                     Hdv.ravel(), gap.ravel())
+
+    def gaps(self, q) -> np.ndarray:
+        if self.constant:
+            return self.gap0 + self.HN @ q
+        return self.sys.gaps(q)
+
+    def jac(self, q) -> np.ndarray:
+        """H(q), rows [H_N; H_T]."""
+        if self.constant:
+            return self.H
+        return self.sys.contact_jacobian(q)
+
+    def projector(self, key, rows) -> np.ndarray:
+        """Constant system: the matrix C with mass_projection(A, J, r) = C r, J = vstack(rows)."""
+        C = self._proj.get(("C",) + key)
+        if C is None:
+            J = np.vstack(rows)
+            AJ = np.linalg.solve(self.A, J.T)
+            C = self._proj[("C",) + key] = AJ @ np.linalg.lstsq(J @ AJ, np.eye(J.shape[0]), rcond=None)[0]
+        return C
+
+
+
+MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def system_model(system) -> SystemModel:
+    """The evaluator of a system, built once (a constant system is then assembled only once)."""
+    model = MODELS.get(system)
+    if model is None:
+        model = MODELS[system] = SystemModel(system)
+    return model
+
+
+def check_state(system, q0, v0):
+    """``System.check_state``; for a constant system whose mass matrix was already validated,
+    only the shapes and finiteness of q0 and v0 (anything else: the full check, and its message)."""
+    model = MODELS.get(system)
+    if model is not None and model.state_checked:
+        q, v = np.asarray(q0, dtype=float), np.asarray(v0, dtype=float)
+        if q.shape == v.shape == (model.n,) and all_finite(q) and all_finite(v):
+            return q, v
+    return system.check_state(q0, v0)
+
+
+def mass_projection(A, J, r):
+    """Smallest correction dx in the mass metric with J dx = r: A^-1 J' (J A^-1 J')^-1 r."""
+    AJ = np.linalg.solve(A, J.T)
+    return AJ @ np.linalg.lstsq(J @ AJ, r, rcond=None)[0]
+
+

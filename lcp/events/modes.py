@@ -1,0 +1,307 @@
+"""Mode selection at the acceleration level: which contacts open, stick or slide after an event.
+
+With the closed contacts c (gap 0, normal velocity 0), the contact accelerations are affine in the
+contact forces,
+
+    a = H_c qdd + Hdot_c v = W lam + b,    qdd = qdd_free + S H_c' lam,
+
+with S the inverse mass matrix with the bilateral constraints eliminated (the first block of
+[[A, G'], [G, 0]]^-1), qdd_free the free acceleration and W = H_c S H_c'. The Coulomb law at the
+acceleration level is, per closed contact j:
+
+- normal: 0 <= N_j  perp  a_N,j >= 0;
+- if u_T,j = 0 (stick candidate): |f_j| <= mu_j N_j and f_j = -mu_j N_j sign(a_T,j) if a_T,j != 0,
+  i.e. exactly the complementarity structure of :class:`~lcp.contact_problem.ContactProblem`
+  with impulses replaced by forces and velocities by accelerations;
+- if u_T,j != 0 (sliding): f_j = -mu_j N_j sign(u_T,j), whatever a_T,j.
+
+The sliding contacts are folded into the same ContactProblem: their friction force is carried by
+the normal force's generalized direction ``d_j = H_N,j' - mu_j sign(u_T,j) H_T,j'`` (the column of
+W is ``H_c S d_j``, computed by one solve with d_j so that no W_NN - mu W_NT cancellation is left to
+rounding), and their friction coefficient in the problem is 0, which pins their tangential unknown
+to 0 and leaves only the normal complementarity. So the Coulomb law itself stays in one place
+(``solve_branch``, ``admissible``, ``residual``); this module only changes variables.
+
+The problem is solved by enumerating every branch (open / stick / slide+ / slide- for stick
+candidates, open / closed for sliding contacts), which finds *all* solutions, or by Lemke's method
+for many contacts. Solutions with the same acceleration are one motion (ties at a mode boundary,
+broken by looking a short time ahead).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from itertools import product
+
+import numpy as np
+
+from ..contact_problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem
+from ..solvers import make_solver
+from .model import EPS, StateData
+from .options import ModeSolver
+
+__all__ = ["AccelProblem", "ModeSolution", "ModeSelector", "enumerate_branches", "boundary_alternatives",
+           "group_motions"]
+
+
+class AccelProblem:
+    """The acceleration-level problem of the closed contacts ``idx``, sliding ones folded in.
+
+    ``slide[j]`` is the sign of the sliding velocity of closed contact j (0 for a stick
+    candidate). The ContactProblem is (W', b, mu') with W' = H_c S D, D = H_c' except that a
+    sliding contact's normal column is d_j = H_N,j' - mu_j slide_j H_T,j', and mu'_j = 0 for
+    sliding contacts. Its unknowns are p = (N, f) with f_j = 0 for sliding contacts, whose friction
+    force is -mu_j slide_j N_j.
+    """
+
+    def __init__(self, data: StateData, idx, slide, mu, flush: bool = False):
+        self.idx = idx = np.asarray(idx, dtype=int)
+        self.slide = slide = np.asarray(slide, dtype=float)
+        self.k = k = idx.size
+        m = data.H.shape[0] // 2
+        self.mu = mu[idx]
+        rows = np.concatenate([idx, m + idx])
+        Hc = data.H[rows]
+        D = Hc.T.copy()
+        sl = np.flatnonzero(slide != 0)
+        D[:, sl] = Hc[sl].T - (self.mu[sl] * slide[sl]) * Hc[k + sl].T
+        self.SD = data.solve_dirs(D)
+        W = Hc @ self.SD
+        if flush and sl.size:
+            # A folded column is a difference; entries at the rounding level of its two terms are
+            # zero (kappa = 1 exactly must not be decided by rounding).
+            SH = data.solve_dirs(Hc[np.concatenate([sl, k + sl])].T)
+            ref = np.abs(Hc @ SH[:, : sl.size]) + self.mu[sl] * np.abs(Hc @ SH[:, sl.size:])
+            Wc = W[:, sl]
+            Wc[np.abs(Wc) <= 16 * EPS * ref] = 0.0
+            W[:, sl] = Wc
+        self.qdd_free = data.qdd_free
+        b = Hc @ self.qdd_free + data.Hdv[rows]
+        mu_p = np.where(slide != 0, 0.0, self.mu)
+        self.pb = ContactProblem(W, b, mu_p)
+
+    def forces(self, p) -> tuple[np.ndarray, np.ndarray]:
+        """Physical (N, f) of the closed contacts from the problem's unknowns p."""
+        k = self.k
+        N = p[:k]
+        f = np.where(self.slide != 0, -self.mu * self.slide * N, p[k:])
+        return N, f
+
+    def qdd(self, p) -> np.ndarray:
+        return self.qdd_free + self.SD @ p
+
+    def branch_modes(self, modes) -> list:
+        """Modes for ``solve_branch``: a closed sliding contact solves with p_T = 0 (its mu' is 0)."""
+        return [SLIDE_POS if (s != 0 and md != OPEN) else md for md, s in zip(modes, self.slide)]
+
+    def check_modes(self, modes) -> list:
+        """Modes for ``admissible``: a closed sliding contact is checked as 'stick' with mu' = 0,
+        i.e. p_T = 0 and p_N >= 0, with no condition on a_T (the slide direction is the velocity's)."""
+        return [STICK if (s != 0 and md != OPEN) else md for md, s in zip(modes, self.slide)]
+
+
+@dataclass(eq=False)
+class ModeSolution:
+    modes: tuple  # per closed contact: OPEN / STICK / SLIDE_POS / SLIDE_NEG (sliding: SLIDE_*)
+    p: np.ndarray
+    qdd: np.ndarray
+    #: closed-form phase data of this solution (ClosedFormPhase.ready), per closed set
+    ready: dict = field(default_factory=dict, repr=False)
+
+
+def enumerate_branches(acc: AccelProblem, allowed=None) -> tuple[list, int]:
+    """Every branch of the acceleration problem that satisfies the Coulomb law; (solutions, tried)."""
+    pb = acc.pb
+    choices = []
+    for j in range(acc.k):
+        if acc.slide[j] != 0:
+            s = SLIDE_POS if acc.slide[j] > 0 else SLIDE_NEG
+            choices.append((OPEN, s))
+        else:
+            choices.append((OPEN, STICK, SLIDE_POS, SLIDE_NEG))
+    sols, tried = [], 0
+    for modes in product(*choices):
+        if allowed is not None and modes not in allowed:
+            continue
+        tried += 1
+        p = pb.solve_branch(acc.branch_modes(modes))
+        if p is None or not pb.admissible(p, acc.check_modes(modes)):
+            continue
+        sols.append(ModeSolution(modes, p, acc.qdd(p)))
+    return sols, tried
+
+
+def boundary_alternatives(acc: AccelProblem, modes, p, rtol: float = 1e-9) -> list:
+    """Per closed contact, the modes that describe the same solution p when p is on a boundary
+    between modes (stick force on the friction bound, zero tangential or normal acceleration,
+    zero normal force)."""
+    pb, k = acc.pb, acc.k
+    a = pb.velocity(p)
+    tol = rtol * max(pb.scale, float(np.max(np.abs(p))) if k else 0.0)
+    alts = []
+    for j, md in enumerate(modes):
+        alt = {md}
+        sliding = acc.slide[j] != 0
+        closed_mode = (SLIDE_POS if acc.slide[j] > 0 else SLIDE_NEG) if sliding else STICK
+        if md == OPEN:
+            if abs(a[j]) * pb.rho[j] <= tol:
+                alt.add(closed_mode)
+        else:
+            if p[j] <= tol:
+                alt.add(OPEN)
+            if not sliding:
+                aT = a[k + j] * pb.rho[k + j]
+                if md == STICK and acc.mu[j] * p[j] - abs(p[k + j]) <= tol:
+                    alt.add(SLIDE_POS if p[k + j] < 0 else SLIDE_NEG)
+                if md in (SLIDE_POS, SLIDE_NEG) and abs(aT) <= tol:
+                    alt.add(STICK)
+        alts.append(tuple(sorted(alt)))
+    return alts
+
+
+def group_motions(sols: list, qdd_scale: float) -> list:
+    """Group solutions by motion: equal accelerations are one motion (ties at a mode boundary)."""
+    if len(sols) <= 1:
+        return [list(sols)] if sols else []
+    groups = []
+    for s in sols:
+        for g in groups:
+            if np.max(np.abs(g[0].qdd - s.qdd)) <= 1e-9 * qdd_scale:
+                g.append(s)
+                break
+        else:
+            groups.append([s])
+    return groups
+
+
+class ModeSelector:
+    """Solves the acceleration-level problems of one integration and keeps their statistics.
+
+    ``used`` collects the names of the solvers that ran; ``stats`` (a SolverStats) is updated.
+    """
+
+    def __init__(self, model, options, mu, stats, scales, t_end, gap_tol, vel_tol):
+        self.model, self.o, self.mu, self.stats, self.scales = model, options, mu, stats, scales
+        self.t_end, self.gap_tol, self.vel_tol = t_end, gap_tol, vel_tol
+        self.m = model.m
+        self.used = set()
+
+    def solve_modes(self, data, closed, slide, allowed=None):
+        """Distinct motions of the acceleration problem: list of groups of ModeSolution.
+
+        ``closed`` (contact indices) and ``slide`` (signs) are tuples. For a polynomial system
+        the problem depends on them only: its solutions are kept per system
+        (``SystemModel.mode_memo``) and the solver statistics replayed.
+        """
+        n_branches = 1
+        for s in slide:
+            n_branches *= 2 if s != 0 else 4
+        use_enum = (self.o.mode_solver is ModeSolver.ENUMERATE
+                    or (self.o.mode_solver is ModeSolver.AUTO and n_branches <= self.o.max_branches))
+        if self.model.polynomial:
+            key = (closed, slide, None if allowed is None else frozenset(allowed), use_enum)
+            memo = self.model.mode_memo
+            entry = memo.get(key)
+            if entry is None:
+                entry = memo[key] = self._solve_modes(data, closed, slide, allowed, use_enum)
+        else:
+            entry = self._solve_modes(data, closed, slide, allowed, use_enum)
+        sols, acc, used, iterations, max_iterations, max_residual = entry
+        st = self.stats
+        st.solver_calls += 1
+        self.used.add(used)
+        st.iterations += iterations
+        st.max_iterations = max(st.max_iterations, max_iterations)
+        if max_residual is not None:
+            st.max_residual = max(st.max_residual, max_residual)
+        return group_motions(sols, self.scales["A"]), acc
+
+    def _solve_modes(self, data, closed, slide, allowed, use_enum):
+        """(solutions, problem, solver name, iterations, max iterations candidate, max residual)."""
+        closed, slide = np.array(closed, dtype=int), np.array(slide, dtype=float)
+        acc = AccelProblem(data, closed, slide, self.mu, flush=True)
+        if use_enum or allowed is not None:
+            used = "enumerate"
+            sols, tried = enumerate_branches(acc, allowed)
+            iterations = max_iterations = tried
+        else:
+            used = "lemke"
+            res = make_solver("lemke").solve(acc.pb)
+            iterations = max_iterations = res.iterations
+            sols = []
+            if res.success:
+                md = acc.pb.modes(res.p)
+                modes = tuple(OPEN if md[j] == OPEN else (md[j] if slide[j] == 0 else
+                                                          (SLIDE_POS if slide[j] > 0 else SLIDE_NEG))
+                              for j in range(acc.k))
+                sols = [ModeSolution(modes, res.p, acc.qdd(res.p))]
+                alts = boundary_alternatives(acc, modes, res.p)
+                if any(len(a) > 1 for a in alts):
+                    # Lemke returns one solution; at a mode boundary its neighbours are the same
+                    # motion, and the tie must be seen to be broken (else the phase chatters)
+                    sols, tried = enumerate_branches(acc, set(product(*alts)))
+                    iterations += tried
+        max_residual = None
+        for s in sols:
+            r = acc.pb.residual(s.p)
+            max_residual = r if max_residual is None else max(max_residual, r)
+            s.p.setflags(write=False)
+            s.qdd.setflags(write=False)
+        return sols, acc, used, iterations, max_iterations, max_residual
+
+    def slide_signs(self, closed, ul) -> tuple:
+        """Sign of the sliding velocity of each closed contact (0.0 for a stick candidate)."""
+        m, vtol = self.m, self.vel_tol
+        return tuple(0.0 if abs(x) <= vtol else (1.0 if x > 0 else -1.0) for x in (ul[m + j] for j in closed))
+
+    def lookahead(self, t, q, v, closed, slide, group):
+        """Break a tie (one motion, several mode sets) by the problem a short time later."""
+        qdd = group[0].qdd
+        dt = 1e-6 * self.t_end
+        if self.model.polynomial:
+            d1 = self.model.data(t + dt, q, v)  # the same at every state
+        else:
+            q1 = q + dt * v + 0.5 * dt * dt * qdd
+            v1 = v + dt * qdd
+            d1 = self.model.data(t + dt, q1, v1)
+        groups, _ = self.solve_modes(d1, closed, slide, allowed={s.modes for s in group})
+        if len(groups) == 1 and len(groups[0]) >= 1:
+            return groups[0][0]
+        return group[0]
+
+    def memo_decision(self, q, v):
+        """The decision of a polynomial system in its common case: no contact approaching and
+        an acceleration problem already solved (``SystemModel.mode_memo``) with a unique solution.
+        The same steps as classify, slide_signs and solve_modes, inlined; None otherwise
+        (nothing done: decide then takes its general path)."""
+        model, m = self.model, self.m
+        gtol, vtol = self.gap_tol, self.vel_tol
+        gap = (model.gap0 + model.HN @ q).tolist()  # model.gaps(q)
+        ul = (model.H @ v).tolist()
+        closed = []
+        for j in range(m):
+            if gap[j] <= gtol:
+                if abs(ul[j]) <= vtol:
+                    closed.append(j)
+                elif ul[j] < -vtol:
+                    return None  # an impact first
+        closed = tuple(closed)
+        if not closed:
+            return q, v, closed, None, None
+        slide = tuple([0.0 if abs(x) <= vtol else (1.0 if x > 0 else -1.0) for x in [ul[m + j] for j in closed]])
+        n_branches = 1
+        for s in slide:
+            n_branches *= 2 if s != 0 else 4
+        o = self.o
+        use_enum = (o.mode_solver is ModeSolver.ENUMERATE or (o.mode_solver is ModeSolver.AUTO and n_branches <= o.max_branches))
+        entry = model.mode_memo.get((closed, slide, None, use_enum))
+        if entry is None or len(entry[0]) != 1:
+            return None
+        sols, acc, used, iterations, max_iterations, max_residual = entry
+        st = self.stats  # as solve_modes
+        st.solver_calls += 1
+        self.used.add(used)
+        st.iterations += iterations
+        st.max_iterations = max(st.max_iterations, max_iterations)
+        st.max_residual = max(st.max_residual, max_residual)
+        return q, v, closed, sols[0], acc
+

@@ -1,0 +1,142 @@
+"""Smooth phases integrated by SciPy's ``solve_ivp`` (DOP853 by default, rtol 1e-12).
+
+Used when the phase dynamics is not polynomial in t. Events are functions with ``.terminal`` and
+``.direction`` (:func:`lcp.events.event_location.event_functions`), located by Brent's method on the
+dense output. SciPy's integrators are imported on the first such phase only.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..contact_problem import ContactProblem
+from .event_location import event_functions
+from .modes import AccelProblem
+from .options import EventOptions
+from .phases import SmoothPhase
+
+__all__ = ["OdePhase"]
+
+
+class OdePhase(SmoothPhase):
+    """solve_ivp on y = (q, v, cumulative contact impulses), with terminal event functions."""
+
+    def __init__(self, *args, options: EventOptions, scales):
+        super().__init__(*args)
+        self.options = options
+        self.integrator = options.ode_method
+        self.scales = scales
+        self._cache_key = None
+        self.linear = self.model.constant  # affine forces: the whole phase is a linear ODE y' = L y + c
+        if self.linear:
+            self._build_linear()
+
+    # --- dynamics
+    def _build_linear(self):
+        """For a constant system with affine forces: y' = L y + c, built once per phase.
+
+        The branch solution is linear in the free contact acceleration b; its matrix comes from
+        ``solve_branch`` on unit right-hand sides (the Coulomb law is not rewritten here).
+        """
+        model, n, m = self.model, self.model.n, self.model.m
+        data = model.data(self.t0, np.zeros(n), np.zeros(n))
+        acc = AccelProblem(data, self.idx, self.slide, self.mu)
+        k = acc.k
+        modes = acc.branch_modes(self.modes)
+        Pi = np.zeros((2 * k, 2 * k))
+        for i in range(2 * k):
+            e = np.zeros(2 * k)
+            e[i] = 1.0
+            p = ContactProblem(acc.pb.W, e, acc.pb.mu).solve_branch(modes)
+            if p is None:
+                raise FloatingPointError("singular contact branch in a smooth phase")
+            Pi[:, i] = p
+        rows = np.concatenate([self.idx, m + self.idx])
+        Hc = model.H[rows]
+        # qdd_free = S (F0 + Kq q + Cv v): columns by solves
+        Sfree = data.solve_dirs(np.column_stack([model.F0, model.Kq, model.Cv]))
+        s0, Sq, Sv = Sfree[:, 0], Sfree[:, 1:n + 1], Sfree[:, n + 1:]
+        # p = Pi b, b = Hc qdd_free
+        Pq, Pv, p0 = Pi @ Hc @ Sq, Pi @ Hc @ Sv, Pi @ Hc @ s0
+        Qq, Qv, q0 = Sq + acc.SD @ Pq, Sv + acc.SD @ Pv, s0 + acc.SD @ p0
+        # physical forces of all contacts: N = p[:k]; f = p[k:] or -mu s N
+        fold = np.zeros((2 * m, 2 * k))
+        fold[self.idx, np.arange(k)] = 1.0
+        for jj, j in enumerate(self.idx):
+            if self.slide[jj] != 0:
+                fold[m + j, jj] = -self.mu[j] * self.slide[jj]
+            else:
+                fold[m + j, k + jj] = 1.0
+        L = np.zeros((2 * n + 2 * m, 2 * n + 2 * m))
+        c = np.zeros(2 * n + 2 * m)
+        L[:n, n:2 * n] = np.eye(n)
+        L[n:2 * n, :n], L[n:2 * n, n:2 * n], c[n:2 * n] = Qq, Qv, q0
+        L[2 * n:, :n], L[2 * n:, n:2 * n], c[2 * n:] = fold @ Pq, fold @ Pv, fold @ p0
+        self.L, self.c = L, c
+
+    def evaluate(self, t, y):
+        """(ydot, N (m), f (m)) at (t, y), cached for the event functions at the same point."""
+        key = (t, y.tobytes())
+        if key == self._cache_key:
+            return self._cache
+        n, m = self.model.n, self.model.m
+        if self.linear:
+            yd = self.L @ y + self.c
+            out = (yd, yd[2 * n:2 * n + m], yd[2 * n + m:])
+        else:
+            q, v = y[:n], y[n:2 * n]
+            data = self.model.data(t, q, v)
+            qdd, N, f = self.accel(data)
+            Nm, fm = np.zeros(m), np.zeros(m)
+            Nm[self.idx], fm[self.idx] = N, f
+            out = (np.concatenate([v, qdd, Nm, fm]), Nm, fm)
+        self._cache_key, self._cache = key, out
+        return out
+
+    def _rhs(self, t, y):
+        return self.evaluate(t, y)[0]
+
+    # --- events
+    def run(self, t_stop):
+        n = self.model.n
+        y0 = np.concatenate([self.q0, self.v0, self.P0])
+        evs, meta = event_functions(self)
+        o = self.options
+        atol = np.concatenate([np.full(n, o.atol * self.scales["L"]), np.full(n, o.atol * self.scales["V"]),
+                               np.full(self.P0.size, o.atol * self.scales["P"])])
+        from scipy.integrate import (
+            solve_ivp,  # imported on the first non-polynomial phase only
+        )
+
+        sol = solve_ivp(self._rhs, (self.t0, t_stop), y0, method=o.ode_method, rtol=o.rtol, atol=atol,
+                        events=evs, dense_output=True)
+        self.nfev = sol.nfev
+        self.sol = sol
+        if sol.status < 0:
+            raise FloatingPointError(f"solve_ivp ({o.ode_method}) failed at t = {sol.t[-1]:.10g}: {sol.message}")
+        self.y1 = sol.y[:, -1]
+        if sol.status == 1:
+            first = min((float(te[0]), i) for i, te in enumerate(sol.t_events) if te.size)
+            self.t1 = first[0]
+            self.y1 = sol.y_events[first[1]][0]
+            kind, j = meta[first[1]]
+            return self.t1, kind, j
+        self.t1 = t_stop
+        return None
+
+    def end_state(self):
+        n = self.model.n
+        y = self.y1
+        return y[:n].copy(), y[n:2 * n].copy(), y[2 * n:].copy()
+
+    def output(self, t, out):
+        """Write (q, v, cumulative impulses) at the times t into the columns of ``out``; return (N, f)."""
+        m = self.model.m
+        Y = self.sol.sol(t) if t.size else np.zeros((out.shape[0], 0))
+        out[:] = Y
+        N = np.zeros((t.size, m))
+        f = np.zeros((t.size, m))
+        for i in range(t.size):
+            _, N[i], f[i] = self.evaluate(float(t[i]), Y[:, i])
+        return N, f
+
+

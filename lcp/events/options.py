@@ -1,0 +1,167 @@
+"""Options of the event-driven integrator: how phases are integrated and modes are selected."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from enum import Enum
+
+import numpy as np
+
+from ..result import STATUS_MESSAGES
+from ..solvers import make_solver
+
+__all__ = ["EVENT_STATUS_MESSAGES", "SmoothIntegrator", "ModeSolver", "EventOptions"]
+
+#: status codes of the event integrator (the package's one table, :data:`lcp.result.STATUS_MESSAGES`)
+EVENT_STATUS_MESSAGES = STATUS_MESSAGES
+
+
+class SmoothIntegrator(str, Enum):
+    """How smooth phases are integrated."""
+
+    AUTO = "auto"  #: closed form when the phase dynamics is polynomial in t, SciPy otherwise
+    CLOSED_FORM = "closed-form"  #: closed form only (ValueError if the system does not allow it)
+    SCIPY = "scipy"  #: solve_ivp with event functions, always
+
+
+class ModeSolver(str, Enum):
+    """How the acceleration-level contact problem is solved at events."""
+
+    AUTO = "auto"  #: enumeration while the number of branches is <= max_branches, else Lemke
+    ENUMERATE = "enumerate"  #: every branch: finds all solutions (detects non-uniqueness)
+    LEMKE = "lemke"  #: Lemke's method on the LCP form (one solution; no uniqueness check)
+
+
+_ODE_METHODS = ("DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
+
+
+def _enum_value(enum, name, value):
+    member = _ENUM_MEMBERS[enum].get(value) if isinstance(value, str) else None
+    if member is not None:
+        return member
+    try:
+        return enum(value)
+    except ValueError:
+        raise ValueError(f"{name} must be one of {[e.value for e in enum]}, got {value!r}") from None
+
+
+#: members by value (a str Enum member is its own value): Enum(value) without the metaclass call
+_ENUM_MEMBERS = {enum: {e.value: e for e in enum} for enum in (SmoothIntegrator, ModeSolver)}
+
+
+
+
+def all_finite(x) -> bool:
+    """np.isfinite(x).all() for a 1-D array, without NumPy's per-call overhead when small."""
+    if x.size <= 16:
+        return all(map(math.isfinite, x.tolist()))
+    return bool(np.isfinite(x).all())
+
+
+def absmax(x) -> float:
+    """float(np.max(np.abs(x))) for a non-empty 1-D array, without NumPy's per-call overhead when small."""
+    if x.size <= 16:
+        return float(max(map(abs, x.tolist())))
+    return float(np.max(np.abs(x)))
+
+
+@dataclass(frozen=True, eq=False)
+class EventOptions:
+    """Validated options of the event-driven integrator.
+
+    Parameters
+    ----------
+    t_eval : array_like, optional
+        Output times, increasing, inside [0, t_end]. Default: ``n_eval`` equally spaced times
+        from 0 to t_end.
+    n_eval : int
+        Number of default output times (>= 2).
+    smooth : {"auto", "closed-form", "scipy"}
+        Integrator of the smooth phases (:class:`SmoothIntegrator`).
+    ode_method : str
+        ``solve_ivp`` method for non-polynomial phases (DOP853, RK45, RK23, Radau, BDF, LSODA).
+    rtol, atol : float
+        ``solve_ivp`` tolerances.
+    mode_solver : {"auto", "enumerate", "lemke"}
+        Solver of the acceleration-level problem (:class:`ModeSolver`).
+    impact_solver : str
+        One-step solver of the velocity-level impact problem (``"auto"``, ``"enum"``, ``"lemke"``,
+        ``"osqp"``; see :func:`lcp.solvers.make_solver`).
+    max_branches : int
+        Largest number of branches enumerated by ``mode_solver="auto"``.
+    max_events : int
+        Largest number of events before the integration stops with status -4.
+    tol : float
+        Relative tolerance of the zero tests (a velocity, a gap or a force "is zero"), relative
+        to the scene's velocity, length and force scales.
+    """
+
+    t_eval: object = None
+    n_eval: int = 1000
+    smooth: str = "auto"
+    ode_method: str = "DOP853"
+    rtol: float = 1e-12
+    atol: float = 1e-14
+    mode_solver: str = "auto"
+    impact_solver: str = "auto"
+    max_branches: int = 4096
+    max_events: int = 10_000
+    tol: float = 1e-10
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        set_(self, "smooth", _enum_value(SmoothIntegrator, "smooth", self.smooth))
+        set_(self, "mode_solver", _enum_value(ModeSolver, "mode_solver", self.mode_solver))
+        if self.ode_method not in _ODE_METHODS:
+            raise ValueError(f"ode_method must be one of {list(_ODE_METHODS)}, got {self.ode_method!r}")
+        defaults = _OPTION_DEFAULTS
+        for name in ("rtol", "atol", "tol"):
+            val = getattr(self, name)
+            if val is defaults[name]:
+                continue  # the default, valid
+            if not isinstance(val, (int, float, np.floating)) or not math.isfinite(val) or val <= 0:
+                raise ValueError(f"{name} must be finite and > 0, got {val!r}")
+        for name, low in (("n_eval", 2), ("max_branches", 1), ("max_events", 1)):
+            val = getattr(self, name)
+            if val is defaults[name]:
+                continue
+            if not isinstance(val, (int, np.integer)) or isinstance(val, bool) or val < low:
+                raise ValueError(f"{name} must be an integer >= {low}, got {val!r}")
+        if not (isinstance(self.impact_solver, str) and self.impact_solver in _VALID_SOLVER_NAMES):
+            make_solver(self.impact_solver)  # raises ValueError naming the known solvers
+            if isinstance(self.impact_solver, str):
+                _VALID_SOLVER_NAMES.add(self.impact_solver)
+        if self.t_eval is not None:
+            te = np.array(self.t_eval, dtype=float).ravel()
+            # strictly increasing with finite ends: all finite (a NaN fails every comparison)
+            ok = (te.size and math.isfinite(te[0]) and math.isfinite(te[-1])
+                  and (te.size == 1 or (te[1:] > te[:-1]).all()))
+            if not ok and (te.size == 0 or not np.isfinite(te).all()):
+                raise ValueError("t_eval must be a non-empty array of finite times")
+            if not ok or te[0] < 0:
+                raise ValueError("t_eval must be strictly increasing and >= 0")
+            te.setflags(write=False)
+            set_(self, "t_eval", te)
+
+    @classmethod
+    def from_kwargs(cls, **options) -> EventOptions:
+        """Build from keyword arguments; unknown names raise ValueError listing the known ones."""
+        known = _OPTION_NAMES
+        if not known.issuperset(options):
+            names = [f.name for f in fields(cls)]
+            unknown = sorted(set(options) - known)
+            raise ValueError(f"unknown option(s) {unknown} for method 'event'; known options: {names}")
+        return cls(**options)
+
+    def output_times(self, t_end: float) -> np.ndarray:
+        if self.t_eval is None:
+            return np.linspace(0.0, t_end, self.n_eval)
+        if self.t_eval[-1] > t_end:
+            raise ValueError(f"t_eval must lie inside [0, t_end = {t_end!r}], got a last time {self.t_eval[-1]!r}")
+        return np.array(self.t_eval)
+
+
+_OPTION_NAMES = frozenset(f.name for f in fields(EventOptions))
+_OPTION_DEFAULTS = {f.name: f.default for f in fields(EventOptions)}
+_VALID_SOLVER_NAMES: set = set()  # impact-solver names make_solver accepted (no need to build one again)
+

@@ -1,0 +1,124 @@
+"""What the event-driven integrator records: events, impulses, smooth phases, and its result."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from ..result import SimulationResult
+
+__all__ = ["Event", "Impulse", "Phase", "EventResult", "make_record"]
+
+
+@dataclass(frozen=True)
+class Event:
+    """One event: its time, kind and contact.
+
+    ``kind`` is one of ``"stop"`` (sliding velocity reached zero), ``"lift-off"`` (normal force
+    reached zero), ``"slip"`` (stick force reached the friction bound), ``"impact"`` (gap closed),
+    ``"tangential impact"`` (impulsive fallback of the Painlevé cases).
+    """
+
+    t: float
+    kind: str
+    contact: int
+
+
+def make_record(cls, *values):
+    """``cls(*values)`` for the frozen record dataclasses (Event, Phase), without the per-field
+    ``object.__setattr__`` of their generated ``__init__`` (they have no ``__post_init__``)."""
+    obj = object.__new__(cls)
+    obj.__dict__.update(zip(RECORD_FIELDS[cls], values))
+    return obj
+
+
+@dataclass(frozen=True)
+class Impulse:
+    """An impulse applied at time ``t`` to one contact: normal ``P_N`` and tangential ``P_T``.
+
+    ``reason`` says why: an impact (gap closing with approach velocity) or the impulsive fallback
+    of an acceleration-level problem with no solution or several (Painlevé).
+    """
+
+    t: float
+    contact: int
+    P_N: float
+    P_T: float
+    kind: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class Phase:
+    """One smooth phase [t0, t1): contact modes (names, one per contact) and the integrator used."""
+
+    t0: float
+    t1: float
+    modes: tuple
+    integrator: str
+    nfev: int = 0
+
+
+RECORD_FIELDS = {cls: tuple(f.name for f in fields(cls)) for cls in (Event, Phase)}
+
+
+@dataclass(repr=False)
+class EventResult(SimulationResult):
+    """Result of :func:`event_driven`: a :class:`~lcp.result.SimulationResult` plus the events.
+
+    Attributes (besides those of SimulationResult)
+    ----------------------------------------------
+    t : ndarray, shape (n_points,)
+        The requested output times (``t_eval``); q and v are exact-in-time values there (right
+        limits at an impulse).
+    p_N, p_T : ndarray, shape (n_points - 1, m)
+        Contact impulses over each output interval [t_i, t_{i+1}): the contact forces integrated
+        plus the impulses applied in the interval (as Moreau-Jean's p over a step).
+    modes : ndarray of int8, shape (n_points - 1, m)
+        Mode of each contact at t_i (right limit): 0 open, 1 stick, 2 slide+, 3 slide-.
+    force_N, force_T : ndarray, shape (n_points, m)
+        Contact forces at the output times (right limits).
+    t_events : list of float
+        Times of the events (mode switches and impulses), in order.
+    events : list of Event
+    impulses : list of Impulse
+        Every impulse: impacts and the tangential impacts of the impulsive fallback.
+    phases : list of Phase
+        The smooth phases with their modes and the integrator used.
+    """
+
+    force_N: np.ndarray = None
+    force_T: np.ndarray = None
+    events: list = field(default_factory=list)
+    impulses: list = field(default_factory=list)
+    phases: list = field(default_factory=list)
+
+    @property
+    def mode_sequence(self) -> list:
+        """Modes per phase (tuples of mode names, one per contact), repeats at events merged."""
+        seq = []
+        for ph in self.phases:
+            if not seq or seq[-1] != ph.modes:
+                seq.append(ph.modes)
+        return seq
+
+    @property
+    def integrators(self) -> list:
+        """The smooth-phase integrators used, without repeats, in order of first use."""
+        return list(dict.fromkeys(ph.integrator for ph in self.phases))
+
+    @property
+    def N(self) -> np.ndarray:
+        """Mean normal force over each output interval, p_N / dt, shape (n_points - 1, m)."""
+        return self.p_N / np.diff(self.t)[:, None]
+
+    @property
+    def f(self) -> np.ndarray:
+        """Mean friction force over each output interval, p_T / dt, shape (n_points - 1, m)."""
+        return self.p_T / np.diff(self.t)[:, None]
+
+    def __repr__(self) -> str:
+        return (f"EventResult(method='event', phases={len(self.phases)}, events={len(self.events)}, "
+                f"impulses={len(self.impulses)}, integrators={self.integrators}, status={self.status}, "
+                f"message={self.message!r})")
+
