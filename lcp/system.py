@@ -109,6 +109,10 @@ class System:
         Time symbol, if any expression depends on time.
     names : sequence of str, optional
         Names of the coordinates.
+    breakpoints : array_like, optional
+        Times at which a time-dependent force is discontinuous (e.g. the switches of a
+        piecewise-constant control); stored sorted and unique as :attr:`breakpoints` (empty by
+        default), so that an event integrator can end its phases exactly there.
 
     Notes
     -----
@@ -130,7 +134,8 @@ class System:
     """
 
     def __init__(self, q, v, mass, force, contacts: Sequence[Contact] = (), constraints=None,
-                 t=None, names: Sequence[str] | None = None):
+                 t=None, names: Sequence[str] | None = None, breakpoints=None):
+        self.breakpoints = _breakpoints(breakpoints)
         if not isinstance(q, ca.SX) or not q.is_symbolic() or q.shape[1] != 1:
             raise ValueError("q must be a column of CasADi SX symbols (casadi.SX.sym('q', n))")
         if not isinstance(v, ca.SX) or not v.is_symbolic() or v.shape != q.shape:
@@ -295,6 +300,16 @@ class System:
             raise ValueError("mass matrix is singular or not positive definite (on the constraint manifold) "
                              f"at q0: eigenvalues {eig}")
         return q0, v0
+
+
+def _breakpoints(values) -> np.ndarray:
+    """Sorted, unique, finite 1-D array of times (empty for None), or ValueError naming it."""
+    if values is None:
+        return np.zeros(0)
+    b = np.asarray(values, dtype=float).ravel()
+    if not np.all(np.isfinite(b)):
+        raise ValueError(f"breakpoints must be finite, got {b}")
+    return np.unique(b)
 
 
 def _null_space(G: np.ndarray) -> np.ndarray:
