@@ -44,7 +44,12 @@ class StepAssembly:
     """
 
     def __init__(self, system, h: float, theta: float):
+        if getattr(system, "is_controlled", False):
+            raise ValueError("the system has a control input: give a control schedule (control=..., or "
+                             "system.with_control(schedule))")
         self.sys, self.h, self.theta = system, h, theta
+        # a control schedule's impulse over each step is integrated exactly (see _control_correction)
+        self.schedule = getattr(system, "control_schedule", None)
         self.n, self.m = system.n, system.n_contacts
         self.constant = system.is_constant
         self.dv_const = None
@@ -95,9 +100,29 @@ class StepAssembly:
             dv = self.S @ (h * Fth + h * h * th * self.Kq @ v)
             if self.T.shape[1]:
                 dv = dv + self.T @ (-self.phi_t - self.G @ v)
+            if self.schedule is not None:
+                dv = dv + self._control_correction(t, q, self.S)
             return dv, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
-        vfree, _, _, SHt, W, gap, H = self._eval(t, q, v)
-        return vfree - v, SHt, W, gap, H
+        vfree, S, _, SHt, W, gap, H = self._eval(t, q, v)
+        dv = vfree - v
+        if self.schedule is not None:
+            dv = dv + self._control_correction(t, q, S)
+        return dv, SHt, W, gap, H
+
+    def _control_correction(self, t, q, S):
+        """Replace the theta-weighted control force by the control's exact impulse over the step.
+
+        The theta-method sees h ((1 - theta) B u(t) + theta B u(t + h)); for a piecewise-constant
+        control evaluated at a breakpoint t + h that is the next piece's value, which would average
+        neighbouring pieces. The step's velocity increment gets instead S B(t, q) int_t^{t+h} u ds:
+        u_k h for a constant hold, the trapezoid for a linear hold, exact for any step placement.
+        """
+        h, th = self.h, self.theta
+        cf = self.sys.control_force_fn
+        seen = h * ((1 - th) * np.array(cf(t, q), dtype=float).ravel()
+                    + th * np.array(cf(t + h, q), dtype=float).ravel())
+        B = np.array(self.sys.control_matrix_fn(t, q), dtype=float).reshape(self.n, -1)
+        return S @ (B @ self.schedule.impulse(t, t + h) - seen)
 
 
 def kahan_add(s, inc, comp):

@@ -19,7 +19,8 @@ METHODS = {"moreau-jean": moreau_jean, "event": event_driven}
 def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 0.5,
              solver: str = "auto", method: str = "moreau-jean", q0=None, v0=None,
              solver_options: dict | None = None, fallback: bool = True, save_every: int = 1,
-             fast: bool = True, allow_large_step: bool = False, **method_options) -> SimulationResult:
+             fast: bool = True, allow_large_step: bool = False, control=None,
+             **method_options) -> SimulationResult:
     """Simulate a scene (or a bare :class:`~lcp.system.System` with ``q0`` and ``v0``).
 
     Parameters
@@ -53,6 +54,9 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
     allow_large_step : bool
         Moreau-Jean only: accept a step h larger than the horizon (one step then overshoots
         ``t_end``). Without it such an h is taken for a mistake and raises.
+    control : lcp.control.ControlSchedule, optional
+        The control of a controlled System (``System(..., control=u)``), replayed as
+        ``system.with_control(control)``; required for a controlled system.
     **method_options
         Options of the chosen method other than Moreau-Jean's (see :mod:`lcp.events`).
 
@@ -81,6 +85,13 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
             raise ValueError("simulating a bare System needs q0, v0 and t_end")
     else:
         raise ValueError(f"scene must be a Scene or a System, got {type(scene).__name__}")
+    if control is not None:
+        if not system.is_controlled:
+            raise ValueError("control given for a system without a control input")
+        system = system.with_control(control)
+    elif system.is_controlled:
+        raise ValueError("the system has a control input u: pass control=ControlSchedule(...) "
+                         "(lcp.control) to simulate it")
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"unknown method {method!r}; known methods: {sorted(METHODS)}")
     if not isinstance(t_end, (int, float, np.floating)) or not np.isfinite(t_end) or t_end <= 0:

@@ -113,6 +113,15 @@ class System:
         Times at which a time-dependent force is discontinuous (e.g. the switches of a
         piecewise-constant control); stored sorted and unique as :attr:`breakpoints` (empty by
         default), so that an event integrator can end its phases exactly there.
+    control : casadi.SX, optional
+        Column of control symbols u (nu x 1). The force must be affine in u,
+        F(t, q, v, u) = F0(t, q, v) + B(t, q) u (checked: B may not depend on u or v), and the
+        mass, constraints and contacts may not depend on u. A controlled system is simulated
+        with a control schedule (:meth:`with_control`, or ``lcp.simulate(..., control=...)``) and
+        optimised by :class:`lcp.ocp.OptimalControlProblem`. Its ``force_expr``, ``force_fn`` and
+        the step functions are those of the drift F0 (u = 0); ``control_matrix_expr`` is B.
+    control_bounds : (array_like, array_like), optional
+        Lower and upper bounds of u (broadcast to (nu,); +-inf allowed; -inf..inf by default).
 
     Notes
     -----
@@ -134,8 +143,10 @@ class System:
     """
 
     def __init__(self, q, v, mass, force, contacts: Sequence[Contact] = (), constraints=None,
-                 t=None, names: Sequence[str] | None = None, breakpoints=None):
+                 t=None, names: Sequence[str] | None = None, breakpoints=None, control=None,
+                 control_bounds=None):
         self.breakpoints = _breakpoints(breakpoints)
+        self.control_schedule = None  # set by with_control
         if not isinstance(q, ca.SX) or not q.is_symbolic() or q.shape[1] != 1:
             raise ValueError("q must be a column of CasADi SX symbols (casadi.SX.sym('q', n))")
         if not isinstance(v, ca.SX) or not v.is_symbolic() or v.shape != q.shape:
@@ -147,6 +158,7 @@ class System:
         self.q_sym, self.v_sym = q, v
         self.mass_expr = _sx(mass, "mass", (n, n))
         self.force_expr = _sx(force, "force", (n, 1))
+        self._init_control(control, control_bounds, q, v, t)
         self.contacts = tuple(contacts)
         for c in self.contacts:
             if not isinstance(c, Contact):
@@ -218,6 +230,101 @@ class System:
             [self.mass_expr, self.force_expr, K, C, G, phi_t, gap, H])
         # energy bookkeeping needs a potential only when the user gives one; kinetic energy is general
         self.kinetic_fn = ca.Function("kinetic", [self.t_sym, q, v], [0.5 * ca.mtimes([v.T, self.mass_expr, v])])
+
+    def _init_control(self, control, control_bounds, q, v, t):
+        """Split F = F0 + B u for a control u, checking that u enters affinely."""
+        self.control_sym = None
+        self.nu = 0
+        self.control_bounds = (np.zeros(0), np.zeros(0))
+        self.control_matrix_expr = ca.SX.zeros(self.n, 0)
+        if control is None:
+            if control_bounds is not None:
+                raise ValueError("control_bounds given without a control")
+            return
+        if not isinstance(control, ca.SX) or not control.is_symbolic() or control.shape[1] != 1:
+            raise ValueError("control must be a column of CasADi SX symbols (casadi.SX.sym('u', nu))")
+        nu = control.shape[0]
+        if ca.depends_on(control, ca.vertcat(q, v, self.t_sym)):
+            raise ValueError("control symbols must differ from t, q and v")
+        F = self.force_expr
+        B = ca.jacobian(F, control)
+        if ca.depends_on(B, ca.vertcat(control, v)):
+            raise ValueError("the force must be affine in the control: F = F0(t, q, v) + B(t, q) u with B "
+                             "independent of u and v")
+        for name, expr in (("mass", self.mass_expr),):
+            if ca.depends_on(expr, control):
+                raise ValueError(f"{name} may not depend on the control")
+        self.controlled_force_expr = F
+        self.force_expr = ca.substitute(F, control, ca.SX.zeros(nu, 1))
+        self.control_sym, self.nu, self.control_matrix_expr = control, nu, B
+        self.control_matrix_fn = ca.Function("control_matrix", [self.t_sym, q], [B])
+        if control_bounds is None:
+            lo, hi = -np.inf, np.inf
+        else:
+            try:
+                lo, hi = control_bounds
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"control_bounds must be a pair (lo, hi), got {control_bounds!r}") from exc
+        lo = np.broadcast_to(np.asarray(lo, dtype=float), (nu,)).copy()
+        hi = np.broadcast_to(np.asarray(hi, dtype=float), (nu,)).copy()
+        if np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(lo > hi):
+            raise ValueError(f"control_bounds must satisfy lo <= hi, got {control_bounds!r}")
+        self.control_bounds = (lo, hi)
+
+    @property
+    def is_controlled(self) -> bool:
+        """True when the system has a control input that no schedule fixes yet."""
+        return self.nu > 0
+
+    def with_control(self, schedule) -> "System":
+        """This system with its control fixed to a schedule: F(t) = F0(t, q, v) + B(t, q) u(t).
+
+        Parameters
+        ----------
+        schedule : lcp.control.ControlSchedule
+            With ``nu`` components, within ``control_bounds`` (checked).
+
+        Returns
+        -------
+        System
+            Uncontrolled, its force a known function of time; ``breakpoints`` are the schedule's
+            discontinuities (merged with this system's), and ``control_schedule`` is the schedule,
+            so that a Moreau-Jean step integrates the control's impulse over the step exactly
+            (:class:`lcp.assembly.StepAssembly`).
+
+        Examples
+        --------
+        >>> import casadi as ca, lcp
+        >>> from lcp.control import ControlSchedule
+        >>> q, v, u = ca.SX.sym("q", 1), ca.SX.sym("v", 1), ca.SX.sym("u", 1)
+        >>> s = System(q, v, mass=1.0, force=u, control=u, control_bounds=(-1, 1))
+        >>> r = lcp.simulate(s, 1.0, h=0.25, q0=[0.0], v0=[0.0],
+        ...                  control=ControlSchedule([0, 0.5, 1.0], [1.0, -1.0]))
+        >>> float(r.v[2, 0]), float(r.v[-1, 0]), float(r.q[-1, 0])
+        (0.5, 0.0, 0.25)
+        """
+        from .control import ControlSchedule
+
+        if not self.is_controlled:
+            raise ValueError("with_control needs a system with a control input (System(..., control=u))")
+        if not isinstance(schedule, ControlSchedule):
+            raise ValueError(f"control must be a lcp.control.ControlSchedule, got {type(schedule).__name__}")
+        if schedule.nu != self.nu:
+            raise ValueError(f"control must have {self.nu} components, got {schedule.nu}")
+        lo, hi = self.control_bounds
+        tol = 1e-9 * np.maximum(1.0, np.abs(schedule.values).max())
+        if np.any(schedule.values < lo - tol) or np.any(schedule.values > hi + tol):
+            raise ValueError(f"control values leave control_bounds [{lo}, {hi}]")
+        t = self.t_sym
+        force = self.force_expr + ca.mtimes(self.control_matrix_expr, schedule.expression(t))
+        out = System(self.q_sym, self.v_sym, self.mass_expr, force, contacts=self.contacts,
+                     constraints=self.constraints_expr if self.n_bilateral else None, t=t, names=self.names,
+                     breakpoints=np.concatenate([self.breakpoints, schedule.breakpoints]))
+        out.control_schedule = schedule
+        out.control_matrix_fn = self.control_matrix_fn
+        out.control_force_fn = ca.Function("control_force", [t, self.q_sym],
+                                           [ca.mtimes(self.control_matrix_expr, schedule.expression(t))])
+        return out
 
     @functools.cached_property
     def one_step_fn(self) -> ca.Function:
