@@ -5,8 +5,14 @@ Shared by the time-stepping loop (:mod:`lcp.timestepping`) and the batch path (:
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
-__all__ = ["StepAssembly", "kahan_add"]
+__all__ = ["StepAssembly", "kahan_add", "SPARSE_MIN_CONTACT_ROWS", "SPARSE_DROP_TOL"]
+
+#: constant systems with at least this many contact rows (2 per contact) are assembled sparsely
+SPARSE_MIN_CONTACT_ROWS = 200
+#: relative size below which an entry of S H' is dropped in the sparse assembly (rounding level)
+SPARSE_DROP_TOL = 1e-18
 
 
 class StepAssembly:
@@ -57,7 +63,12 @@ class StepAssembly:
         # forces are evaluated per step and nothing else is rebuilt
         self.matrices_constant = (system.mass_is_constant and system.kinematics_is_constant
                                   and system.force_is_affine)
-        if self.matrices_constant:
+        # many contacts, no bilateral constraints: assemble sparsely (memory grows with nnz(W))
+        self.sparse = (self.matrices_constant and 2 * self.m >= SPARSE_MIN_CONTACT_ROWS
+                       and system.n_bilateral == 0)
+        if self.sparse:
+            self._init_sparse(h, theta)
+        elif self.matrices_constant:
             z = np.zeros(self.n)
             _, S, T, SHt, W, gap0, H = self._eval(0.0, z, z)
             self.S, self.T, self.SHt, self.W, self.H = S, T, SHt, W, H
@@ -72,6 +83,51 @@ class StepAssembly:
             # itself is constant
             self.dv_const = (self.S @ (h * self.F0) if self.constant and self.force_constant
                              and not self.Kq.any() and not self.T.shape[1] else None)
+
+    def _init_sparse(self, h, th):
+        """The constant data of a large system, sparse: W_h = A + h theta C + (h theta)^2 K is
+        factorized once (SuperLU), S is applied through the factors, and S H' and W = H S H' are
+        kept sparse. Entries of S H' below ``SPARSE_DROP_TOL`` times its largest entry are dropped:
+        for springs between neighbours they decay geometrically away from the contact (ratio about
+        (h theta)^2 k / m), so the operator is banded to rounding level."""
+        import casadi as ca
+        from scipy.sparse.linalg import LinearOperator, splu
+
+        sys_, n, m = self.sys, self.n, self.m
+        z = np.zeros(n)
+
+        def csc(x):
+            return sp.csc_matrix(ca.DM(x).sparse(), dtype=float)
+
+        A, F, K, C, _, _, gap, H = sys_.step_data_fn(0.0, z, z)
+        A, K, C, H = csc(A), csc(K), csc(C), csc(H)
+        Wh = (A + (h * th) * C + (h * th) ** 2 * K).tocsc()
+        try:
+            lu = splu(Wh)
+        except RuntimeError as exc:
+            raise FloatingPointError(f"singular iteration matrix: {exc}") from None
+        self._lu = lu
+        self.S = LinearOperator((n, n), matvec=lu.solve, dtype=float)
+        self.T = np.zeros((n, 0))
+        Ht = H.T.tocsc()
+        cols = []
+        for a in range(0, 2 * m, 512):  # column blocks keep the dense intermediate small
+            X = lu.solve(Ht[:, a:a + 512].toarray())
+            big = np.max(np.abs(X)) if X.size else 0.0
+            X[np.abs(X) <= SPARSE_DROP_TOL * big] = 0.0
+            cols.append(sp.csc_matrix(X))
+        SHt = sp.hstack(cols).tocsr() if cols else sp.csr_matrix((n, 0))
+        if not np.all(np.isfinite(SHt.data)):
+            raise FloatingPointError("singular iteration matrix: the mass matrix is singular")
+        self.SHt, self.H = SHt, H.tocsr()
+        self.W = (self.H @ SHt).tocsr()
+        self.gap0 = np.array(gap, dtype=float).ravel()
+        self.F0 = sys_.force(z, z)
+        self.Kq, self.Cv = -K.tocsr(), -C.tocsr()
+        self.G, self.phi_t = np.zeros((0, n)), np.zeros(0)
+        self.force_constant = not sys_.force_depends_on_state
+        self.dv_const = (lu.solve(h * self.F0) if self.constant and self.force_constant and not self.Kq.nnz
+                         else None)
 
     def _eval(self, t, q, v):
         """CasADi's one-step data (System.one_step_fn) as NumPy arrays, checked."""
