@@ -22,11 +22,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 __all__ = ["OPEN", "STICK", "SLIDE_POS", "SLIDE_NEG", "MODE_NAMES", "ContactProblem", "planar_enum",
-           "planar_refine", "PY_OPS", "NUMPY_OPS", "CASADI_OPS"]
+           "planar_refine", "PY_OPS", "NUMPY_OPS", "CASADI_OPS", "SPARSE_MIN_SIZE"]
 
 OPEN, STICK, SLIDE_POS, SLIDE_NEG = 0, 1, 2, 3
+#: a scipy.sparse W with at most this many rows is stored dense (2 x 2 blocks gain nothing from sparsity)
+SPARSE_MIN_SIZE = 8
 MODE_NAMES = {OPEN: "open", STICK: "stick", SLIDE_POS: "slide+", SLIDE_NEG: "slide-"}
 
 
@@ -169,7 +172,12 @@ class ContactProblem:
     key: object = None
 
     def __post_init__(self, rho=None):
-        self.W = np.asarray(self.W, dtype=float)
+        if sp.issparse(self.W):
+            # sparse operators stay sparse (memory grows with nnz); tiny ones are cheaper dense
+            self.W = (self.W.toarray().astype(float) if self.W.shape[0] <= SPARSE_MIN_SIZE
+                      else sp.csr_matrix(self.W, dtype=float))
+        else:
+            self.W = np.asarray(self.W, dtype=float)
         self.q = np.asarray(self.q, dtype=float)
         self.mu = np.atleast_1d(np.asarray(self.mu, dtype=float))
         self.k = k = self.mu.size
@@ -177,7 +185,7 @@ class ContactProblem:
             raise ValueError(f"W must be ({2 * k}, {2 * k}) and q ({2 * k},) for {k} contacts, "
                              f"got {self.W.shape} and {self.q.shape}")
         if rho is None:
-            d = np.diag(self.W)
+            d = self.W.diagonal() if sp.issparse(self.W) else np.diag(self.W)
             # natural-map weights rho = 1/W_ii make the residual an impulse; guard zero diagonals
             rho = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 1.0)
         self.rho = rho
@@ -256,6 +264,21 @@ class ContactProblem:
         k = self.k
         if k == 1:  # one contact: the closed form, without assembling a 2 x 2 system
             return self._solve_branch_planar(int(modes[0]))
+        if sp.issparse(self.W):
+            return self._solve_branch_sparse(np.asarray(modes))
+        E, r = self.branch_system(modes)
+        try:
+            p = np.linalg.solve(E, r)
+        except np.linalg.LinAlgError:
+            return None
+        if not np.all(np.isfinite(p)):
+            return None
+        return p
+
+    def branch_system(self, modes) -> tuple[np.ndarray, np.ndarray]:
+        """The linear system E p = r of one branch (see :meth:`solve_branch`); E is singular when
+        the branch's forces are not unique (redundant contacts)."""
+        k = self.k
         E = np.zeros((2 * k, 2 * k))
         r = np.zeros(2 * k)
         for j, md in enumerate(modes):
@@ -271,10 +294,37 @@ class ContactProblem:
             else:
                 E[k + j, k + j] = 1.0
                 E[k + j, j] = self.mu[j] if md == SLIDE_POS else -self.mu[j]
-        try:
-            p = np.linalg.solve(E, r)
-        except np.linalg.LinAlgError:
-            return None
+        return E, r
+
+    def _solve_branch_sparse(self, modes: np.ndarray) -> np.ndarray | None:
+        """solve_branch for a sparse W: the same rows, assembled and factorized sparsely."""
+        from scipy.sparse.linalg import spsolve
+
+        k, W = self.k, self.W
+        j = np.arange(k)
+        closed = modes != OPEN
+        stick = modes == STICK
+        slide = closed & ~stick
+        # rows taken from W: u_N of closed contacts, u_T of sticking ones; identity rows otherwise
+        from_W = np.concatenate([closed, stick])
+        D = sp.diags(from_W.astype(float))
+        eye_rows = np.flatnonzero(~from_W)
+        cols = eye_rows.copy()
+        vals = np.ones(eye_rows.size)
+        sj = j[slide]  # p_T + -mu p_N = 0 on sliding contacts: the p_N column of their rows
+        sgn = np.where(modes[slide] == SLIDE_POS, 1.0, -1.0)
+        E = (D @ W + sp.csr_matrix((np.concatenate([vals, sgn * self.mu[sj]]),
+                                    (np.concatenate([eye_rows, k + sj]), np.concatenate([cols, sj]))),
+                                   shape=(2 * k, 2 * k))).tocsc()
+        r = -np.where(from_W, self.q, 0.0)
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # scipy warns (not raises) on a singular matrix
+            try:
+                p = spsolve(E, r)
+            except (RuntimeError, Warning):
+                return None
         if not np.all(np.isfinite(p)):
             return None
         return p
@@ -369,7 +419,7 @@ class ContactProblem:
         (Stewart-Trinkle / Anitescu-Potra form with the two tangent directions +-t).
         """
         k = self.k
-        W = self.W
+        W = self.W.toarray() if sp.issparse(self.W) else self.W
         WN, WT = W[:k], W[k:]  # rows of u_N and u_T in p = (p_N, p_T)
         I = np.eye(k)
         M = np.zeros((4 * k, 4 * k))
