@@ -81,6 +81,9 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     integ.check_initial(q0, v0)
     phases, status, message, t_fail = integ.run(q0, v0)
     n, m = system.n, system.n_contacts
+    if integ.nonunique:
+        message = (f"{message} Contact forces are not unique in {integ.nonunique} phase(s) (redundant "
+                   "contacts): the least-norm admissible forces are reported; the motion is unique.")
     if status < 0:
         t_out = t_out[t_out <= t_fail]
         if scene is not None:
@@ -136,4 +139,5 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
                        solver="+".join(used) if used else "none",
                        t_events=[ev.t for ev in integ.events], force_N=FN, force_T=FT,
                        events=integ.events, impulses=integ.impulses,
-                       phases=integ.phases)
+                       phases=integ.phases, impacts=integ.impact_list, accumulations=integ.accumulations,
+                       nonunique_forces=integ.nonunique)

@@ -45,14 +45,30 @@ def first_landing(g0: float, u: float, a: float) -> float:
     return min(good) if good else math.inf
 
 
-def event_functions(phase):
-    """Terminal event functions of a SciPy phase (an :class:`~lcp.events.ode_phase.OdePhase`):
-    (functions, (kind, contact) per function). Each decreases through zero at its event."""
+def event_functions(phase, t0, y0, force_tol: float = 0.0):
+    """Terminal event functions of a SciPy phase (an :class:`~lcp.events.ode_phase.OdePhase`)
+    starting at (t0, y0): (functions, (kind, contact) per function). Each decreases through zero
+    at its event.
+
+    A phase of redundant contacts (``phase.indeterminate``) has one force event, its force margin
+    (kind ``"force-limit"``), in place of the per-contact lift-off and slip events: its forces are
+    not unique, so the phase ends only when no admissible forces remain.
+
+    A force event that starts on its bound (|g(t0)| <= force_tol: a stick force exactly at the
+    friction bound, a normal force exactly zero, that the mode decision found consistent) is
+    moved to g = -force_tol: rounding-level crossings of a force held on its bound do not end
+    the phase, a real departure is located within force_tol.
+    """
     n, m = phase.model.n, phase.model.m
     model, evaluate = phase.model, phase.evaluate
     evs, meta = [], []
 
-    def make(fun, kind, j):
+    def make(fun, kind, j, force=False):
+        if force and force_tol > 0 and abs(fun(t0, y0)) <= force_tol:
+            inner = fun
+
+            def fun(t, y):
+                return inner(t, y) + force_tol
         fun.terminal, fun.direction = True, -1
         evs.append(fun)
         meta.append((kind, int(j)))
@@ -61,11 +77,17 @@ def event_functions(phase):
         s = phase.slide[jj]
         if s != 0:
             make(lambda t, y, j=j, s=s: s * float(model.jac(y[:n])[m + j] @ y[n:2 * n]), "stop", j)
-        make(lambda t, y, j=j: float(evaluate(t, y)[1][j]), "lift-off", j)
+        if phase.indeterminate:
+            continue
+        make(lambda t, y, j=j: float(evaluate(t, y)[1][j]), "lift-off", j, force=True)
         if s == 0:
             mu = phase.mu[j]
-            make(lambda t, y, j=j, mu=mu: float(mu * evaluate(t, y)[1][j] - evaluate(t, y)[2][j]), "slip", j)
-            make(lambda t, y, j=j, mu=mu: float(mu * evaluate(t, y)[1][j] + evaluate(t, y)[2][j]), "slip", j)
+            make(lambda t, y, j=j, mu=mu: float(mu * evaluate(t, y)[1][j] - evaluate(t, y)[2][j]), "slip", j,
+                 force=True)
+            make(lambda t, y, j=j, mu=mu: float(mu * evaluate(t, y)[1][j] + evaluate(t, y)[2][j]), "slip", j,
+                 force=True)
+    if phase.indeterminate:
+        make(lambda t, y: phase.margin_at(t, y)[0], "force-limit", -1, force=True)
     for j in phase.open_idx:
         make(lambda t, y, j=j: float(model.gaps(y[:n])[j]), "impact", j)
     return evs, meta

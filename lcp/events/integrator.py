@@ -1,10 +1,13 @@
 """The event loop: decide the modes, integrate a smooth phase to its first event, project, repeat."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..contact_problem import OPEN, STICK
 from ..result import SolverStats
+from .accumulation import BounceSequence, sum_up
 from .impacts import ImpactLaw
 from .model import EPS, absmax, all_finite, system_model
 from .modes import ModeSelector
@@ -12,7 +15,7 @@ from .ode_phase import OdePhase
 from .options import EVENT_STATUS_MESSAGES, EventOptions, SmoothIntegrator
 from .phases import ClosedFormPhase
 from .projection import StateProjector
-from .records import Event, Impulse, Phase, make_record
+from .records import Event, Impact, Impulse, Phase, make_record
 
 __all__ = ["Integrator", "Inconsistent"]
 
@@ -50,16 +53,31 @@ class Integrator:
             d = model.data(0.0, q0, v0)
             acc_scale = float(np.max(np.abs(d.qdd_free))) if n else 0.0
             A_max = float(np.max(np.abs(d.A)))
-        V = max(absmax(v0) if n else 0.0, acc_scale * t_end, 1e-300)
-        self.scales = {"V": V, "L": max(V * t_end, absmax(q0) if n else 0.0, 1e-300),
-                       "A": max(acc_scale, V / t_end),
-                       "P": max(A_max * V, 1e-300)}
+        # The zero tests' scales: velocities reached and distances covered over the horizon, but
+        # over no more than 100 times the scene's own time scale (a ball resting on a floor
+        # for 1e6 s must not have a 1e6-fold coarser length tolerance).
+        V0, L0 = (absmax(v0), absmax(q0)) if n else (0.0, 0.0)
+        T = t_end
+        if acc_scale > 0:
+            T_own = 100.0 * max(math.sqrt(L0 / acc_scale), V0 / acc_scale)
+            T = min(t_end, T_own) if T_own > 0 else t_end
+        V = max(V0, acc_scale * T, 1e-300)
+        self.scales = {"V": V, "L": max(V * T, L0, 1e-300),
+                       "A": max(acc_scale, V / T),
+                       "P": max(A_max * V, 1e-300),
+                       "F": max(A_max * max(acc_scale, V / T), 1e-300)}
         self.vel_tol = options.tol * V
         self.gap_tol = options.tol * self.scales["L"]
         self.selector = ModeSelector(model, options, self.mu, self.stats, self.scales, t_end,
                                      self.gap_tol, self.vel_tol)
         self.impacts = ImpactLaw(model, self.mu, self.e, self.stats, options.impact_solver, t_end)
         self.projector = StateProjector(system, model)
+        self.accumulations, self.impact_list = [], []
+        self.nonunique = 0
+        self.bounces = BounceSequence()
+        bp = np.asarray(getattr(system, "breakpoints", None) if getattr(system, "breakpoints", None) is not None
+                        else (), dtype=float).ravel()
+        self.breakpoints = np.unique(bp[(bp > 0) & (bp < t_end)]).tolist()
 
     # --- consistency of the initial state
     def check_initial(self, q0, v0):
@@ -98,9 +116,12 @@ class Integrator:
 
     def record_impulse(self, t, contacts, p, kind, reason):
         k = len(contacts)
+        names = self.sys.contacts
         for jj, j in enumerate(contacts):
             if p[jj] != 0.0 or p[k + jj] != 0.0:
                 self.impulses.append(Impulse(float(t), int(j), float(p[jj]), float(p[k + jj]), kind, reason))
+                if kind == "impact":
+                    self.impact_list.append(Impact(float(t), int(j), names[j].name, float(p[jj]), float(p[k + jj])))
         if not (self.events and self.events[-1].t == t and self.events[-1].kind == kind):
             self.events.append(Event(float(t), kind, int(contacts[0]) if k == 1 else -1))
 
@@ -187,7 +208,8 @@ class Integrator:
             modes = sol.modes if sol is not None else ()
             keep = [i for i, md in enumerate(modes) if md != OPEN]
             args = (self.model, t, q, v, P, closed_a[keep], tuple(modes[i] for i in keep), self.mu)
-            ph = OdePhase(*args, options=self.o, scales=self.scales)
+            ph = OdePhase(*args, options=self.o, scales=self.scales,
+                          indeterminate=sol is not None and sol.nullity > 0)
         return ph
 
     def run(self, q0, v0):
@@ -197,27 +219,49 @@ class Integrator:
         status, message = 0, EVENT_STATUS_MESSAGES[0]
         run_phases = []
         short = 0
+        breakpoints = list(self.breakpoints)
+        last = None  # the last phase and the event that ended it
         while True:
             try:
                 q, v, closed, sol, acc = self.decide(t, q, v)
             except Inconsistent as exc:
                 status, message = -3, f"{EVENT_STATUS_MESSAGES[-3]} {exc}"
                 break
+            if last is not None and last[1] == "impact":
+                jump = self.watch_bounces(t, q, v, P, closed, sol, last[0])
+                if jump is not None:
+                    t, q, v, tail = jump
+                    run_phases.append(tail)
+                    self.phases.append(make_record(Phase, float(tail.t0), float(tail.t1), tail.names(),
+                                                   tail.integrator, 0))
+                    last = None
+                    continue
+            elif last is not None:
+                self.bounces.reset()
+            while breakpoints and breakpoints[0] <= t:
+                breakpoints.pop(0)
+            t_stop = breakpoints[0] if breakpoints else self.t_end
             ph = self.new_phase(t, q, v, P, closed, sol, acc)
             closed, modes = ph.idx_t, ph.modes
             try:
-                ev = ph.run(self.t_end)
+                ev = ph.run(t_stop)
             except FloatingPointError as exc:
                 status, message = -2, f"{EVENT_STATUS_MESSAGES[-2]} Phase from t = {t:.10g}: {exc}"
                 break
             run_phases.append(ph)
-            self.phases.append(make_record(Phase, float(ph.t0), float(ph.t1), ph.names(), ph.integrator, int(ph.nfev)))
+            unique = sol is None or sol.nullity == 0
+            self.nonunique += not unique
+            self.phases.append(make_record(Phase, float(ph.t0), float(ph.t1), ph.names(), ph.integrator,
+                                           int(ph.nfev), unique))
             counts = self.stats.mode_counts
             for name in ph.names():
                 counts[name] += 1
             if ev is None:
-                break
+                if t_stop >= self.t_end:
+                    break
+                ev = (t_stop, "breakpoint", -1)  # the forces jump: decide again
             te, kind, j = ev
+            last = (ph, kind)
             q, v, P = ph.end_state()
             stick = tuple(c for c, md in zip(closed, modes) if md == STICK)
             if kind == "stop":
@@ -239,5 +283,16 @@ class Integrator:
         self.stats.free_steps = sum(1 for ph in run_phases if not ph.idx_t)
         return run_phases, status, message, t
 
-
+    def watch_bounces(self, t, q, v, P, closed, sol, flight):
+        """After an impact at t (state (q, v) its right limit, ``flight`` the phase that ended
+        with it): record it, and when the impacts form an accumulation whose bounces are below
+        the length tolerance, jump to its limit. Returns (t_inf, q_inf, v_inf, tail phase) or None."""
+        at = tuple(sorted({imp.contact for imp in self.impulses if imp.t == t and imp.kind == "impact"}))
+        if not at:
+            self.bounces.reset()
+            return None
+        self.bounces.push(t, at, q, v, (closed, sol.modes if sol is not None else ()))
+        if not self.bounces.geometric():
+            return None
+        return sum_up(self, t, q, v, P, at, closed, sol, flight)
 

@@ -14,7 +14,7 @@ import casadi as ca
 import numpy as np
 
 __all__ = ["EPS", "StateData", "SystemModel", "system_model", "check_state", "mass_projection",
-           "all_finite", "absmax", "accel_function"]
+           "all_finite", "absmax", "accel_function", "coordinate_rows"]
 
 EPS = np.finfo(float).eps
 
@@ -127,7 +127,7 @@ class SystemModel:
             self.A_max = float(np.max(np.abs(self.A))) if n else 0.0
             self._const_data = StateData(self.A, self.F0, self.G, np.zeros(system.n_bilateral), self.H,
                                      np.zeros(2 * m), self.gap0, check=True)
-            self._proj = {}
+            self.proj_cache = {}
             self.mode_memo = {}
             self.phase_memo = {}
             self.impact_memo = {}
@@ -163,11 +163,11 @@ class SystemModel:
 
     def projector(self, key, rows) -> np.ndarray:
         """Constant system: the matrix C with mass_projection(A, J, r) = C r, J = vstack(rows)."""
-        C = self._proj.get(("C",) + key)
+        C = self.proj_cache.get(("C",) + key)
         if C is None:
             J = np.vstack(rows)
             AJ = np.linalg.solve(self.A, J.T)
-            C = self._proj[("C",) + key] = AJ @ np.linalg.lstsq(J @ AJ, np.eye(J.shape[0]), rcond=None)[0]
+            C = self.proj_cache[("C",) + key] = AJ @ np.linalg.lstsq(J @ AJ, np.eye(J.shape[0]), rcond=None)[0]
         return C
 
 
@@ -192,6 +192,18 @@ def check_state(system, q0, v0):
         if q.shape == v.shape == (model.n,) and all_finite(q) and all_finite(v):
             return q, v
     return system.check_state(q0, v0)
+
+
+def coordinate_rows(J, target) -> tuple:
+    """Constraint rows J x = target that fix one coordinate each (a flat contact, a fixed
+    direction): ((i, target_r / J[r, i]), ...), so that the constraint can be imposed exactly
+    rather than to rounding (a ball resting on a floor stays at height 0, not 1e-17)."""
+    out = []
+    for r in range(J.shape[0]):
+        nz = np.flatnonzero(J[r])
+        if nz.size == 1:
+            out.append((int(nz[0]), float(target[r]) / float(J[r, nz[0]])))
+    return tuple(out)
 
 
 def mass_projection(A, J, r):

@@ -36,6 +36,7 @@ import numpy as np
 
 from ..contact_problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem
 from ..solvers import make_solver
+from .indeterminate import branch_forces
 from .model import EPS, StateData
 from .options import ModeSolver
 
@@ -106,6 +107,9 @@ class ModeSolution:
     qdd: np.ndarray
     #: closed-form phase data of this solution (ClosedFormPhase.ready), per closed set
     ready: dict = field(default_factory=dict, repr=False)
+    #: dimension of the set of forces giving this motion (0: unique; > 0: redundant contacts,
+    #: p is the least-norm admissible choice)
+    nullity: int = 0
 
 
 def enumerate_branches(acc: AccelProblem, allowed=None) -> tuple[list, int]:
@@ -123,10 +127,16 @@ def enumerate_branches(acc: AccelProblem, allowed=None) -> tuple[list, int]:
         if allowed is not None and modes not in allowed:
             continue
         tried += 1
-        p = pb.solve_branch(acc.branch_modes(modes))
-        if p is None or not pb.admissible(p, acc.check_modes(modes)):
+        branch, check = acc.branch_modes(modes), acc.check_modes(modes)
+        p = pb.solve_branch(branch) if acc.k == 1 else None
+        if p is not None:
+            if pb.admissible(p, check):
+                sols.append(ModeSolution(modes, p, acc.qdd(p)))
             continue
-        sols.append(ModeSolution(modes, p, acc.qdd(p)))
+        # several contacts, or one singular contact: a singular branch has a set of forces
+        bf = branch_forces(pb, check, branch)
+        if bf is not None and bf.admissible:
+            sols.append(ModeSolution(modes, bf.p, acc.qdd(bf.p), nullity=bf.nullity))
     return sols, tried
 
 

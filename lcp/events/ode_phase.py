@@ -20,13 +20,15 @@ __all__ = ["OdePhase"]
 class OdePhase(SmoothPhase):
     """solve_ivp on y = (q, v, cumulative contact impulses), with terminal event functions."""
 
-    def __init__(self, *args, options: EventOptions, scales):
+    def __init__(self, *args, options: EventOptions, scales, indeterminate=False):
         super().__init__(*args)
         self.options = options
         self.integrator = options.ode_method
         self.scales = scales
+        self.indeterminate = indeterminate
         self._cache_key = None
-        self.linear = self.model.constant  # affine forces: the whole phase is a linear ODE y' = L y + c
+        # affine forces: the whole phase is a linear ODE y' = L y + c (with unique forces)
+        self.linear = self.model.constant and not indeterminate
         if self.linear:
             self._build_linear()
 
@@ -99,13 +101,12 @@ class OdePhase(SmoothPhase):
     def run(self, t_stop):
         n = self.model.n
         y0 = np.concatenate([self.q0, self.v0, self.P0])
-        evs, meta = event_functions(self)
+        evs, meta = event_functions(self, self.t0, y0, self.options.tol * self.scales.get("F", 0.0))
         o = self.options
         atol = np.concatenate([np.full(n, o.atol * self.scales["L"]), np.full(n, o.atol * self.scales["V"]),
                                np.full(self.P0.size, o.atol * self.scales["P"])])
-        from scipy.integrate import (
-            solve_ivp,  # imported on the first non-polynomial phase only
-        )
+        # imported on the first non-polynomial phase only (keeps `import lcp` cheap)
+        from scipy.integrate import solve_ivp
 
         sol = solve_ivp(self._rhs, (self.t0, t_stop), y0, method=o.ode_method, rtol=o.rtol, atol=atol,
                         events=evs, dense_output=True)
@@ -119,9 +120,30 @@ class OdePhase(SmoothPhase):
             self.t1 = first[0]
             self.y1 = sol.y_events[first[1]][0]
             kind, j = meta[first[1]]
+            if kind == "force-limit":
+                kind, j = self.binding(self.t1, self.y1)
             return self.t1, kind, j
         self.t1 = t_stop
         return None
+
+    def margin_at(self, t, y):
+        """Force margin of the phase's modes at (t, y) (:meth:`SmoothPhase.margin`), cached."""
+        key = (t, y.tobytes())
+        if key != getattr(self, "_margin_key", None):
+            n = self.model.n
+            self._margin_key, self._margin = key, self.margin(self.model.data(t, y[:n], y[n:2 * n]))
+        return self._margin
+
+    def binding(self, t, y):
+        """(kind, contact) of the inequality that limits the force margin at (t, y)."""
+        _, slack, labels = self.margin_at(t, y)
+        kind, jj = labels[int(np.argmin(slack))]
+        return kind, int(self.idx[jj])
+
+    def end_acceleration(self):
+        """Acceleration at the end of the phase."""
+        n = self.model.n
+        return self.evaluate(self.t1, self.y1)[0][n:2 * n].copy()
 
     def end_state(self):
         n = self.model.n

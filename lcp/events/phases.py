@@ -16,7 +16,8 @@ import numpy as np
 
 from ..contact_problem import MODE_NAMES, OPEN, SLIDE_NEG, SLIDE_POS
 from .event_location import first_landing, first_stop
-from .model import mass_projection
+from .indeterminate import branch_forces, force_margin
+from .model import coordinate_rows, mass_projection
 from .modes import AccelProblem
 
 __all__ = ["phase_static", "SmoothPhase", "ClosedFormPhase", "closed_form_output"]
@@ -43,6 +44,10 @@ def phase_static(m: int, idx: tuple, modes: tuple) -> tuple:
 class SmoothPhase:
     """Common part of a smooth phase: fixed closed set, slide signs and stick set."""
 
+    #: the forces of this phase's modes are not unique (redundant contacts): least-norm admissible
+    #: forces are reported, and the phase ends when no admissible forces remain
+    indeterminate = False
+
     def __init__(self, model, t0, q0, v0, P0, idx, modes, mu, static=None):
         self.model = model
         self.t0, self.q0, self.v0, self.P0 = t0, q0, v0, P0
@@ -57,12 +62,23 @@ class SmoothPhase:
         return self._names
 
     def accel(self, data):
+        """(qdd, N, f) of the phase's modes at a state (its data)."""
         acc = AccelProblem(data, self.idx, self.slide, self.mu)
-        p = acc.pb.solve_branch(acc.branch_modes(self.modes))
+        if self.indeterminate:
+            bf = branch_forces(acc.pb, acc.check_modes(self.modes), acc.branch_modes(self.modes))
+            p = None if bf is None else bf.p  # not admissible past the phase's end: its event
+        else:
+            p = acc.pb.solve_branch(acc.branch_modes(self.modes))
         if p is None:
             raise FloatingPointError("singular contact branch in a smooth phase")
         N, f = acc.forces(p)
         return acc.qdd(p), N, f
+
+    def margin(self, data) -> tuple[float, np.ndarray, list]:
+        """Force margin of the phase's modes at a state (see
+        :func:`~lcp.events.indeterminate.force_margin`): zero where the phase must end."""
+        acc = AccelProblem(data, self.idx, self.slide, self.mu)
+        return force_margin(acc.pb, acc.check_modes(self.modes), acc.branch_modes(self.modes))
 
 
 class ClosedFormPhase(SmoothPhase):
@@ -85,6 +101,8 @@ class ClosedFormPhase(SmoothPhase):
         J = np.vstack(rows)
         if J.shape[0]:
             self.qdd = self.qdd - mass_projection(self.model.A, J, J @ self.qdd)
+            for i, val in coordinate_rows(J, np.zeros(J.shape[0])):
+                self.qdd[i] = val  # a flat contact at rest stays exactly at rest
         m = self.model.m
         self.N = np.zeros(m)
         self.f = np.zeros(m)
@@ -128,6 +146,10 @@ class ClosedFormPhase(SmoothPhase):
             return None
         self.t1 = self.t0 + dt
         return self.t1, kind, j
+
+    def end_acceleration(self):
+        """Acceleration at the end of the phase (constant here)."""
+        return self.qdd
 
     def end_state(self):
         dt = self.t1 - self.t0

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .model import mass_projection
+from .model import coordinate_rows, mass_projection
 
 __all__ = ["StateProjector"]
 
@@ -70,11 +70,12 @@ class StateProjector:
         nb = model.nb
         if gap_rows or nb:
             key = ("q", gap_rows)
-            entry = model._proj.get(key)
+            entry = model.proj_cache.get(key)
             if entry is None:
                 rows = np.array(gap_rows, dtype=int)
-                entry = model._proj[key] = (rows, model.projector(key, [model.G, model.H[rows]]))
-            rows, C = entry
+                entry = model.proj_cache[key] = (rows, model.projector(key, [model.G, model.H[rows]]),
+                                                 coordinate_rows(model.HN[rows], -model.gap0[rows]))
+            rows, C, snap = entry
             res = []
             if nb:
                 res.append(np.array(self.sys.constraints_fn(t, q)[0], dtype=float).ravel())
@@ -84,19 +85,24 @@ class StateProjector:
             r = np.concatenate(res) if len(res) > 1 else res[0]
             if r.any():
                 q = q - C @ r
+            for i, val in snap:  # a flat contact: its gap exactly zero, not to rounding
+                q[i] = val
         vr = normal_rows + tuple(m + j for j in tangent_rows)
         if nb or vr:
             key = ("v", vr)
-            entry = model._proj.get(key)
+            entry = model.proj_cache.get(key)
             if entry is None:
                 Hv = model.H[np.array(vr, dtype=int)]
-                entry = model._proj[key] = (Hv, model.projector(key, [model.G, Hv]))
-            Hv, C = entry
+                entry = model.proj_cache[key] = (Hv, model.projector(key, [model.G, Hv]),
+                                                 coordinate_rows(Hv, np.zeros(len(vr))))
+            Hv, C, snap = entry
             if nb:
                 r = np.concatenate([model.G @ v + model.phi_t, Hv @ v])
             else:
                 r = Hv @ v
             if r.any():
                 v = v - C @ r
+            for i, val in snap:
+                v[i] = val
         return q, v
 

@@ -7,7 +7,7 @@ import numpy as np
 
 from ..result import SimulationResult
 
-__all__ = ["Event", "Impulse", "Phase", "EventResult", "make_record"]
+__all__ = ["Event", "Impulse", "Impact", "Accumulation", "Phase", "EventResult", "make_record"]
 
 
 @dataclass(frozen=True)
@@ -16,7 +16,9 @@ class Event:
 
     ``kind`` is one of ``"stop"`` (sliding velocity reached zero), ``"lift-off"`` (normal force
     reached zero), ``"slip"`` (stick force reached the friction bound), ``"impact"`` (gap closed),
-    ``"tangential impact"`` (impulsive fallback of the Painlevé cases).
+    ``"tangential impact"`` (impulsive fallback of the Painlevé cases), ``"breakpoint"`` (a time
+    where the forces are discontinuous, ``System.breakpoints``), ``"accumulation"`` (the limit of
+    an accumulation of impacts). ``contact`` is -1 when the event concerns no single contact.
     """
 
     t: float
@@ -57,6 +59,44 @@ class Phase:
     modes: tuple
     integrator: str
     nfev: int = 0
+    #: False when the contact forces of the phase's modes are not unique (redundant contacts);
+    #: the reported forces are then the least-norm admissible ones
+    forces_unique: bool = True
+
+
+@dataclass(frozen=True)
+class Impact:
+    """One impact: a gap closing with approach velocity, resolved at time ``t`` on ``contact``
+    (index; ``name`` is the contact's name), with normal impulse ``p_N`` and tangential impulse
+    ``p_T`` (the velocity-level impact law: Newton restitution and Coulomb friction)."""
+
+    t: float
+    contact: int
+    name: str
+    p_N: float
+    p_T: float
+
+
+@dataclass(frozen=True)
+class Accumulation:
+    """An accumulation of impacts (Zeno behaviour) and its limit.
+
+    The impacts on ``contacts`` from ``t_first`` on came at geometrically shrinking intervals;
+    ``n_impacts`` of them were resolved one by one (they are in :attr:`EventResult.impacts`), and
+    the infinitely many others were summed up: they end at the accumulation time ``t``, found
+    ``method="closed-form"`` (free flight under constant forces between impacts, Newton
+    restitution e: t = t_k + Delta_k / (1 - e)) or ``method="aitken"`` (Aitken's extrapolation of
+    the impact times and states). From ``t`` on the contacts persist with zero normal velocity.
+    ``P_N`` and ``P_T`` are the impulses of the unresolved impacts (per contact in ``contacts``).
+    """
+
+    t: float
+    contacts: tuple
+    n_impacts: int
+    t_first: float
+    method: str
+    P_N: tuple
+    P_T: tuple
 
 
 RECORD_FIELDS = {cls: tuple(f.name for f in fields(cls)) for cls in (Event, Phase)}
@@ -82,9 +122,19 @@ class EventResult(SimulationResult):
         Times of the events (mode switches and impulses), in order.
     events : list of Event
     impulses : list of Impulse
-        Every impulse: impacts and the tangential impacts of the impulsive fallback.
+        Every impulse: impacts, the tangential impacts of the impulsive fallback and the summed
+        impulses of accumulations of impacts (kind ``"accumulation"``).
+    impacts : list of Impact
+        The impacts (gaps closing with approach velocity): time, contact, normal and tangential
+        impulse.
+    accumulations : list of Accumulation
+        Accumulations of impacts resolved by their limit (time, contacts, impacts resolved).
     phases : list of Phase
         The smooth phases with their modes and the integrator used.
+    nonunique_forces : int
+        Number of phases whose contact forces are not unique (redundant contacts: the reported
+        forces are the least-norm admissible ones; the motion is unique). Also noted in
+        ``message``.
     """
 
     force_N: np.ndarray = None
@@ -92,6 +142,9 @@ class EventResult(SimulationResult):
     events: list = field(default_factory=list)
     impulses: list = field(default_factory=list)
     phases: list = field(default_factory=list)
+    impacts: list = field(default_factory=list)
+    accumulations: list = field(default_factory=list)
+    nonunique_forces: int = 0
 
     @property
     def mode_sequence(self) -> list:

@@ -1,0 +1,170 @@
+"""Redundant contacts: branches of the acceleration-level problem whose forces are not unique.
+
+Two corners of a box on a floor, the four legs of a table, a block wedged between two walls: the
+constraint rows of the closed contacts are linearly dependent, so the Delassus matrix W is only
+positive semidefinite and a branch's linear system E p = r (:meth:`ContactProblem.branch_system`)
+is singular. The motion is still unique (forces along the null space of E do no work), but the
+forces form a polytope
+
+    P = {p : E p = r, G p >= h},
+
+with G p >= h the inequalities of the branch's modes (N >= 0, |f| <= mu N for a stick, the sign of
+the sliding acceleration for a slip, a_N >= 0 for an open contact). This module
+
+- solves such a branch: p = p0 + Z z, p0 the least-norm solution of E p = r (SVD) and Z a basis of
+  the null space of E; the reported forces are the **least-norm admissible** ones, the projection
+  of 0 onto P, found as a least-distance program by Lawson and Hanson's NNLS reduction
+  (``scipy.optimize.nnls``), and checked against the Coulomb inequalities afterwards;
+- measures how far P is from being empty, the **force margin**
+  ``max {s : E p = r, G p >= h + s}`` (a linear program), whose zero crossing is the event that
+  ends a phase of redundant contacts (onset of slip, or a contact unloading: tipping).
+
+SciPy's optimizers are imported on first use only.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..contact_problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK
+
+__all__ = ["BranchForces", "branch_forces", "admissibility_rows", "force_margin"]
+
+#: relative singular-value threshold below which a branch is treated as singular
+RANK_RTOL = 1e-10
+
+
+@dataclass(eq=False)
+class BranchForces:
+    """Forces of one branch: ``p`` (admissible if ``admissible``), the null-space dimension
+    ``nullity`` of its linear system (0: unique), and the pieces of the force set (p0, Z)."""
+
+    p: np.ndarray
+    nullity: int
+    admissible: bool
+    p0: np.ndarray
+    Z: np.ndarray
+
+
+def admissibility_rows(pb, modes) -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
+    """Inequalities G p >= h equivalent to ``pb.admissible(p, modes)`` (without its tolerance), a
+    mask of the rows that are friction bounds of a contact with mu = 0 (equalities in fact), and
+    per row the event its violation means, (kind, contact index in the problem)."""
+    k, W, q, mu = pb.k, pb.W, pb.q, pb.mu
+    rows, rhs, zero_mu, labels = [], [], [], []
+
+    def add(g, h, label, flag=False):
+        rows.append(g)
+        rhs.append(h)
+        zero_mu.append(flag)
+        labels.append((label, j))
+
+    for j, md in enumerate(modes):
+        if md == OPEN:
+            add(W[j], -q[j], "impact")  # a_N >= 0
+            continue
+        e = np.zeros(2 * k)
+        e[j] = 1.0
+        add(e, 0.0, "lift-off")  # N >= 0
+        if md == STICK:
+            for sgn in (1.0, -1.0):
+                g = mu[j] * e
+                g[k + j] = -sgn
+                add(g, 0.0, "slip", mu[j] == 0.0)  # mu N -+ f >= 0
+        elif md in (SLIDE_POS, SLIDE_NEG):
+            sgn = 1.0 if md == SLIDE_POS else -1.0
+            add(sgn * W[k + j], sgn * q[k + j], "stop")  # sign of the sliding acceleration
+    if not rows:
+        return np.zeros((0, 2 * k)), np.zeros(0), np.zeros(0, dtype=bool), []
+    return np.array(rows), np.array(rhs), np.array(zero_mu), labels
+
+
+def _null_split(E, r):
+    """(p0, Z, consistent): least-norm solution of E p = r, null-space basis of E, and whether
+    E p0 = r holds to rounding."""
+    U, s, Vt = np.linalg.svd(E)
+    smax = float(s[0]) if s.size else 0.0
+    rank = int(np.sum(s > RANK_RTOL * max(smax, 1e-300)))
+    Ur, Vr = U[:, :rank], Vt[:rank].T
+    p0 = Vr @ ((Ur.T @ r) / s[:rank])
+    Z = Vt[rank:].T
+    res = float(np.max(np.abs(E @ p0 - r))) if r.size else 0.0
+    scale = float(np.max(np.abs(r))) if r.size else 0.0
+    scale = max(scale, smax * (float(np.max(np.abs(p0))) if p0.size else 0.0), 1e-300)
+    return p0, Z, res <= 1e-9 * scale
+
+
+def _least_distance(B, c):
+    """argmin ||z|| subject to B z >= c, or None if infeasible (Lawson & Hanson, LDP by NNLS)."""
+    from scipy.optimize import nnls  # only for redundant contacts
+
+    d = B.shape[1]
+    Ematrix = np.vstack([B.T, c[None, :]])
+    f = np.zeros(d + 1)
+    f[d] = 1.0
+    u, _ = nnls(Ematrix, f, maxiter=50 * (B.shape[0] + d + 1))
+    res = Ematrix @ u - f
+    if abs(res[d]) <= 1e-14 or np.linalg.norm(res) <= 1e-12:
+        return None
+    return -res[:d] / res[d]
+
+
+def branch_forces(pb, check_modes, branch_modes) -> BranchForces | None:
+    """Forces of one branch of ``pb``: the unique solution when the branch is regular, the
+    least-norm admissible one when it is singular; None if the branch's equations are
+    inconsistent. ``check_modes`` and ``branch_modes`` are the modes for ``admissible`` and
+    ``solve_branch`` (they differ for sliding contacts folded into the problem)."""
+    E, r = pb.branch_system(branch_modes)
+    p0, Z, consistent = _null_split(E, r)
+    if not consistent:
+        return None
+    if Z.shape[1] == 0:
+        p = p0
+        return BranchForces(p, 0, pb.admissible(p, check_modes), p0, Z)
+    G, h, _, _ = admissibility_rows(pb, check_modes)
+    slack = G @ p0 - h
+    tol = 1e-12 * max(pb.scale, float(np.max(np.abs(p0))) if p0.size else 0.0)
+    if slack.size == 0 or slack.min() >= -tol:
+        p = p0  # p0 (orthogonal to the null space) is already the least-norm admissible point
+    else:
+        z = _least_distance(G @ Z, -slack)
+        if z is None:
+            return BranchForces(p0, Z.shape[1], False, p0, Z)
+        p = p0 + Z @ z
+    return BranchForces(p, Z.shape[1], pb.admissible(p, check_modes), p0, Z)
+
+
+def force_margin(pb, check_modes, branch_modes) -> tuple[float, np.ndarray, list]:
+    """(margin, slack, labels): the largest s with E p = r and G p >= h + s (a linear program;
+    negative when the branch has no admissible forces), the slack G p - h of each inequality at
+    the optimum and the rows' labels (as in :func:`admissibility_rows`; friction rows of mu = 0
+    contacts are held as equalities and excluded from s)."""
+    E, r = pb.branch_system(branch_modes)
+    p0, Z, _ = _null_split(E, r)
+    G, h, zero_mu, labels = admissibility_rows(pb, check_modes)
+    base = G @ p0 - h
+    if G.shape[0] == 0:
+        return np.inf, base, labels
+    B = G @ Z
+    free = ~zero_mu
+    if Z.shape[1] == 0 or not B.any():
+        return (float(base[free].min()) if free.any() else np.inf), base, labels
+    from scipy.optimize import linprog  # only for redundant contacts
+
+    d = Z.shape[1]
+    # variables (z, s): maximise s subject to B z + base >= s on the free rows, B z + base = 0 on
+    # the rows of frictionless sticks
+    c = np.zeros(d + 1)
+    c[d] = -1.0
+    A_ub = np.hstack([-B[free], np.ones((int(free.sum()), 1))])
+    b_ub = base[free]
+    kw = {}
+    if zero_mu.any():
+        kw = {"A_eq": np.hstack([B[zero_mu], np.zeros((int(zero_mu.sum()), 1))]), "b_eq": -base[zero_mu]}
+    scale = max(float(np.max(np.abs(base))), 1.0)
+    res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=[(None, None)] * d + [(None, scale)], method="highs", **kw)
+    if res.status != 0:
+        return -np.inf, base, labels
+    z = res.x[:d]
+    return float(res.x[d]), B @ z + base, labels
