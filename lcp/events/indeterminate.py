@@ -163,8 +163,42 @@ def force_margin(pb, check_modes, branch_modes) -> tuple[float, np.ndarray, list
     if zero_mu.any():
         kw = {"A_eq": np.hstack([B[zero_mu], np.zeros((int(zero_mu.sum()), 1))]), "b_eq": -base[zero_mu]}
     scale = max(float(np.max(np.abs(base))), 1.0)
-    res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=[(None, None)] * d + [(None, scale)], method="highs", **kw)
+    res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=[(None, None)] * d + [(None, scale)], method="highs",
+                  options={"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10}, **kw)
     if res.status != 0:
         return -np.inf, base, labels
-    z = res.x[:d]
-    return float(res.x[d]), B @ z + base, labels
+    z, s_opt = _polish(B, base, zero_mu, res.x[:d], float(res.x[d]), scale)
+    return s_opt, B @ z + base, labels
+
+
+def _polish(B, base, zero_mu, z, s, scale):
+    """The LP vertex (z, s) recomputed exactly: HiGHS meets its constraints to its feasibility
+    tolerance only, and the margin's zero is an event time. The rows active within that
+    tolerance are few: each choice of d + 1 of them (with the equality rows) is solved, and the
+    best vertex feasible to rounding is kept."""
+    from itertools import combinations
+
+    d = B.shape[1]
+    slack = B @ z + base
+    eq = [int(i) for i in np.flatnonzero(zero_mu)]
+    cand = [int(i) for i in np.argsort(slack - s) if not zero_mu[i] and slack[i] - s <= 1e-6 * scale][:12]
+    need = d + 1 - len(eq)
+    if need < 0 or len(cand) < need:
+        return z, s
+    tol = 256 * np.finfo(float).eps * scale
+    best = None
+    free = ~zero_mu
+    for pick in combinations(cand, need):
+        rows = eq + list(pick)
+        M = np.array([np.append(B[i], 0.0 if zero_mu[i] else -1.0) for i in rows])
+        try:
+            x = np.linalg.solve(M, -base[rows])
+        except np.linalg.LinAlgError:
+            continue
+        zp, sp = x[:d], float(x[d])
+        sl = B @ zp + base
+        if not np.all(np.isfinite(x)) or np.any(sl[free] < sp - tol) or (eq and np.max(np.abs(sl[eq])) > tol):
+            continue
+        if best is None or sp > best[1]:
+            best = (zp, sp)
+    return best if best is not None and abs(best[1] - s) <= 1e-6 * scale else (z, s)

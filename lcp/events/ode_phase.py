@@ -10,6 +10,7 @@ import numpy as np
 
 from ..contact_problem import ContactProblem
 from .event_location import event_functions
+from .model import mass_projection
 from .modes import AccelProblem
 from .options import EventOptions
 from .phases import SmoothPhase
@@ -88,11 +89,27 @@ class OdePhase(SmoothPhase):
             q, v = y[:n], y[n:2 * n]
             data = self.model.data(t, q, v)
             qdd, N, f = self.accel(data)
+            if self.indeterminate:
+                qdd = self.constrained(data, qdd)
             Nm, fm = np.zeros(m), np.zeros(m)
             Nm[self.idx], fm[self.idx] = N, f
             out = (np.concatenate([v, qdd, Nm, fm]), Nm, fm)
         self._cache_key, self._cache = key, out
         return out
+
+    def constrained(self, data, qdd):
+        """qdd with the residual of the phase's constraints at the acceleration level (closed
+        normals, sticking tangents, bilateral constraints) removed in the mass metric. Redundant
+        contacts' forces come from a least-squares solve whose rounding (1e-15 of the forces)
+        would otherwise move a sticking body over a long phase and shift its events."""
+        m = self.model.m
+        rows = np.concatenate([self.idx, m + self.idx[self.slide == 0]])
+        J = data.H[rows]
+        r = J @ qdd + data.Hdv[rows]
+        if data.nb:
+            J = np.vstack([J, data.G])
+            r = np.concatenate([r, data.G @ qdd + data.zeta])
+        return qdd - mass_projection(data.A, J, r) if J.shape[0] and r.any() else qdd
 
     def _rhs(self, t, y):
         return self.evaluate(t, y)[0]
@@ -136,8 +153,11 @@ class OdePhase(SmoothPhase):
 
     def binding(self, t, y):
         """(kind, contact) of the inequality that limits the force margin at (t, y)."""
-        _, slack, labels = self.margin_at(t, y)
-        kind, jj = labels[int(np.argmin(slack))]
+        margin, slack, labels = self.margin_at(t, y)
+        tight = [lab for x, lab in zip(slack, labels) if x <= max(margin, 0.0) + 1e-9 * max(1.0, abs(margin))]
+        tight = tight or [labels[int(np.argmin(slack))]]
+        # a contact unloading takes its friction bound with it: call it a lift-off
+        kind, jj = next((lab for lab in tight if lab[0] == "lift-off"), tight[0])
         return kind, int(self.idx[jj])
 
     def end_acceleration(self):
