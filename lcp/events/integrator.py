@@ -244,7 +244,7 @@ class Integrator:
             ph = self.new_phase(t, q, v, P, closed, sol, acc)
             closed, modes = ph.idx_t, ph.modes
             try:
-                ev = ph.run(t_stop)
+                ev = ph.run(t_stop, t_stop < self.t_end)
             except FloatingPointError as exc:
                 status, message = -2, f"{EVENT_STATUS_MESSAGES[-2]} Phase from t = {t:.10g}: {exc}"
                 break

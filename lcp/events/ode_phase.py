@@ -87,7 +87,7 @@ class OdePhase(SmoothPhase):
             out = (yd, yd[2 * n:2 * n + m], yd[2 * n + m:])
         else:
             q, v = y[:n], y[n:2 * n]
-            data = self.model.data(t, q, v)
+            data = self.model.data(min(t, self.t_left), q, v)
             qdd, N, f = self.accel(data)
             if self.indeterminate:
                 qdd = self.constrained(data, qdd)
@@ -115,7 +115,15 @@ class OdePhase(SmoothPhase):
         return self.evaluate(t, y)[0]
 
     # --- events
-    def run(self, t_stop):
+    #: the forces are evaluated at no later time than this: the left limit at a breakpoint that
+    #: ends the phase (the last stage of a step, and the event functions, evaluate at t_stop)
+    t_left = np.inf
+
+    def run(self, t_stop, breakpoint=False):
+        """First event before t_stop: (t_event, kind, contact) or None. With ``breakpoint`` the
+        forces jump at t_stop: the phase sees their left limit there."""
+        if breakpoint:
+            self.t_left = float(np.nextafter(t_stop, -np.inf))
         n = self.model.n
         y0 = np.concatenate([self.q0, self.v0, self.P0])
         evs, meta = event_functions(self, self.t0, y0, self.options.tol * self.scales.get("F", 0.0))
@@ -148,7 +156,8 @@ class OdePhase(SmoothPhase):
         key = (t, y.tobytes())
         if key != getattr(self, "_margin_key", None):
             n = self.model.n
-            self._margin_key, self._margin = key, self.margin(self.model.data(t, y[:n], y[n:2 * n]))
+            data = self.model.data(min(t, self.t_left), y[:n], y[n:2 * n])
+            self._margin_key, self._margin = key, self.margin(data)
         return self._margin
 
     def binding(self, t, y):

@@ -126,8 +126,9 @@ class ClosedFormPhase(SmoothPhase):
         (ph.modes, ph.idx, ph.slide, ph.open_idx, ph.full_modes, ph._names, ph._sliding, ph.idx_t) = ph.static
         return ph
 
-    def run(self, t_stop):
-        """First event before t_stop: (t_event, kind, contact) or None."""
+    def run(self, t_stop, breakpoint=False):
+        """First event before t_stop: (t_event, kind, contact) or None (the forces are constant:
+        a breakpoint changes nothing before it)."""
         H = self.H
         best = (math.inf, None, -1)
         for j, s, Hrow, a in self._slide_rows:
