@@ -74,7 +74,7 @@ def admissibility_rows(pb, modes) -> tuple[np.ndarray, np.ndarray, np.ndarray, l
                 add(g, 0.0, "slip", mu[j] == 0.0)  # mu N -+ f >= 0
         elif md in (SLIDE_POS, SLIDE_NEG):
             sgn = 1.0 if md == SLIDE_POS else -1.0
-            add(sgn * W[k + j], sgn * q[k + j], "stop")  # sign of the sliding acceleration
+            add(sgn * W[k + j], -sgn * q[k + j], "stop")  # sign of the sliding acceleration
     if not rows:
         return np.zeros((0, 2 * k)), np.zeros(0), np.zeros(0, dtype=bool), []
     return np.array(rows), np.array(rhs), np.array(zero_mu), labels

@@ -275,8 +275,11 @@ class ModeSelector:
             d1 = self.model.data(t + dt, q1, v1)
         groups, _ = self.solve_modes(d1, closed, slide, allowed={s.modes for s in group})
         if len(groups) == 1 and len(groups[0]) >= 1:
-            return groups[0][0]
-        return group[0]
+            group = groups[0]
+        # Still a tie: prefer the contacts closed. A contact at rest with a zero normal force and
+        # zero normal acceleration may be called open as well, but an open contact at zero gap
+        # would end its phase at once (a table's legs, a box's corners).
+        return min(group, key=lambda s: sum(md == OPEN for md in s.modes))
 
     def memo_decision(self, q, v):
         """The decision of a polynomial system in its common case: no contact approaching and

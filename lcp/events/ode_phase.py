@@ -10,6 +10,7 @@ import numpy as np
 
 from ..contact_problem import ContactProblem
 from .event_location import event_functions
+from .indeterminate import admissibility_rows, branch_forces
 from .model import mass_projection
 from .modes import AccelProblem
 from .options import EventOptions
@@ -161,12 +162,19 @@ class OdePhase(SmoothPhase):
         return self._margin
 
     def binding(self, t, y):
-        """(kind, contact) of the inequality that limits the force margin at (t, y)."""
-        margin, slack, labels = self.margin_at(t, y)
-        tight = [lab for x, lab in zip(slack, labels) if x <= max(margin, 0.0) + 1e-9 * max(1.0, abs(margin))]
-        tight = tight or [labels[int(np.argmin(slack))]]
-        # a contact unloading takes its friction bound with it: call it a lift-off
-        kind, jj = next((lab for lab in tight if lab[0] == "lift-off"), tight[0])
+        """(kind, contact) of what ends a phase of redundant contacts at (t, y): a contact whose
+        normal force must vanish there (``"lift-off"``: tipping), else the friction bound or
+        sliding direction with the least slack, both judged on the least-norm admissible forces."""
+        n = self.model.n
+        data = self.model.data(min(t, self.t_left), y[:n], y[n:2 * n])
+        acc = AccelProblem(data, self.idx, self.slide, self.mu)
+        check = acc.check_modes(self.modes)
+        bf = branch_forces(acc.pb, check, acc.branch_modes(self.modes))
+        G, h, _, labels = admissibility_rows(acc.pb, check)
+        slack = G @ bf.p - h
+        tol = 1e-9 * max(acc.pb.scale, float(np.max(np.abs(bf.p))))
+        lift = [lab for x, lab in zip(slack, labels) if lab[0] == "lift-off" and x <= tol]
+        kind, jj = lift[0] if lift else labels[int(np.argmin(slack))]
         return kind, int(self.idx[jj])
 
     def end_acceleration(self):
