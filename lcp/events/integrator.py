@@ -1,20 +1,18 @@
 """The event loop: decide the modes, integrate a smooth phase to its first event, project, repeat."""
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..contact_problem import OPEN, STICK
 from ..result import SolverStats
 from .accumulation import BounceSequence, sum_up
 from .impacts import ImpactLaw
-from .model import EPS, absmax, all_finite, system_model
+from .model import EPS, all_finite, system_model, zero_test_scales
 from .modes import ModeSelector
 from .ode_phase import OdePhase
 from .options import EVENT_STATUS_MESSAGES, EventOptions, SmoothIntegrator
 from .phases import ClosedFormPhase
-from .projection import StateProjector
+from .projection import StateProjector, check_initial
 from .records import Event, Impact, Impulse, Phase, make_record
 
 __all__ = ["Integrator", "Inconsistent"]
@@ -41,31 +39,9 @@ class Integrator:
         self.closed_form = self.model.polynomial and options.smooth is not SmoothIntegrator.SCIPY
         self.stats = SolverStats()
         self.events, self.impulses, self.phases = [], [], []
-        # scales for the zero tests
         model = self.model
-        if model.polynomial:
-            acc_scale = model.__dict__.get("acc_scale")
-            if acc_scale is None:
-                d = model.data(0.0, q0, v0)
-                acc_scale = model.acc_scale = float(np.max(np.abs(d.qdd_free))) if n else 0.0
-            A_max = model.A_max
-        else:
-            d = model.data(0.0, q0, v0)
-            acc_scale = float(np.max(np.abs(d.qdd_free))) if n else 0.0
-            A_max = float(np.max(np.abs(d.A)))
-        # The zero tests' scales: velocities reached and distances covered over the horizon, but
-        # over no more than 100 times the scene's own time scale (a ball resting on a floor
-        # for 1e6 s must not have a 1e6-fold coarser length tolerance).
-        V0, L0 = (absmax(v0), absmax(q0)) if n else (0.0, 0.0)
-        T = t_end
-        if acc_scale > 0:
-            T_own = 100.0 * max(math.sqrt(L0 / acc_scale), V0 / acc_scale)
-            T = min(t_end, T_own) if T_own > 0 else t_end
-        V = max(V0, acc_scale * T, 1e-300)
-        self.scales = {"V": V, "L": max(V * T, L0, 1e-300),
-                       "A": max(acc_scale, V / T),
-                       "P": max(A_max * V, 1e-300),
-                       "F": max(A_max * max(acc_scale, V / T), 1e-300)}
+        self.scales = zero_test_scales(model, q0, v0, t_end)
+        V = self.scales["V"]
         self.vel_tol = options.tol * V
         self.gap_tol = options.tol * self.scales["L"]
         self.selector = ModeSelector(model, options, self.mu, self.stats, self.scales, t_end,
@@ -75,25 +51,13 @@ class Integrator:
         self.accumulations, self.impact_list = [], []
         self.nonunique = 0
         self.bounces = BounceSequence()
-        bp = np.asarray(getattr(system, "breakpoints", None) if getattr(system, "breakpoints", None) is not None
-                        else (), dtype=float).ravel()
+        bp = getattr(system, "breakpoints", None)
+        bp = np.asarray(() if bp is None else bp, dtype=float).ravel()
         self.breakpoints = np.unique(bp[(bp > 0) & (bp < t_end)]).tolist()
 
-    # --- consistency of the initial state
     def check_initial(self, q0, v0):
-        sys = self.sys
-        if sys.n_bilateral:
-            phi, G, phi_t = (np.array(x, dtype=float) for x in sys.constraints_fn(0.0, q0))
-            G = G.reshape(sys.n_bilateral, self.n)
-            if np.max(np.abs(phi)) > 1e-9 * self.scales["L"]:
-                raise ValueError(f"q0 violates the bilateral constraints (residual {np.max(np.abs(phi)):.3g})")
-            if np.max(np.abs(G @ v0 + phi_t.ravel())) > 1e-9 * self.scales["V"]:
-                raise ValueError("v0 violates the velocity form of the bilateral constraints")
-        if self.m:
-            gap = self.model.gaps(q0)
-            bad = np.flatnonzero(gap < -self.gap_tol) if min(gap.tolist()) < -self.gap_tol else ()
-            if len(bad):
-                raise ValueError(f"q0 penetrates contact {bad[0]} (gap {gap[bad[0]]:.3g} < 0)")
+        """ValueError if (q0, v0) violates the bilateral constraints or penetrates a contact."""
+        check_initial(self.sys, self.model, q0, v0, self.scales, self.gap_tol)
 
     # --- the acceleration-level problem and the next mode
     def classify(self, q, v):

@@ -14,7 +14,8 @@ import casadi as ca
 import numpy as np
 
 __all__ = ["EPS", "StateData", "SystemModel", "system_model", "check_state", "mass_projection",
-           "all_finite", "absmax", "accel_function", "coordinate_rows"]
+           "all_finite", "absmax", "accel_function", "coordinate_rows",
+           "zero_test_scales"]
 
 EPS = np.finfo(float).eps
 
@@ -212,3 +213,32 @@ def mass_projection(A, J, r):
     return AJ @ np.linalg.lstsq(J @ AJ, r, rcond=None)[0]
 
 
+
+
+def zero_test_scales(model, q0, v0, t_end) -> dict:
+    """Scales of the zero tests (a velocity, a gap, a force "is zero"): velocity V, length L,
+    acceleration A, impulse P and force F.
+
+    Velocities reached and distances covered over the horizon, but over no more than 100 times
+    the scene's own time scale: a ball resting on a floor for 1e6 s must not get a 1e6-fold
+    coarser length tolerance.
+    """
+    n = model.n
+    if model.polynomial:
+        acc_scale = model.__dict__.get("acc_scale")
+        if acc_scale is None:
+            d = model.data(0.0, q0, v0)
+            acc_scale = model.acc_scale = float(np.max(np.abs(d.qdd_free))) if n else 0.0
+        A_max = model.A_max
+    else:
+        d = model.data(0.0, q0, v0)
+        acc_scale = float(np.max(np.abs(d.qdd_free))) if n else 0.0
+        A_max = float(np.max(np.abs(d.A)))
+    V0, L0 = (absmax(v0), absmax(q0)) if n else (0.0, 0.0)
+    T = t_end
+    if acc_scale > 0:
+        T_own = 100.0 * max(math.sqrt(L0 / acc_scale), V0 / acc_scale)
+        T = min(t_end, T_own) if T_own > 0 else t_end
+    V = max(V0, acc_scale * T, 1e-300)
+    return {"V": V, "L": max(V * T, L0, 1e-300), "A": max(acc_scale, V / T), "P": max(A_max * V, 1e-300),
+            "F": max(A_max * max(acc_scale, V / T), 1e-300)}
