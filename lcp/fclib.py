@@ -346,18 +346,41 @@ def _from_global(M, H, f, w, mu, name, storage):
                        storage=storage)
 
 
-def write_dat(path, cf: ContactFile) -> None:
-    """Write the local form of a problem in Siconos's ``.dat`` layout (CSparse triplet storage)."""
-    W = sp.coo_matrix(cf.W)
+def write_dat(path, cf: ContactFile, storage: str = "csparse") -> None:
+    """Write the local form of a problem in Siconos's ``.dat`` layout.
+
+    ``storage``: ``"csparse"`` (triplets), ``"sparse-block"`` (2 x 2 blocks, the storage Siconos's
+    fc2d solvers take sparse) or ``"dense"`` (column-major).
+    """
+    if storage not in ("csparse", "sparse-block", "dense"):
+        raise ValueError(f"storage must be 'csparse', 'sparse-block' or 'dense', got {storage!r}")
     k = cf.n_contacts
+    n = 2 * k
+    lines = [f"2\n{k}\n"]
+    if storage == "dense":
+        lines.append(f"0\n{n}\n{n}\n{n}\t{n}\n")
+        Wd = cf.W.toarray()
+        for j in range(n):  # one column per line
+            lines.append(" ".join(f"{x:.17e}" for x in Wd[:, j]) + "\n")
+    elif storage == "sparse-block":
+        B = sp.bsr_matrix(cf.W, blocksize=(2, 2))
+        B.sort_indices()
+        nb = B.indices.size
+        sizes = " ".join(str(2 * (i + 1)) for i in range(k))
+        lines.append(f"1\n{n}\n{n}\n{nb}\n{k}\n{k}\n{sizes}\n{sizes}\n{k + 1}\n{nb}\n")
+        lines.append(" ".join(map(str, B.indptr)) + "\n")
+        lines.append(" ".join(map(str, B.indices)) + "\n")
+        for b in range(nb):
+            lines.append(f"{b}\n" + " ".join(f"{x:.17e}" for x in B.data[b].ravel(order="F")) + "\n")
+    else:
+        W = sp.coo_matrix(cf.W)
+        lines.append(f"2\n{n}\n{n}\n1\nCSparse Version 3.1.9 (written by lcp.fclib)\n"
+                     f"triplet: {n}-by-{n}, nzmax: {W.nnz} nnz: {W.nnz}\n")
+        lines.extend(f"    {i} {j} : {x:.17g}\n" for i, j, x in zip(W.row, W.col, W.data))
+    lines.append(" ".join(f"{x:.17g}" for x in cf.q) + "\n")
+    lines.append(" ".join(f"{x:.17g}" for x in cf.mu) + "\n")
     with open(path, "w") as fh:
-        fh.write(f"2\n{k}\n2\n{2 * k}\n{2 * k}\n1\n")
-        fh.write("CSparse Version 3.1.9 (written by lcp.fclib)\n")
-        fh.write(f"triplet: {2 * k}-by-{2 * k}, nzmax: {W.nnz} nnz: {W.nnz}\n")
-        for i, j, x in zip(W.row, W.col, W.data):
-            fh.write(f"    {i} {j} : {x:.17g}\n")
-        fh.write(" ".join(f"{x:.17g}" for x in cf.q) + "\n")
-        fh.write(" ".join(f"{x:.17g}" for x in cf.mu) + "\n")
+        fh.writelines(lines)
 
 
 # --------------------------------------------------------------------------- FCLib (HDF5)
@@ -383,9 +406,17 @@ def _h5_matrix(grp, what, path):
     return mat
 
 
+def _h5py():
+    try:
+        import h5py
+    except ImportError:  # pragma: no cover - h5py is in the "fclib" extra
+        raise ImportError("FCLib HDF5 files need h5py: pip install lcp-lem[fclib]") from None
+    return h5py
+
+
 def read_hdf5(path) -> ContactFile:
     """Read an FCLib HDF5 problem (``/fclib_local`` or ``/fclib_global``, planar)."""
-    import h5py
+    h5py = _h5py()
 
     path = os.fspath(path)
     name = os.path.basename(path)
@@ -437,7 +468,7 @@ def _h5_write_matrix(g, A):
 
 def write_hdf5(path, cf: ContactFile, form: str | None = None) -> None:
     """Write a problem in FCLib's HDF5 layout (CSC matrices); ``form`` defaults to the file's own."""
-    import h5py
+    h5py = _h5py()
 
     form = form or cf.form
     if form not in ("local", "global"):
