@@ -207,6 +207,8 @@ class OsqpSolver(OneStepSolver):
         import osqp
 
         n = 2 * pb.k
+        if sp.issparse(pb.W):
+            return self._sparse_workspace(pb)
         key = pb.key if pb.key is not None else ("size", n)
         solver = self._cache.get(key)
         if solver is not None and pb.key is not None:
@@ -223,6 +225,34 @@ class OsqpSolver(OneStepSolver):
         l, u = self._bounds(pb, np.zeros(pb.k))
         solver.setup(P, pb.q, sp.identity(n, format="csc"), l, u, **self.settings)
         self._cache[key] = solver
+        return solver
+
+    def _sparse_workspace(self, pb: ContactProblem):
+        """The workspace of a sparse W: P = triu(W) with W's own pattern (memory grows with nnz).
+
+        Keyed problems set up once; unkeyed ones reuse the workspace of the same size when the
+        pattern is unchanged (only P's values are updated) and set up anew otherwise.
+        """
+        import osqp
+
+        n = 2 * pb.k
+        key = pb.key if pb.key is not None else ("sparse", n)
+        solver = self._cache.get(key)
+        if solver is not None and pb.key is not None:
+            return solver
+        P = sp.triu(pb.W, format="csc")
+        P.sort_indices()
+        if solver is not None:
+            indptr, indices = self._patterns[key]
+            if np.array_equal(indptr, P.indptr) and np.array_equal(indices, P.indices):
+                solver.update(Px=P.data)
+                return solver
+        solver = osqp.OSQP()
+        l, u = self._bounds(pb, np.zeros(pb.k))
+        solver.setup(P, pb.q, sp.identity(n, format="csc"), l, u, **self.settings)
+        self._cache[key] = solver
+        self._patterns = getattr(self, "_patterns", {})
+        self._patterns[key] = (P.indptr.copy(), P.indices.copy())
         return solver
 
     @staticmethod

@@ -28,7 +28,7 @@ def random_problem(k, seed, mu=0.5):
     return ContactProblem(W, q, np.full(k, mu))
 
 
-@pytest.mark.parametrize("name", ["nsgs", "newton", "auto"])
+@pytest.mark.parametrize("name", ["nsgs", "newton", "auto", "osqp"])
 @pytest.mark.parametrize("k,seed", [(3, 0), (12, 1), (40, 2)])
 def test_iterative_solvers_satisfy_coulomb(name, k, seed):
     pb = random_problem(k, seed)
