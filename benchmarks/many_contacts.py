@@ -67,7 +67,8 @@ for i in range(qs.shape[0]):
     its += so.iparam[sn.SICONOS_IPARAM_ITER_DONE]
     fails += int(info != 0)
     diff = max(diff, float(np.max(np.abs(r - rs[i]))))
-print(json.dumps(dict(time=total, worst_error=worst, iterations=its, failures=fails, max_impulse_diff=diff)))
+print(json.dumps(dict(time=float(total), worst_error=float(worst), iterations=int(its), failures=int(fails),
+                      max_impulse_diff=float(diff))))
 '''
 
 
@@ -143,14 +144,19 @@ def bench_scenes(Ks, use_siconos):
         for K in Ks:
             scene = lcp.scenes.block_chain(K) if family == "block_chain" else jean_pratt_copies(K)
             ref, best = None, np.inf
-            for name in solvers_for(K):
-                reps = 3 if K <= 10 else 1
-                times = []
-                for _ in range(reps):
+            names = solvers_for(K)
+            for name in names:  # warm-up: CasADi functions, numba kernels, caches
+                lcp.simulate(scene, 5 * H_STEP, h=H_STEP, solver=name)
+            reps = 3 if K <= 100 else 1
+            times = {name: [] for name in names}
+            results = {}
+            for _ in range(reps):  # interleaved repeats: a change of machine load hits every solver
+                for name in names:
                     t0 = time.perf_counter()
-                    r = lcp.simulate(scene, T_END, h=H_STEP, solver=name)
-                    times.append(time.perf_counter() - t0)
-                t = min(times)
+                    results[name] = lcp.simulate(scene, T_END, h=H_STEP, solver=name)
+                    times[name].append(time.perf_counter() - t0)
+            for name in names:
+                r, t = results[name], min(times[name])
                 if ref is None:
                     ref = r
                 diff = float(np.max(np.abs(r.q - ref.q))) if r.q.shape == ref.q.shape else np.nan

@@ -119,11 +119,13 @@ class StepAssembly:
         SHt = sp.hstack(cols).tocsr() if cols else sp.csr_matrix((n, 0))
         if not np.all(np.isfinite(SHt.data)):
             raise FloatingPointError("singular iteration matrix: the mass matrix is singular")
-        self.SHt, self.H = SHt, H.tocsr()
-        self.W = (self.H @ SHt).tocsr()
+        self.SHt, self.H = SHt, _LeadingRows(H.tocsr(), m)
+        self.W = (H.tocsr() @ SHt).tocsr()
+        self._HN = self.H[:m]
         self.gap0 = np.array(gap, dtype=float).ravel()
         self.F0 = sys_.force(z, z)
         self.Kq, self.Cv = -K.tocsr(), -C.tocsr()
+        self._hhK = (h * h * th) * self.Kq
         self.G, self.phi_t = np.zeros((0, n)), np.zeros(0)
         self.force_constant = not sys_.force_depends_on_state
         self.dv_const = (lu.solve(h * self.F0) if self.constant and self.force_constant and not self.Kq.nnz
@@ -142,6 +144,8 @@ class StepAssembly:
 
     def at(self, t, q, v):
         """(v_free - v, SHt, W, gap, H) at the start of a step from (t, q, v)."""
+        if self.sparse and self.schedule is None:
+            return self._at_sparse(t, q, v)
         if self.dv_const is not None:
             return self.dv_const, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
         if self.matrices_constant:
@@ -165,6 +169,21 @@ class StepAssembly:
             dv = dv + self._control_correction(t, q, S)
         return dv, SHt, W, gap, H
 
+    def _at_sparse(self, t, q, v):
+        """:meth:`at` of the sparse assembly: the factors of W_h instead of S, no matrix rebuilt."""
+        gap = self.gap0 + self._HN @ q
+        if self.dv_const is not None:
+            return self.dv_const, self.SHt, self.W, gap, self.H
+        h, th = self.h, self.theta
+        if self.constant:
+            Fth = self.F0 if self.force_constant else self.F0 + self.Kq @ q + self.Cv @ v
+        else:
+            f = self.sys.force_fn
+            Fth = ((1 - th) * np.array(f(t, q, v), dtype=float).ravel()
+                   + th * np.array(f(t + h, q, v), dtype=float).ravel())
+        dv = self._lu.solve(h * Fth + self._hhK @ v)
+        return dv, self.SHt, self.W, gap, self.H
+
     def _control_correction(self, t, q, S):
         """Replace the theta-weighted control force by the control's exact impulse over the step.
 
@@ -179,6 +198,21 @@ class StepAssembly:
                     + th * np.array(cf(t + h, q), dtype=float).ravel())
         B = np.array(self.sys.control_matrix_fn(t, q), dtype=float).reshape(self.n, -1)
         return S @ (B @ self.schedule.impulse(t, t + h) - seen)
+
+
+class _LeadingRows(sp.csr_matrix):
+    """A CSR matrix that keeps its leading row block ``[:m]`` (the normal rows of the contact
+    Jacobian, which the stepping loop takes every step) instead of slicing it each time."""
+
+    def __init__(self, A, m):
+        super().__init__(A)
+        self._m = m
+        self._lead = sp.csr_matrix(A[:m])
+
+    def __getitem__(self, key):
+        if isinstance(key, slice) and key.start in (None, 0) and key.step in (None, 1) and key.stop == self._m:
+            return self._lead
+        return sp.csr_matrix(self).__getitem__(key)
 
 
 def kahan_add(s, inc, comp):

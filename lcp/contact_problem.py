@@ -176,6 +176,8 @@ class ContactProblem:
             # sparse operators stay sparse (memory grows with nnz); tiny ones are cheaper dense
             self.W = (self.W.toarray().astype(float) if self.W.shape[0] <= SPARSE_MIN_SIZE
                       else sp.csr_matrix(self.W, dtype=float))
+            if sp.issparse(self.W):
+                self._branch_lus = {}  # modes -> SuperLU of the branch matrix (it depends on W only)
         else:
             self.W = np.asarray(self.W, dtype=float)
         self.q = np.asarray(self.q, dtype=float)
@@ -197,6 +199,8 @@ class ContactProblem:
         new = object.__new__(ContactProblem)
         new.W, new.mu, new.key, new.k, new.rho = self.W, self.mu, self.key, self.k, self.rho
         new.q = q
+        if "_branch_lus" in self.__dict__:  # sparse W: branch factorizations are shared too
+            new._branch_lus = self._branch_lus
         if self.k == 1:  # floats: cheaper than three NumPy calls on a 2-vector
             qN, qT = q.tolist()
             rN, rT = self.rho.tolist()
@@ -297,34 +301,42 @@ class ContactProblem:
         return E, r
 
     def _solve_branch_sparse(self, modes: np.ndarray) -> np.ndarray | None:
-        """solve_branch for a sparse W: the same rows, assembled and factorized sparsely."""
-        from scipy.sparse.linalg import spsolve
+        """solve_branch for a sparse W: the same rows, assembled and factorized sparsely.
+
+        The branch matrix depends on W, mu and the modes only, so its factorization is kept per
+        modes (shared by :meth:`with_q` copies): time stepping refines on the same branch step
+        after step.
+        """
+        from scipy.sparse.linalg import splu
 
         k, W = self.k, self.W
-        j = np.arange(k)
         closed = modes != OPEN
         stick = modes == STICK
-        slide = closed & ~stick
-        # rows taken from W: u_N of closed contacts, u_T of sticking ones; identity rows otherwise
         from_W = np.concatenate([closed, stick])
-        D = sp.diags(from_W.astype(float))
-        eye_rows = np.flatnonzero(~from_W)
-        cols = eye_rows.copy()
-        vals = np.ones(eye_rows.size)
-        sj = j[slide]  # p_T + -mu p_N = 0 on sliding contacts: the p_N column of their rows
-        sgn = np.where(modes[slide] == SLIDE_POS, 1.0, -1.0)
-        E = (D @ W + sp.csr_matrix((np.concatenate([vals, sgn * self.mu[sj]]),
-                                    (np.concatenate([eye_rows, k + sj]), np.concatenate([cols, sj]))),
-                                   shape=(2 * k, 2 * k))).tocsc()
-        r = -np.where(from_W, self.q, 0.0)
-        import warnings
-
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")  # scipy warns (not raises) on a singular matrix
+        cache = self.__dict__.setdefault("_branch_lus", {})
+        key = modes.astype(np.int8).tobytes()
+        lu = cache.get(key)
+        if lu is None:
+            j = np.arange(k)
+            slide = closed & ~stick
+            # rows taken from W: u_N of closed contacts, u_T of sticking ones; identity rows otherwise
+            eye_rows = np.flatnonzero(~from_W)
+            sj = j[slide]  # p_T + -mu p_N = 0 on sliding contacts: the p_N column of their rows
+            sgn = np.where(modes[slide] == SLIDE_POS, 1.0, -1.0)
+            E = (sp.diags(from_W.astype(float)) @ W
+                 + sp.csr_matrix((np.concatenate([np.ones(eye_rows.size), sgn * self.mu[sj]]),
+                                  (np.concatenate([eye_rows, k + sj]), np.concatenate([eye_rows, sj]))),
+                                 shape=(2 * k, 2 * k))).tocsc()
             try:
-                p = spsolve(E, r)
-            except (RuntimeError, Warning):
-                return None
+                lu = splu(E)
+            except RuntimeError:  # exactly singular: the branch's impulses are not unique
+                lu = False
+            if len(cache) > 64:
+                cache.clear()
+            cache[key] = lu
+        if lu is False:
+            return None
+        p = lu.solve(-np.where(from_W, self.q, 0.0))
         if not np.all(np.isfinite(p)):
             return None
         return p

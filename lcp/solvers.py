@@ -448,21 +448,24 @@ class NewtonSolver(OneStepSolver):
         op = warm.op
         tol = 1e-3 * self.residual_tol * pb.scale  # relative, as NsgsSolver's
         p = np.zeros(2 * pb.k) if warm.p is None else warm.p.copy()
-        res = pb.residual(p)
+        res = np.inf  # the sweeps below compute it
         its, msg = 0, ""
         qi = pb.q[op.perm]
         for rnd in range(self.max_rounds):
             if res <= tol:
                 break
+            if not self.sweeps and rnd == 0:
+                res = pb.residual(p)
+                if res <= tol:
+                    break
             if self.sweeps:
                 # where Newton stalls (degenerate contacts) NSGS does the work: its share doubles
                 n_sw = self.sweeps * 2 ** min(rnd, 10)
-                r, sw, _, _ = nsgs(op, qi, pb.mu, p[op.perm], tol, n_sw, self.compiled)
+                r, sw, res_s, _ = nsgs(op, qi, pb.mu, p[op.perm], tol, n_sw, self.compiled)
                 its += sw
                 p_s = np.empty_like(r)
                 p_s[op.perm] = r
-                res_s = pb.residual(p_s)
-                if res_s <= res:
+                if res_s <= res:  # the sweeps' residual is ContactProblem.residual's measure
                     p, res = p_s, res_s
                 if res <= tol:
                     break
