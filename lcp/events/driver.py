@@ -81,6 +81,8 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     integ.check_initial(q0, v0)
     phases, status, message, t_fail = integ.run(q0, v0)
     n, m = system.n, system.n_contacts
+    for note in integ.notes:
+        message = f"{message} {note}"
     if integ.nonunique:
         message = (f"{message} Contact forces are not unique in {integ.nonunique} phase(s) (redundant "
                    "contacts): the least-norm admissible forces are reported; the motion is unique.")

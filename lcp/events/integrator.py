@@ -50,6 +50,7 @@ class Integrator:
         self.projector = StateProjector(system, model)
         self.accumulations, self.impact_list = [], []
         self.nonunique = 0
+        self.notes = []  # said in the result's message
         self.bounces = BounceSequence()
         bp = getattr(system, "breakpoints", None)
         bp = np.asarray(() if bp is None else bp, dtype=float).ravel()
@@ -135,6 +136,10 @@ class Integrator:
                 continue
             if groups:
                 # several motions and no impulse: follow the one Moreau-Jean's vanishing step picks
+                if not self.notes:
+                    self.notes.append(f"At t = {t:.10g} {len(groups)} motions were consistent (non-unique "
+                                      "solution); the integration followed the one a vanishing "
+                                      "Moreau-Jean step selects.")
                 for g in groups:
                     for s in g:
                         if all((im == OPEN) == (sm == OPEN) for im, sm in zip(imodes, s.modes)):
