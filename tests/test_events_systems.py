@@ -326,3 +326,34 @@ def test_control_schedule_holds_a_block_exactly_at_the_friction_bound():
     np.testing.assert_allclose(res.q[:, 0], x, rtol=0, atol=1e-13)
     held = (t >= 1) & (t < 2)
     np.testing.assert_allclose(res.force_T[held, 0], -Fb, rtol=1e-14)  # exactly on the bound
+
+
+# ----------------------------------------------------------------- systems the method was not tuned on
+@pytest.mark.slow
+@settings(max_examples=20, deadline=None)
+@given(m=st.floats(0.1, 10.0), w=st.floats(0.2, 2.0), h=st.floats(0.2, 2.0), mu=st.floats(0.05, 1.5),
+       hf=st.floats(-0.5, 1.0))
+def test_random_boxes_slide_or_tip_at_the_exact_time_or_say_why_not(m, w, h, mu, hf):
+    c = m  # F = m t: the onsets are a few seconds away
+    t_slide, t_tip = box_onsets(m, w, h, mu, c, hf)
+    t_tip = t_tip if h / 2 + hf > 0 else math.inf  # pushed below the centre: tips backwards, later
+    t_on = min(t_slide, t_tip)
+    res = event_driven(box(m, w, h, mu, c, hf), [0.0, h / 2, 0.0], np.zeros(3), 1.1 * t_on, n_eval=23)
+    if not res.success:
+        assert res.status < 0 and res.message  # a failure is reported, never a wrong answer
+        return
+    ev = res.events[0]
+    assert abs(ev.t - t_on) <= 1e-11 * max(1.0, t_on)
+    assert ev.kind == ("slip" if t_slide < t_tip else "lift-off")
+
+
+def test_block_between_parallel_walls_says_that_its_motion_is_not_unique():
+    # A rigid block touching two parallel walls without preload may stay (friction with any
+    # squeeze) or fall (no squeeze, no friction): both motions are consistent.
+    q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
+    walls = [Contact(gap=q[0], tangent=q[1], mu=0.5, name="left"), Contact(gap=-q[0], tangent=q[1], mu=0.5, name="right")]
+    res = event_driven(System(q, v, mass=ca.SX.eye(2), force=ca.vertcat(0, -G), contacts=walls), [0.0, 0.0],
+                       [0.0, 0.0], 1.0, n_eval=3)
+    assert res.success and "motions were consistent" in res.message
+    assert res.mode_sequence == [("open", "open")]  # a vanishing Moreau-Jean step lets it fall
+    np.testing.assert_allclose(res.q[:, 1], -G * res.t ** 2 / 2, rtol=1e-15)

@@ -53,8 +53,11 @@ class Integrator:
         self.notes = []  # said in the result's message
         self.bounces = BounceSequence()
         bp = getattr(system, "breakpoints", None)
-        bp = np.asarray(() if bp is None else bp, dtype=float).ravel()
-        self.breakpoints = np.unique(bp[(bp > 0) & (bp < t_end)]).tolist()
+        if bp is None or not len(bp):
+            self.breakpoints = []
+        else:
+            bp = np.asarray(bp, dtype=float).ravel()
+            self.breakpoints = np.unique(bp[(bp > 0) & (bp < t_end)]).tolist()
 
     def check_initial(self, q0, v0):
         """ValueError if (q0, v0) violates the bilateral constraints or penetrates a contact."""
