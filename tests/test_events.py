@@ -12,8 +12,8 @@ from lcp.events import EventOptions, EventResult, event_driven
 from lcp.exact import JeanPrattExact
 from lcp.system import Contact, System
 
-X_EXACT = 1e-13  # issue 4: |x(t) - exact| at the output times
-T_STOP = 1e-14  # issue 4: |t_stop - tau0| <= T_STOP * max(1, tau0)
+X_EXACT = 1e-13  # |x(t) - exact| at the output times
+T_STOP = 1e-14  # |t_stop - tau0| <= T_STOP * max(1, tau0)
 
 
 def run(scene, **kw):

@@ -17,7 +17,22 @@ Events
 - a sliding velocity reaching zero (stop);
 - a normal force reaching zero (lift-off);
 - a stick force reaching the friction bound (stick -> slip);
-- a gap closing (impact).
+- a gap closing (impact);
+- for redundant contacts, the set of admissible forces becoming empty (slip or tipping);
+- a breakpoint of the forces (``System.breakpoints``, e.g. the switches of a control schedule):
+  phases end exactly there and see the forces' left limit.
+
+Redundant contacts (two corners of a box, the legs of a table, a block in a groove) have a
+positive semidefinite Delassus matrix: the motion is unique but the forces are not. Their forces
+are the least-norm admissible ones, the phase is flagged (``Phase.forces_unique``,
+``EventResult.nonunique_forces`` and the message), and the phase ends when no admissible forces
+remain (:mod:`~lcp.events.indeterminate`). A force that the mode decision found consistent on its
+bound (a stick exactly at the friction limit) is kept there, not flipped at every rounding error.
+
+Accumulations of impacts (a ball bouncing to rest) are detected and summed up at their limit, in
+closed form or by Aitken's extrapolation; the contacts then persist with zero normal velocity
+(exactly zero gap on a flat contact). They are listed in ``EventResult.accumulations``, and every
+resolved impact in ``EventResult.impacts`` (:mod:`~lcp.events.accumulation`).
 
 At each event the next mode comes from the **acceleration-level contact problem**. With the
 closed contacts c (gap 0, normal velocity 0), the contact accelerations are affine in the contact
@@ -59,7 +74,7 @@ Cost on constant systems
 With constant mass matrix, kinematics and forces (``System.is_constant`` and no state dependence
 of the forces) the acceleration-level problems, the phases' accelerations and forces, the
 projection matrices and the check of the mass matrix depend on the System only: they are built
-on first use and kept per System object (``_Model``), so that a later call only classifies the
+on first use and kept per System object (``SystemModel``), so that a later call only classifies the
 contacts, finds the event times, projects the state at events and evaluates the quadratic phases
 at the output times (all at once, with NumPy). The results are those of a fresh System.
 
@@ -76,15 +91,17 @@ Modules
 - :mod:`~lcp.events.records`: :class:`EventResult` and what it lists (events, impulses, phases);
 - :mod:`~lcp.events.model`: the system evaluated at a state, and what is kept per system;
 - :mod:`~lcp.events.modes`: mode selection at the acceleration level;
+- :mod:`~lcp.events.indeterminate`: redundant contacts (least-norm admissible forces, force margin);
 - :mod:`~lcp.events.phases`, :mod:`~lcp.events.ode_phase`: smooth phases (closed form, SciPy);
 - :mod:`~lcp.events.event_location`: the events that end a phase;
 - :mod:`~lcp.events.impacts`: the velocity-level impact law;
+- :mod:`~lcp.events.accumulation`: accumulations of impacts and their limit;
 - :mod:`~lcp.events.projection`: the projection onto the active constraints at events;
 - :mod:`~lcp.events.integrator`, :mod:`~lcp.events.driver`: the event loop and :func:`event_driven`.
 """
 from .driver import event_driven
 from .options import EVENT_STATUS_MESSAGES, EventOptions, ModeSolver, SmoothIntegrator
-from .records import Event, EventResult, Impulse, Phase
+from .records import Accumulation, Event, EventResult, Impact, Impulse, Phase
 
 __all__ = ["EVENT_STATUS_MESSAGES", "SmoothIntegrator", "ModeSolver", "EventOptions", "Event", "Impulse",
-           "Phase", "EventResult", "event_driven"]
+           "Impact", "Accumulation", "Phase", "EventResult", "event_driven"]

@@ -48,12 +48,14 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     EventResult
         ``t`` (n_points,), ``q`` and ``v`` (n_points, n) at the output times, impulses ``p_N``,
         ``p_T`` and ``modes`` (n_points - 1, m) per output interval, ``force_N`` and ``force_T``
-        (n_points, m), ``t_events``, ``events``, ``impulses``, ``phases`` (with the integrator of
-        each), ``mode_sequence``, ``status``, ``message``, ``success`` and ``stats``.
+        (n_points, m), ``t_events``, ``events``, ``impulses``, ``impacts``, ``accumulations``,
+        ``phases`` (with the integrator of each), ``nonunique_forces``, ``mode_sequence``,
+        ``status``, ``message``, ``success`` and ``stats``.
 
     Examples
     --------
-    The Jean-Pratt block slides and sticks at tau0 = 0.152905... s (physics.md section 2):
+    The Jean-Pratt block slides and sticks at tau0 = 0.152905... s (the exact solution,
+    :mod:`lcp.exact`):
 
     >>> import lcp
     >>> sc = lcp.scenes.jean_pratt()
@@ -69,6 +71,19 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     >>> imp = res.impulses[0]
     >>> imp.t, round(imp.P_N, 12), round(imp.P_T, 12), res.mode_sequence
     (0.0, 1.0, -2.0, [('stick',)])
+
+    A ball dropped from 1 m with restitution 0.8 bounces infinitely often before
+    t_inf = sqrt(2/g) (1 + 2 e / (1 - e)) = 4.0637... s, then rests exactly on the floor:
+
+    >>> import casadi as ca
+    >>> from lcp.system import Contact, System
+    >>> q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
+    >>> ball = System(q, v, mass=ca.SX.eye(2), force=ca.vertcat(0, -9.81),
+    ...               contacts=[Contact(gap=q[1], tangent=q[0], mu=0.3, e=0.8, name="floor")])
+    >>> res = event_driven(ball, [0.0, 1.0], [0.0, 0.0], 1e6, t_eval=[0.0, 10.0, 1e6])
+    >>> acc = res.accumulations[0]
+    >>> round(acc.t, 12), acc.method, acc.n_impacts == len(res.impacts), res.q[1:, 1].tolist()
+    (4.063712768872, 'closed-form', True, [0.0, 0.0])
     """
     opts = EventOptions.from_kwargs(**options)
     if not (isinstance(t_end, (int, float, np.floating)) and math.isfinite(t_end) and t_end > 0):
