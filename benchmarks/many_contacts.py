@@ -125,6 +125,29 @@ def siconos_steps(scene, res, tmp):
     return out
 
 
+def ours_steps(scene, res, name):
+    """Our solver alone on the same per-step problems as :func:`siconos_steps` (warm-started the
+    same way, through the problem key): total solve time, worst error, largest impulse difference."""
+    W, qs, rs = step_problems(scene, res)
+    if not len(qs):
+        return None
+    m = scene.system.n_contacts
+    back = np.argsort(interleave(m))
+    template = ContactProblem(W, qs[0][back], scene.system.mu, key="steps")
+    solver = make_solver(name)
+    solver.solve(template)  # warm-up (kernels, caches), then from a cold start again
+    solver = make_solver(name)
+    total, worst, diff = 0.0, 0.0, 0.0
+    for qi, ri in zip(qs, rs):
+        pb = template.with_q(qi[back])
+        t0 = time.perf_counter()
+        sol = solver.solve(pb)
+        total += time.perf_counter() - t0
+        worst = max(worst, natural_map_error(pb.W, pb.q, pb.mu, sol.p))
+        diff = max(diff, float(np.max(np.abs(sol.p - ri[back]))))
+    return dict(time=total, worst_error=worst, max_impulse_diff=diff, steps=len(qs))
+
+
 def solvers_for(K):
     names = ["auto", "newton", "nsgs"]
     if K == 1:
@@ -175,6 +198,15 @@ def bench_scenes(Ks, use_siconos):
                     except Exception as exc:  # noqa: BLE001 - the peer's failure is reported
                         print(f"{'':18s} Siconos peer failed: {exc}")
                         s = None
+                for name in ("auto", "nsgs"):
+                    o = ours_steps(scene, ref, name)
+                    if o is not None:
+                        us = o["time"] / (o["steps"] * K) * 1e6
+                        rows.append(dict(scene=family, K=K, solver=f"{name} (solve only)", status=0, us=us,
+                                         diff=o["max_impulse_diff"], residual=o["worst_error"], iterations=0))
+                        print(f"{family:18s} K={K:5d} {name:8s} (solve only) {us:8.2f} us/contact-step "
+                              f"max|r - r_auto| {o['max_impulse_diff']:.1e} worst error {o['worst_error']:.1e}",
+                              flush=True)
                 if s is not None:
                     us = s["time"] / (s["steps"] * K) * 1e6
                     rows.append(dict(scene=family, K=K, solver="siconos-nsgs (solve only)", status=-s["failures"],

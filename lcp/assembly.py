@@ -97,9 +97,17 @@ class StepAssembly:
         z = np.zeros(n)
 
         def csc(x):
-            return sp.csc_matrix(ca.DM(x).sparse(), dtype=float)
+            x = ca.DM(x)
+            r, c = x.sparsity().get_triplet()
+            return sp.csc_matrix((np.array(x.nonzeros(), dtype=float), (r, c)), shape=x.shape)
 
-        A, F, K, C, _, _, gap, H = sys_.step_data_fn(0.0, z, z)
+        # structural zeros removed symbolically (a mass matrix built from a dense array has n^2
+        # structural entries, whose conversion alone would cost seconds at n = 2000)
+        q_, v_, t_ = sys_.q_sym, sys_.v_sym, sys_.t_sym
+        fn = ca.Function("sparse_step_data", [t_, q_, v_],
+                         [ca.sparsify(sys_.mass_expr), ca.sparsify(-ca.jacobian(sys_.force_expr, q_)),
+                          ca.sparsify(-ca.jacobian(sys_.force_expr, v_)), ca.sparsify(sys_.H_expr), sys_.gap_expr])
+        A, K, C, H, gap = fn(0.0, z, z)
         A, K, C, H = csc(A), csc(K), csc(C), csc(H)
         Wh = (A + (h * th) * C + (h * th) ** 2 * K).tocsc()
         try:

@@ -136,6 +136,22 @@ def planar_refine(W00, W01, W10, W11, rN, rT, mu, mode, ops=PY_OPS):
     return dpN, dpT
 
 
+_RESIDUAL_KERNELS = []
+
+
+def _compiled_residual():
+    """The compiled natural-map kernels of :mod:`lcp.nsgs` when numba is installed, else None."""
+    if not _RESIDUAL_KERNELS:
+        try:
+            from . import nsgs
+
+            _RESIDUAL_KERNELS.append((nsgs.residual_blocked_dense, nsgs.residual_blocked_csr)
+                                     if nsgs.HAVE_NUMBA else None)
+        except ImportError:  # pragma: no cover
+            _RESIDUAL_KERNELS.append(None)
+    return _RESIDUAL_KERNELS[0]
+
+
 @dataclass
 class ContactProblem:
     """The discrete Coulomb problem  u = W p + q  for k planar contacts.
@@ -233,6 +249,13 @@ class ContactProblem:
             s = float(self.mu[0]) * max(pN, 0.0)
             rT = pT - min(max(pT - rhoT * uT, -s), s)
             return max(abs(min(pN, rhoN * uN)), abs(rT))
+        fast = _compiled_residual()
+        if fast is not None and p.dtype == np.float64 and np.all(np.isfinite(p)):
+            # the same natural map, compiled: NumPy's per-call overhead dominates at small k
+            if sp.issparse(self.W):
+                W = self.W
+                return float(fast[1](W.indptr, W.indices, W.data, self.q, self.mu, self.rho, p))
+            return float(fast[0](self.W, self.q, self.mu, self.rho, p))
         u = self.velocity(p)
         pN, pT = p[:k], p[k:]
         rN = np.minimum(pN, self.rho[:k] * u[:k])

@@ -130,7 +130,7 @@ class ProblemCheck:
 
 
 def check_problem(W, q, mu, name: str = "problem", sym_tol: float = 1e-5, psd_tol: float = 1e-9,
-                  dense_limit: int = 3000) -> ProblemCheck:
+                  dense_limit: int = 4096) -> ProblemCheck:
     """Check a local problem (W, q, mu) before any solve.
 
     Sizes that disagree, negative or non-finite mu, non-finite entries of W or q are errors;

@@ -188,3 +188,37 @@ def nsgs(op: InterleavedOperator, q, mu, r0=None, tol: float = 1e-12, max_sweeps
     sweeps, res, fails = fn(op.indptr, op.indices, op.data, op.blocks, np.asarray(q, dtype=float),
                             np.asarray(mu, dtype=float), op.rho, r, float(tol), int(max_sweeps))
     return r, int(sweeps), float(res), int(fails)
+
+
+@njit(cache=True)
+def residual_blocked_dense(W, q, mu, rho, p):
+    """ContactProblem.residual's natural map for a dense W in blocked order (normals first)."""
+    k = mu.size
+    n = 2 * k
+    res = 0.0
+    for j in range(k):
+        uN = q[j]
+        uT = q[k + j]
+        for i in range(n):
+            uN += W[j, i] * p[i]
+            uT += W[k + j, i] * p[i]
+        rN = min(p[j], rho[j] * uN)
+        s = mu[j] * max(p[j], 0.0)
+        z = min(max(p[k + j] - rho[k + j] * uT, -s), s)
+        res = max(res, abs(rN), abs(p[k + j] - z))
+    return res
+
+
+@njit(cache=True)
+def residual_blocked_csr(indptr, indices, data, q, mu, rho, p):
+    """ContactProblem.residual's natural map for a CSR W in blocked order (normals first)."""
+    k = mu.size
+    res = 0.0
+    for j in range(k):
+        uN = q[j] + _row_dot(indptr, indices, data, p, j)
+        uT = q[k + j] + _row_dot(indptr, indices, data, p, k + j)
+        rN = min(p[j], rho[j] * uN)
+        s = mu[j] * max(p[j], 0.0)
+        z = min(max(p[k + j] - rho[k + j] * uT, -s), s)
+        res = max(res, abs(rN), abs(p[k + j] - z))
+    return res
