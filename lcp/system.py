@@ -393,6 +393,8 @@ class System:
                 raise ValueError(f"{name} must have shape ({self.n},), got {x.shape}")
             if not np.all(np.isfinite(x)):
                 raise ValueError(f"{name} must be finite, got {x}")
+        if self.__dict__.get("_mass_checked_constant"):
+            return q0, v0  # a constant mass matrix (and constraints) passed the check below once
         A = self.mass(q0, t0)
         if not np.all(np.isfinite(A)):
             raise ValueError("mass matrix is not finite at q0")
@@ -406,6 +408,9 @@ class System:
         if eig.min() <= 1e-14 * max(1.0, abs(eig).max()):
             raise ValueError("mass matrix is singular or not positive definite (on the constraint manifold) "
                              f"at q0: eigenvalues {eig}")
+        # the check does not depend on the state when nothing in it does: done once (it costs an
+        # eigenvalue decomposition, seconds for thousands of coordinates)
+        self._mass_checked_constant = self.mass_is_constant and self.kinematics_is_constant
         return q0, v0
 
 
