@@ -357,3 +357,49 @@ def test_block_between_parallel_walls_says_that_its_motion_is_not_unique():
     assert res.success and "motions were consistent" in res.message
     assert res.mode_sequence == [("open", "open")]  # a vanishing Moreau-Jean step lets it fall
     np.testing.assert_allclose(res.q[:, 1], -G * res.t ** 2 / 2, rtol=1e-15)
+
+
+def box_dropped(e, mu=0.5, m=1.0, w=1.0, h=0.5):
+    q, v = ca.SX.sym("q", 3), ca.SX.sym("v", 3)
+    x, y, th = q[0], q[1], q[2]
+    cs, sn = ca.cos(th), ca.sin(th)
+    contacts = [Contact(gap=y + sn * sx * w / 2 - cs * h / 2, tangent=x + cs * sx * w / 2 + sn * h / 2, mu=mu, e=e,
+                        name=name) for sx, name in ((-1, "rear"), (1, "front"))]
+    return System(q, v, mass=ca.diag(ca.vertcat(m, m, m * (w * w + h * h) / 12)), force=ca.vertcat(0, -m * G, 0),
+                  contacts=contacts)
+
+
+@pytest.mark.parametrize("e", [0.5, 0.7])
+def test_box_dropped_flat_bounces_on_both_corners_to_rest(e):
+    # both corners land together: a redundant impact (its friction impulses are not unique)
+    drop = 0.25
+    res = event_driven(box_dropped(e), [0.0, 0.25 + drop, 0.0], np.zeros(3), 3.0, n_eval=31)
+    assert res.success, res.message
+    (acc,) = res.accumulations
+    t_k, u_k, t_inf = ball_impacts(drop, e, acc.n_impacts)
+    assert acc.contacts == (0, 1) and acc.method == "aitken" and abs(acc.t - t_inf) <= 1e-12
+    times = np.array([imp.t for imp in res.impacts]).reshape(-1, 2)
+    np.testing.assert_allclose(times, np.column_stack([t_k, t_k]), rtol=0, atol=1e-13)
+    p_N = np.array([imp.p_N for imp in res.impacts]).reshape(-1, 2)
+    np.testing.assert_allclose(p_N, np.column_stack([u_k, u_k]) * (1 + e) / 2, rtol=0, atol=1e-12)
+    assert np.max(np.abs([imp.p_T for imp in res.impacts])) <= 1e-13  # least-norm: no internal squeeze
+    rest = res.t > t_inf
+    np.testing.assert_allclose(res.q[rest], np.tile([0.0, 0.25, 0.0], (rest.sum(), 1)), rtol=0, atol=1e-15)
+    assert np.max(np.abs(res.v[rest])) <= 1e-15 and res.mode_sequence[-1] == ("stick", "stick")
+
+
+@pytest.mark.parametrize("name, system, q0, v0", [
+    ("tilted box", box_dropped(0.5), [0.0, 0.5, 0.1], [0.0, 0.0, 0.0]),
+    ("ball in a bowl", ball(smooth_floor=0.5), [0.3, 1.0], [0.5, 0.0]),
+])
+def test_bouncing_to_persistent_contact_ends_on_the_surface(name, system, q0, v0):
+    res = event_driven(system, q0, v0, 6.0, n_eval=61)
+    assert res.success, res.message
+    assert res.accumulations and res.impacts
+    t_last = res.accumulations[-1].t
+    after = res.t > t_last
+    gaps = np.array([system.gaps(q) for q in res.q[after]])
+    assert np.max(np.abs(gaps)) <= 1e-13  # in persistent contact from the accumulation on
+    # energy only decreases (impacts with e < 1, friction)
+    energy = np.array([system.kinetic_energy(q, v) for q, v in zip(res.q, res.v)]) + G * res.q[:, 1]
+    assert np.all(np.diff(energy) <= 1e-12)

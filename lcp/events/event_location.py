@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["first_landing", "first_stop", "event_functions"]
+__all__ = ["first_landing", "first_stop", "event_functions", "approach_gap"]
 
 
 def first_stop(u0: float, a: float, s: float) -> float:
@@ -89,5 +89,16 @@ def event_functions(phase, t0, y0, force_tol: float = 0.0):
     if phase.indeterminate:
         make(lambda t, y: phase.margin_at(t, y)[0], "force-limit", -1, force=True)
     for j in phase.open_idx:
-        make(lambda t, y, j=j: float(model.gaps(y[:n])[j]), "impact", j)
+        make(lambda t, y, j=j: approach_gap(model, y, n, j), "impact", j)
     return evs, meta
+
+
+def approach_gap(model, y, n, j) -> float:
+    """The gap of contact j while it closes, and a positive value while it opens: a contact that
+    leaves the surface starts at gap 0, and a first step too short to change the gap in floating
+    point must not read as an impact. The landing is unchanged (the gap, approached with u_N < 0)."""
+    q = y[:n]
+    gap = float(model.gaps(q)[j])
+    if gap > 0 or float(model.jac(q)[j] @ y[n:2 * n]) < 0:
+        return gap
+    return 1.0 + abs(gap)

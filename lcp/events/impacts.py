@@ -14,6 +14,7 @@ import numpy as np
 
 from ..contact_problem import ContactProblem
 from ..solvers import make_solver
+from .indeterminate import branch_forces
 
 __all__ = ["ImpactLaw"]
 
@@ -68,9 +69,12 @@ class ImpactLaw:
             return None
         modes = pb_d.modes(sol.p)
         pb0 = ContactProblem(W, qv, self.mu[idx])
-        p = pb0.solve_branch(modes)
+        p = pb0.solve_branch(modes) if idx.size == 1 else None
         if p is None or not pb0.admissible(p, modes):
-            p = sol.p  # the branch is singular at delta = 0: keep the vanishing-step solution
+            # several contacts (possibly redundant: two corners landing flat), or a singular
+            # branch: its least-norm admissible impulses, else the vanishing-step solution
+            bf = branch_forces(pb0, modes, modes)
+            p = bf.p if bf is not None and bf.admissible else sol.p
         self.stats.max_residual = max(self.stats.max_residual, pb0.residual(p))
         return SH @ p, p, modes
 
