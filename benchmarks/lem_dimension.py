@@ -14,7 +14,7 @@ one truncated moment system (no restart). Three families of systems:
   v_0 = 1 couples every degree and every moment is needed; dimension C(N + 2, 2).
 
 Columns: ``build_s`` = Taylor expansion of f (jets) + reachability search + sparse assembly
-(``lem.truncation.moment_system``); ``solve_s`` = one ``lem.truncation.solve(..., check=False)``
+(``lem.moments.moment_system``); ``solve_s`` = one ``lem.solve(..., check=False)``
 (build + ``expm_multiply``) minus the build; ``total_s`` = build + solve; ``checked_s`` = a full
 ``solve`` with the a-posteriori estimate (four degrees N - 4, N - 2, N, N + 2). Times are medians
 of K repeats after a warm-up. ``error`` is |y_N(1) - y(1)| against a 25-digit mpmath reference
@@ -33,7 +33,9 @@ from pathlib import Path
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from lem.truncation import LEMWarning, moment_system, solve
+from lem.moments import moment_system
+from lem.propagation import solve
+from lem.result import LEMWarning
 
 TARGET_S = 2.0
 

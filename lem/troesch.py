@@ -3,7 +3,7 @@
     y'' = lambda sinh(lambda y),  y(0) = 0,  y(1) = 1.
 
 The initial slope s = y'(0) is found by shooting: each trial integrates ``y' = z, z' = lambda
-sinh(lambda y)`` over [0, 1] with the restarted LEM engine (:func:`lem.truncation.solve`), whose
+sinh(lambda y)`` over [0, 1] with the restarted LEM engine (:func:`lem.solve`), whose
 propagators also give the sensitivity d y(1) / d s for Newton's method. y(1; s) increases with s
 (y'' > 0 for y > 0), so the root is bracketed and Newton steps that leave the bracket are replaced
 by bisection. For large lambda the shooting solution has a pole just beyond x = 1 (at x = 1.00135
@@ -25,7 +25,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .truncation import AnalyticField, LEMResult, LEMWarning, solve
+from .fields import AnalyticField
+from .propagation import solve
+from .result import LEMResult, LEMWarning
 
 __all__ = ["TROESCH_REFERENCE", "TROESCH_POLE_10", "STATUS_MESSAGES", "troesch_field", "shoot",
            "TroeschResult", "solve_troesch"]
@@ -67,7 +69,7 @@ def _check_lam(lam) -> float:
 def shoot(lam: float, s: float, **options) -> LEMResult:
     """Integrate y(0) = 0, y'(0) = s over [0, 1] with the (by default auto-restarted) LEM engine.
 
-    ``options`` go to :func:`lem.truncation.solve` (defaults: degree 16, restart "auto",
+    ``options`` go to :func:`lem.solve` (defaults: degree 16, restart "auto",
     rtol 1e-12, atol 1e-14).
     """
     if not np.isfinite(s):
@@ -150,7 +152,7 @@ def solve_troesch(lam: float, *, s0: float | None = None, xtol: float = 1e-13, f
     maxiter : int
         Maximum number of trials.
     **options
-        Passed to :func:`lem.truncation.solve` (``degree``, ``rtol``, ``restart`` ...).
+        Passed to :func:`lem.solve` (``degree``, ``rtol``, ``restart`` ...).
 
     Returns
     -------
@@ -200,7 +202,7 @@ def solve_troesch(lam: float, *, s0: float | None = None, xtol: float = 1e-13, f
             lo = max(lo, s)
         else:
             hi = min(hi, s)
-        step = -F / dF if dF > 0 else math.nan
+        step = _newton_step(lam, F, dF)
         if near:
             best = (s, F, dF, res)
             if abs(F) <= ftol or (np.isfinite(step) and abs(step) <= xtol * s):
@@ -222,6 +224,22 @@ def solve_troesch(lam: float, *, s0: float | None = None, xtol: float = 1e-13, f
     s, F, dF, res = best
     est = float(res.error_estimate[0, -1]) / dF + abs(F / dF)
     return _result(lam, s, F, est, status, message, maxiter, failed, res, dF, history)
+
+
+def _newton_step(lam: float, F: float, dF: float) -> float:
+    """Newton step on G = (2/lam) (1 - exp(-lam F / 2)) for an overshoot (F > 0), on F otherwise.
+
+    Beyond the root the pole x_p of the shooting solution nears x = 1, and there
+    y ~ -(2/lam) log(lam (x_p - x) / 2) (y'' ~ (lam/2) exp(lam y)): y(1; s) grows only like a
+    logarithm of the distance to the pole, which plain Newton descends in many small steps, while
+    exp(-lam y(1) / 2) is about linear in s. G = F + O(F**2) at the root, so the last steps and
+    the stopping test are Newton's on F.
+    """
+    if not dF > 0:
+        return math.nan
+    if F <= 0:
+        return -F / dF
+    return -(2.0 / lam) * math.expm1(min(0.5 * lam * F, 700.0)) / dF
 
 
 def _bisect(lo: float, hi: float) -> float:

@@ -39,8 +39,11 @@ from scipy.integrate import solve_ivp
 
 from lem import series
 from lem.troesch import TROESCH_REFERENCE, solve_troesch, troesch_field
-from lem.truncation import (LEMWarning, moment_system, smooth_friction_field, solve, tanh_ode_field,
-                            taylor_coefficients)
+from lem.moments import moment_system
+from lem.paper_equations import smooth_friction_field, tanh_ode_field
+from lem.propagation import solve
+from lem.result import LEMWarning
+from lem.taylor import taylor_coefficients
 from studies._common import out_dir, parse_args, save, write_csv
 
 import matplotlib.pyplot as plt  # noqa: E402  (studies._common selects the Agg backend first)

@@ -1,4 +1,4 @@
-"""The LEM engine (lem.truncation) against exact solutions, exact series and solve_ivp references."""
+"""The LEM engine (lem.solve and its modules) against exact solutions, exact series and solve_ivp references."""
 import math
 import warnings
 from fractions import Fraction
@@ -10,10 +10,14 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 from lem import series
-from lem.truncation import (STATUS_MESSAGES, AnalyticField, Jet, LEMOptions, LEMWarning,
-                            PolynomialField, _space, double_series, initial_data_coefficients,
-                            moment_rhs_3_16, moment_system, smooth_friction_field, solve,
-                            tanh_ode_field, tanh_taylor_coefficients, taylor_coefficients)
+from lem.fields import AnalyticField, PolynomialField
+from lem.jets import Jet, monomial_space
+from lem.moments import moment_system
+from lem.paper_equations import (moment_rhs_3_16, smooth_friction_field, tanh_ode_field,
+                                 tanh_taylor_coefficients)
+from lem.propagation import solve
+from lem.result import STATUS_MESSAGES, LEMOptions, LEMWarning
+from lem.taylor import double_series, initial_data_coefficients, taylor_coefficients
 
 #: reference integrations (issue 3: solve_ivp with rtol 1e-13)
 REF = dict(method="DOP853", rtol=1e-13, atol=1e-15)
@@ -353,7 +357,7 @@ def test_jet_coefficients_against_cauchy_integrals(name, u0):
     theta = 2 * np.pi * np.arange(M) / M
     vals = getattr(np, name)(u0 + r * np.exp(1j * theta))
     ref = [float((np.mean(vals * np.exp(-1j * k * theta)) / r**k).real) for k in range(D + 1)]
-    coeffs = getattr(np, name)(Jet.variable(_space(2, D), 0, u0)).coefficients()
+    coeffs = getattr(np, name)(Jet.variable(monomial_space(2, D), 0, u0)).coefficients()
     for k in range(D + 1):
         scale = max(abs(v) * r**j for j, v in enumerate(ref)) / r**k
         assert abs(coeffs.get((k, 0), 0.0) - ref[k]) <= 1e-13 * scale
@@ -363,7 +367,7 @@ def test_jet_coefficients_against_cauchy_integrals(name, u0):
 def test_jet_univariate_coefficients(name, u0):
     mpmath = pytest.importorskip("mpmath")
     D = 25
-    space = _space(2, D)
+    space = monomial_space(2, D)
     u = Jet.variable(space, 0, u0)
     g = getattr(np, name)(u)
     coeffs = g.coefficients()
@@ -377,7 +381,7 @@ def test_jet_univariate_coefficients(name, u0):
 
 
 def test_jet_multivariate_identities():
-    space = _space(2, 12)
+    space = monomial_space(2, 12)
     a = Jet.variable(space, 0, 0.3)
     b = Jet.variable(space, 1, -0.2)
     lhs = np.exp(a + 2 * b)
