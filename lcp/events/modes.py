@@ -41,6 +41,7 @@ from .model import EPS, StateData
 from .options import ModeSolver
 
 __all__ = ["AccelProblem", "ModeSolution", "ModeSelector", "enumerate_branches", "boundary_alternatives",
+           "closed_variant",
            "group_motions"]
 
 
@@ -138,6 +139,32 @@ def enumerate_branches(acc: AccelProblem, allowed=None) -> tuple[list, int]:
         if bf is not None and bf.admissible:
             sols.append(ModeSolution(modes, bf.p, acc.qdd(bf.p), nullity=bf.nullity))
     return sols, tried
+
+
+def closed_variant(acc: AccelProblem, sol: ModeSolution, rtol: float = 1e-9) -> ModeSolution | None:
+    """``sol`` with its open contacts that touch with zero normal acceleration closed instead
+    (sticking, or sliding the way their tangential acceleration points), if that is admissible;
+    None otherwise. Lemke's method may call such contacts open (redundant contacts: a table's
+    legs), and an open contact at zero gap would end its phase at once."""
+    pb, k = acc.pb, acc.k
+    a = pb.velocity(sol.p)
+    tol = rtol * max(pb.scale, float(np.max(np.abs(sol.p))) if k else 0.0)
+    modes = list(sol.modes)
+    for j, md in enumerate(sol.modes):
+        if md != OPEN or abs(a[j]) * pb.rho[j] > tol:
+            continue
+        if acc.slide[j] != 0:
+            modes[j] = SLIDE_POS if acc.slide[j] > 0 else SLIDE_NEG
+        else:
+            aT = a[k + j] * pb.rho[k + j]
+            modes[j] = SLIDE_POS if aT > tol else (SLIDE_NEG if aT < -tol else STICK)
+    modes = tuple(modes)
+    if modes == tuple(sol.modes):
+        return None
+    bf = branch_forces(pb, acc.check_modes(modes), acc.branch_modes(modes))
+    if bf is None or not bf.admissible:
+        return None
+    return ModeSolution(modes, bf.p, acc.qdd(bf.p), nullity=bf.nullity)
 
 
 def boundary_alternatives(acc: AccelProblem, modes, p, rtol: float = 1e-9) -> list:
@@ -250,6 +277,9 @@ class ModeSelector:
                     # motion, and the tie must be seen to be broken (else the phase chatters)
                     sols, tried = enumerate_branches(acc, set(product(*alts)))
                     iterations += tried
+                closed = closed_variant(acc, sols[0]) if sols else None
+                if closed is not None and all(s.modes != closed.modes for s in sols):
+                    sols.append(closed)  # the same motion with the unloaded contacts kept closed
         max_residual = None
         for s in sols:
             r = acc.pb.residual(s.p)
