@@ -403,3 +403,22 @@ def test_bouncing_to_persistent_contact_ends_on_the_surface(name, system, q0, v0
     # energy only decreases (impacts with e < 1, friction)
     energy = np.array([system.kinetic_energy(q, v) for q, v in zip(res.q, res.v)]) + G * res.q[:, 1]
     assert np.all(np.diff(energy) <= 1e-12)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mu, kind", [(0.3, "slip"), (0.8, "lift-off")])
+def test_eight_legged_table_past_the_enumeration_limit(mu, kind):
+    # 4^8 branches: Lemke's method picks the modes; the redundant legs must stay closed
+    m, H, hf, c = 4.0, 0.7, 0.1, 2.0
+    legs = tuple(np.linspace(-0.5, 0.5, 8))
+    t_on = mu * m * G / c if kind == "slip" else m * G * 0.5 / (c * (H + hf))
+    res = event_driven(table(m=m, legs=legs, H=H, mu=mu, c=c, hf=hf), [0.0, H, 0.0], np.zeros(3), 1.2 * t_on,
+                       n_eval=25)
+    assert res.success, res.message
+    assert "lemke" in res.solver and abs(res.events[0].t - t_on) <= 1e-12 * t_on
+    after = res.t > t_on
+    if kind == "slip":  # all legs slide together: x = c (t - t_s)^3 / (6 m)
+        np.testing.assert_allclose(res.q[after, 0], c * (res.t[after] - t_on) ** 3 / (6 * m), rtol=1e-9, atol=1e-13)
+    else:
+        assert res.events[0].contact == 0 and res.mode_sequence[1][-1] == "stick"
+        assert all(md == "open" for md in res.mode_sequence[1][:-1])
