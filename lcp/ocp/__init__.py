@@ -1,0 +1,56 @@
+"""Optimal control through frictional contact: Moreau-Jean steps as constraints of an MPCC.
+
+The model is the System itself, with its control input (``System(..., control=u,
+control_bounds=...)``, the force affine in u); :class:`OptimalControlProblem` optimises it and
+``lcp.simulate(system, T, control=result.control)`` replays the same System. Modules:
+
+- :mod:`~lcp.ocp.problem`: :class:`OptimalControlProblem` (costs, constraints, guesses, solve,
+  deterministic multi-start);
+- :mod:`~lcp.ocp.transcription`: the NLP (uniform or free steps, piecewise-constant or linear
+  control hold, the cross complementarity that puts switches on nodes);
+- :mod:`~lcp.ocp.complementarity`: the Scholtes homotopy, polishing and the independent checks;
+- :mod:`~lcp.ocp.replay`: open-loop replay and the replay miss every result carries;
+- :mod:`~lcp.ocp.results`, :mod:`~lcp.ocp.options`, :mod:`~lcp.ocp.model` (``tangential_push``,
+  ``add_control``).
+
+References
+----------
+S. Scholtes, Convergence properties of a regularization scheme for mathematical programs with
+complementarity constraints, SIAM J. Optim. 11 (2001) 918-936.
+M. Jean, The non-smooth contact dynamics method, CMAME 177 (1999) 235-257.
+A. Nurkanovic, M. Sperl, S. Albrecht, M. Diehl, Finite elements with switch detection for direct
+optimal control of nonsmooth systems, Numer. Math. 156 (2024) 1115-1162.
+"""
+from ..contact_problem import MODE_NAMES
+from .model import add_control, controlled_system, tangential_push
+from .options import OCP_STATUS_MESSAGES, HomotopyOptions
+from .problem import OptimalControlProblem
+from .replay import replay, replay_check
+from .results import (
+           HomotopyStage,
+           OCPGuess,
+           OCPResult,
+           ReplayCheck,
+           ReplayResult,
+           Step,
+           effort,
+)
+
+__all__ = [
+           "MODE_NAMES",
+           "OCP_STATUS_MESSAGES",
+           "HomotopyOptions",
+           "HomotopyStage",
+           "OCPGuess",
+           "OCPResult",
+           "OptimalControlProblem",
+           "ReplayCheck",
+           "ReplayResult",
+           "Step",
+           "add_control",
+           "controlled_system",
+           "effort",
+           "replay",
+           "replay_check",
+           "tangential_push",
+]

@@ -1,0 +1,176 @@
+"""Complementarity handling: the Scholtes relaxation homotopy, the polishing solve, and the checks.
+
+The pairs a perp w of the transcription (:mod:`lcp.ocp.transcription`) are relaxed as in Scholtes
+(2001): a >= 0, w >= 0, a w <= sigma. The relaxation parameter goes down geometrically; each NLP
+(one IPOPT instance, built once, sigma a parameter) is warm-started from the previous solution,
+until the Coulomb residual, recomputed independently from the optimizer's states with
+:meth:`~lcp.contact_problem.ContactProblem.residual`, is below the requested tolerance. A final
+polishing solve fixes, pair by pair, the smaller member at zero (the active set the homotopy has
+identified), which makes the complementarity exact; it is kept only if IPOPT converges and the
+residual does not grow.
+
+Limitation: every contact is treated as active at every step (the velocity-level law). Moreau-Jean
+also skips a contact whose predicted gap is positive; ``inactive_conflicts`` counts the steps where
+that would change the step (a positive predicted gap with a nonzero normal impulse).
+
+References
+----------
+S. Scholtes, Convergence properties of a regularization scheme for mathematical programs with
+complementarity constraints, SIAM J. Optim. 11 (2001) 918-936.
+"""
+from __future__ import annotations
+
+import time
+
+import casadi as ca
+import numpy as np
+
+from ..contact_problem import ContactProblem
+from .options import OCP_STATUS_MESSAGES, HomotopyOptions
+from .results import HomotopyStage
+from .transcription import PAIRS
+
+__all__ = ["diagnose", "ipopt_solver", "run_homotopy"]
+
+
+def ipopt_solver(tr, options: HomotopyOptions, warm: bool, cache: dict) -> ca.Function:
+    """IPOPT on the transcription's NLP (cold, or warm-started with a small barrier), cached."""
+    key = (warm, options.max_iter, options.ipopt_tol, tuple(sorted((options.ipopt_options or {}).items())))
+    if key not in cache:
+        ip = {"print_level": 0, "sb": "yes", "tol": options.ipopt_tol, "constr_viol_tol": options.ipopt_tol,
+              "max_iter": int(options.max_iter), "mu_strategy": "adaptive", "bound_relax_factor": 0.0}
+        if warm:
+            # the previous stage's solution is close: start IPOPT's barrier small so that the
+            # warm start is not pushed back into the interior
+            ip.update({"warm_start_init_point": "yes", "mu_init": 1e-6,
+                       "warm_start_bound_push": 1e-9, "warm_start_mult_bound_push": 1e-9})
+        ip.update(options.ipopt_options or {})
+        cache[key] = ca.nlpsol("ocp_warm" if warm else "ocp", "ipopt", tr.nlp, {"print_time": False, "ipopt": ip})
+    return cache[key]
+
+
+def run_homotopy(tr, x0, P0, options: HomotopyOptions, cache: dict):
+    """The relaxation stages and the polishing solve. Returns (x, cost, diag, status, message, history)."""
+    cold, warm = ipopt_solver(tr, options, False, cache), ipopt_solver(tr, options, True, cache)
+    x, lam_x, lam_g = x0, None, None
+    history, best = [], None
+    status, message = -2, OCP_STATUS_MESSAGES[-2]
+    sigma = float(options.sigma0)
+    for i in range(options.n_stages):
+        P0[0] = sigma
+        args = {"x0": x, "lbx": tr.lbx, "ubx": tr.ubx, "lbg": tr.lbg, "ubg": tr.ubg, "p": P0}
+        t0 = time.perf_counter()
+        solver = cold if lam_x is None else warm
+        sol = solver(**args) if lam_x is None else solver(lam_x0=lam_x, lam_g0=lam_g, **args)
+        st = solver.stats()
+        dt = time.perf_counter() - t0
+        xs = np.array(sol["x"]).ravel()
+        diag = diagnose(tr, xs)
+        ok = bool(st["success"]) or st["return_status"] == "Solved_To_Acceptable_Level"
+        history.append(HomotopyStage(sigma, int(st["iter_count"]), diag["residual"], diag["max_product"],
+                                     float(sol["f"]), st["return_status"], ok, dt))
+        if not ok:
+            status = -1
+            message = f"{OCP_STATUS_MESSAGES[-1]} Stage {i} (sigma = {sigma:.3g}): IPOPT returned {st['return_status']}."
+            break
+        x, lam_x, lam_g = xs, np.array(sol["lam_x"]).ravel(), np.array(sol["lam_g"]).ravel()
+        best = (x, float(sol["f"]), diag)
+        if diag["residual"] <= options.tol and diag["cross"] <= options.tol:
+            status, message = 0, OCP_STATUS_MESSAGES[0]
+            break
+        sigma = max(sigma * options.factor, options.sigma_min)
+    if best is not None and status == -2:
+        message = (f"{OCP_STATUS_MESSAGES[-2]} Residual {best[2]['residual']:.3g} > tol = {options.tol:.3g} "
+                   f"at sigma = {history[-1].sigma:.3g}.")
+    if best is not None and options.polish and tr.pb.system.n_contacts:
+        xp, fp, diagp, st, dt = _polish(tr, best[0], lam_x, lam_g, P0, warm)
+        okp = bool(st["success"])
+        history.append(HomotopyStage(0.0, int(st["iter_count"]), diagp["residual"], diagp["max_product"],
+                                     fp, st["return_status"], okp, dt))
+        if okp and diagp["residual"] <= max(best[2]["residual"], options.tol) and \
+                diagp["cross"] <= max(best[2]["cross"], options.tol):
+            best = (xp, fp, diagp)
+            if diagp["residual"] <= options.tol and diagp["cross"] <= options.tol and status != 0:
+                # the last converged stage identified the active set; polishing finished it
+                message = f"{OCP_STATUS_MESSAGES[0]} (By the polishing solve; before it: {message})"
+                status = 0
+        elif status == 0:
+            status, message = 1, OCP_STATUS_MESSAGES[1]
+    if best is None:
+        return x, float("nan"), diagnose(tr, np.asarray(x)), status, message, history
+    return best[0], best[1], best[2], status, message, history
+
+
+def _polish(tr, x, lam_x, lam_g, P, solver):
+    """Fix the smaller member of each complementarity pair (cross pairs included) at zero and re-solve."""
+    ix = tr.ix
+    lbx, ubx = tr.lbx.copy(), tr.ubx.copy()
+    pairs = [(ix[a].reshape(-1), ix[w].reshape(-1)) for a, w in PAIRS]
+    if tr.cross:  # step k's multipliers against step k-1's slacks (k >= 1)
+        pairs += [(ix[a][1:].reshape(-1), ix[w][:-1].reshape(-1))
+                  for a, w in (("pN", "wN"), ("bp", "wp"), ("bm", "wm"), ("wl", "lam"))]
+    for ia, iw in pairs:
+        a_small = x[ia] <= x[iw]
+        ubx[ia[a_small]] = 0.0
+        ubx[iw[~a_small]] = 0.0
+    t0 = time.perf_counter()
+    sol = solver(x0=np.clip(x, lbx, ubx), lam_x0=lam_x, lam_g0=lam_g, lbx=lbx, ubx=ubx, lbg=tr.lbg,
+                 ubg=tr.ubg, p=P)
+    dt = time.perf_counter() - t0
+    xs = np.array(sol["x"]).ravel()
+    return xs, float(sol["f"]), diagnose(tr, xs), solver.stats(), dt
+
+
+def diagnose(tr, x) -> dict:
+    """Coulomb residual (ContactProblem.residual), dynamics residual and modes per step, in NumPy."""
+    pb = tr.pb
+    _, hs, q, v, u, pN, pT = tr.unpack(x)
+    N, n, m, nb = pb.N, pb.system.n, pb.system.n_contacts, pb.system.n_bilateral
+    th, mu, e = pb.theta, pb.system.mu, pb.system.e
+    ua = u[:N]
+    ubar = ua if pb.hold == "constant" else 0.5 * (u[:-1] + u[1:])
+    tk = np.concatenate([[0.0], np.cumsum(hs)])[:-1]
+    out = tr.step.map(N)(tk[None, :], hs[None, :], q[:-1].T, v[:-1].T, ua.T, ubar.T)
+
+    def blocks(a, r, c):  # (r, c N) -> (N, r, c)
+        return np.array(a, dtype=float).reshape(r, N, c).transpose(1, 0, 2)
+
+    Wh, r, H = blocks(out[0], n, n), blocks(out[1], n, 1)[..., 0], blocks(out[2], 2 * m, n)
+    G, phi_t1, gap = blocks(out[3], nb, n), blocks(out[4], nb, 1)[..., 0], blocks(out[5], m, 1)[..., 0]
+    KKT = np.zeros((N, n + nb, n + nb))
+    KKT[:, :n, :n] = Wh
+    KKT[:, :n, n:] = G.transpose(0, 2, 1)
+    KKT[:, n:, :n] = G
+    rhs = np.concatenate([r, -phi_t1 - np.einsum("kij,kj->ki", G, v[:-1])], axis=1)
+    vfree = v[:-1] + np.linalg.solve(KKT, rhs[..., None])[:, :n, 0]
+    res, conflicts = 0.0, 0
+    modes = np.full((N, m), -1, dtype=np.int8)
+    if m:
+        SHt = np.linalg.solve(KKT, np.concatenate([H.transpose(0, 2, 1), np.zeros((N, nb, 2 * m))], axis=1))[:, :n]
+        W = H @ SHt
+        uN_minus = np.einsum("kij,kj->ki", H[:, :m], v[:-1])
+        qf = np.einsum("kij,kj->ki", H, vfree)
+        gap_pred = gap + hs[:, None] * ((1 - th) * uN_minus + th * qf[:, :m])
+        qf[:, :m] += e * np.minimum(uN_minus, 0.0)  # restitution of approaching contacts only
+        p = np.concatenate([pN, pT], axis=1)
+        for k in range(N):
+            cp = ContactProblem(W[k], qf[k], mu)
+            res = max(res, cp.residual(p[k]))
+            modes[k] = cp.modes(p[k], rtol=1e-6)
+            conflicts += int(np.any((gap_pred[k] > 0) & (pN[k] > 1e-9 * max(1.0, cp.scale))))
+        vplus = vfree + np.einsum("kij,kj->ki", SHt, p)
+        a = np.concatenate([x[tr.ix[nm]].ravel() for nm, _ in PAIRS])
+        w = np.concatenate([x[tr.ix[nm]].ravel() for _, nm in PAIRS])
+        if tr.cross:
+            ix = tr.ix
+            a = np.concatenate([a] + [x[ix[nm][1:]].ravel() for nm in ("pN", "bp", "bm", "wl")])
+            w = np.concatenate([w] + [x[ix[nm][:-1]].ravel() for nm in ("wN", "wp", "wm", "lam")])
+        max_product = float(np.max(a * w))
+        lcp_res = float(np.max(np.abs(np.minimum(a, w))))
+        n_own = N * m * len(PAIRS)  # the cross pairs follow the steps' own pairs
+        cross = float(np.max(np.abs(np.minimum(a[n_own:], w[n_own:])), initial=0.0))
+    else:
+        vplus = vfree
+        max_product = lcp_res = cross = 0.0
+    return {"residual": res, "dynamics": float(np.max(np.abs(vplus - v[1:]))), "modes": modes,
+            "conflicts": conflicts, "max_product": max_product, "lcp": lcp_res, "cross": cross}

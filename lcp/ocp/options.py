@@ -1,0 +1,89 @@
+"""Options of the complementarity homotopy, and the status codes of an optimal control solve."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["OCP_STATUS_MESSAGES", "HomotopyOptions"]
+
+#: status code -> meaning; success is ``status >= 0``.
+OCP_STATUS_MESSAGES = {
+    0: "Solved: the complementarity residual and the replay miss are within tolerance.",
+    1: "Solved by the relaxation homotopy; the polishing solve was rejected and the homotopy iterate kept.",
+    -1: "IPOPT failed during the relaxation homotopy.",
+    -2: "The homotopy ended with a complementarity residual above tolerance.",
+    -3: "The replay of the control misses the optimizer's final state or a path constraint by more than "
+        "replay_tol.",
+}
+
+
+def positive(name, value, allow_zero=False) -> float:
+    """A finite number > 0 (or >= 0), or ValueError naming it."""
+    if not isinstance(value, (int, float, np.floating, np.integer)) or not np.isfinite(value):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    if value < 0 or (value == 0 and not allow_zero):
+        raise ValueError(f"{name} must be {'>= 0' if allow_zero else '> 0'}, got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class HomotopyOptions:
+    """Options of the Scholtes relaxation homotopy and of IPOPT.
+
+    Parameters
+    ----------
+    sigma0 : float
+        First relaxation parameter (> 0): complementarity pairs satisfy a w <= sigma (a force times
+        a velocity, in W).
+    factor : float
+        sigma is multiplied by this factor (in (0, 1)) after each stage.
+    sigma_min : float
+        Smallest sigma tried (> 0, <= sigma0).
+    tol : float
+        Target Coulomb residual (impulse units, :meth:`ContactProblem.residual`, maximum over the
+        steps). The homotopy stops as soon as the residual is below it.
+    polish : bool
+        Finish with one solve whose complementarity is exact (the smaller member of each pair fixed
+        at zero); kept only if IPOPT converges and the residual does not grow.
+    max_iter : int
+        IPOPT iteration limit per stage.
+    ipopt_tol : float
+        IPOPT's convergence tolerance (``tol`` and ``constr_viol_tol``).
+    ipopt_options : dict, optional
+        More IPOPT options (without the ``ipopt.`` prefix); they override the defaults.
+
+    Examples
+    --------
+    >>> from lcp.ocp import HomotopyOptions
+    >>> HomotopyOptions(sigma0=1.0, factor=0.1, sigma_min=1e-6).n_stages
+    7
+    """
+
+    sigma0: float = 1.0
+    factor: float = 0.1
+    sigma_min: float = 1e-12
+    tol: float = 1e-8
+    polish: bool = True
+    max_iter: int = 500
+    ipopt_tol: float = 1e-10
+    ipopt_options: dict | None = None
+
+    def __post_init__(self):
+        positive("sigma0", self.sigma0)
+        positive("sigma_min", self.sigma_min)
+        positive("tol", self.tol)
+        positive("ipopt_tol", self.ipopt_tol)
+        if not 0 < float(self.factor) < 1:
+            raise ValueError(f"factor must lie in (0, 1), got {self.factor!r}")
+        if self.sigma_min > self.sigma0:
+            raise ValueError(f"sigma_min must be <= sigma0, got {self.sigma_min!r} > {self.sigma0!r}")
+        if not isinstance(self.max_iter, (int, np.integer)) or self.max_iter < 1:
+            raise ValueError(f"max_iter must be an integer >= 1, got {self.max_iter!r}")
+        if self.ipopt_options is not None and not isinstance(self.ipopt_options, dict):
+            raise ValueError("ipopt_options must be a dict")
+
+    @property
+    def n_stages(self) -> int:
+        """Most relaxation stages: sigma0, sigma0 factor, ..., down to sigma_min."""
+        return 1 + int(np.ceil(np.log(self.sigma_min / self.sigma0) / np.log(self.factor) - 1e-9))

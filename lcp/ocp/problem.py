@@ -1,0 +1,336 @@
+"""The optimal control problem: a controlled System, a horizon, costs and constraints."""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from ..control import HOLDS, ControlSchedule
+from ..system import System
+from .complementarity import run_homotopy
+from .guess import resample, x0_from_guess
+from .model import add_control
+from .options import OCP_STATUS_MESSAGES, HomotopyOptions, positive
+from .replay import replay_check
+from .results import OCPGuess, OCPResult, Step
+from .transcription import Transcription
+
+__all__ = ["OptimalControlProblem"]
+
+
+class OptimalControlProblem:
+    """Optimal control of a system with frictional contacts, transcribed with Moreau-Jean steps.
+
+    minimize   terminal_cost(T, q_N, v_N) + sum_k h_k stage_cost(step_k) + max_k max_cost(step_k)
+               + control_rate_weight sum_k |u_{k+1} - u_k|^2 / h_k
+    subject to the Moreau-Jean step and the discrete Coulomb law at every step
+               (:mod:`lcp.ocp.transcription`), the control within the system's control bounds,
+               q_0, v_0 given, terminal_constraints(q_N, v_N) = 0, path_constraints(step_k) <= 0,
+               T fixed, or T in T_bounds when ``free_time``.
+
+    Parameters
+    ----------
+    system : System or Scene
+        The model, with its control input (``System(..., control=u, control_bounds=...)``); a
+        Scene also supplies q0 and v0. The same System replays the solution
+        (``lcp.simulate(system, T, control=result.control)``).
+    N : int
+        Number of steps (control intervals), >= 1.
+    control_matrix : array_like or casadi.SX, shape (n, nu), optional
+        For an uncontrolled system: B(q), the control force being B(q) u (:func:`add_control`
+        builds the controlled System, stored as :attr:`system`). See :func:`tangential_push`.
+    u_min, u_max : float or array_like, shape (nu,), optional
+        Control bounds (the system's ``control_bounds`` by default).
+    T : float
+        The final time, or its initial guess when ``free_time``.
+    free_time : bool
+        Make T a decision variable, for minimum-time problems (``terminal_cost=lambda T, q, v: T``).
+    T_bounds : (float, float)
+        Bounds of T when free.
+    q0, v0 : array_like, shape (n,)
+        Initial state (the scene's by default).
+    theta : float
+        Theta of the Moreau-Jean step, in [1/2, 1].
+    hold : {"constant", "linear"}
+        The control between nodes: piecewise constant (one value per step, the default) or
+        piecewise linear (one value per node); either is integrated exactly by the step.
+    steps : {"uniform", "free"}
+        Uniform steps T / N, or step lengths as unknowns (within ``step_bounds`` times T / N) with
+        the cross complementarity that puts every switch on a node (module
+        :mod:`lcp.ocp.transcription`).
+    step_bounds : (float, float)
+        Bounds of a free step, relative to T / N.
+    node_times : dict {k: t}, optional
+        Pin node k at time t (free steps; e.g. the ends of a time window of a path constraint).
+    stage_cost : callable(Step) -> scalar, optional
+        Integrated as sum_k h_k stage_cost(step_k). :func:`effort` gives the exact integral of |u|^2.
+    terminal_cost : callable(T, q, v) -> scalar, optional
+    terminal_constraints : callable(q, v) -> vector, optional
+        Equalities at the final node.
+    path_constraints : callable(Step) -> vector, optional
+        Inequalities (<= 0) at every step (``Step.k`` selects steps).
+    max_cost : callable(Step) -> scalar, optional
+        Minimizes its maximum over the steps (an epigraph variable).
+    control_rate_weight : float
+        Adds this weight times sum |u_{k+1} - u_k|^2 / h: selects the smoothest of equally good
+        controls (minimum time, peak force).
+    replay_tol : float or None
+        ``success`` requires the replay miss (:attr:`OCPResult.replay`) within it; None skips the
+        replay.
+
+    Examples
+    --------
+    Push the Jean-Pratt block (friction 0.5) from rest to rest 0.2 m further in minimum time with
+    |u| <= 20 N (bang-bang; the continuous optimum is 0.281085 s), switches off the grid:
+
+    >>> import casadi as ca, lcp
+    >>> from lcp.ocp import OptimalControlProblem, tangential_push
+    >>> sc = lcp.scenes.jean_pratt(v0=0.0)
+    >>> ocp = OptimalControlProblem(sc, 4, control_matrix=tangential_push(sc.system), u_min=-20,
+    ...                             u_max=20, T=0.5, free_time=True, T_bounds=(0.05, 2.0), steps="free",
+    ...                             terminal_cost=lambda T, q, v: T,
+    ...                             terminal_constraints=lambda q, v: ca.vertcat(q[0] - 0.2, v[0]))
+    >>> res = ocp.solve()
+    >>> res.success, round(res.T, 6), res.replay.final_miss < 1e-9
+    (True, 0.281085, True)
+    """
+
+    def __init__(self, system, N: int, *, control_matrix=None, u_min=None, u_max=None, T: float = 1.0,
+                 free_time: bool = False, T_bounds=(1e-3, 1e3), q0=None, v0=None, theta: float = 0.5,
+                 hold: str = "constant", steps: str = "uniform", step_bounds=(0.05, 4.0), node_times=None,
+                 stage_cost: Callable | None = None, terminal_cost: Callable | None = None,
+                 terminal_constraints: Callable | None = None, path_constraints: Callable | None = None,
+                 max_cost: Callable | None = None, control_rate_weight: float = 0.0,
+                 replay_tol: float | None = 1e-6):
+        from ..scenes import Scene
+
+        if isinstance(system, Scene):
+            q0 = system.q0 if q0 is None else q0
+            v0 = system.v0 if v0 is None else v0
+            system = system.system
+        if not isinstance(system, System):
+            raise ValueError(f"system must be a System or a Scene, got {type(system).__name__}")
+        if control_matrix is not None:
+            system = add_control(system, control_matrix,
+                                 -np.inf if u_min is None else u_min, np.inf if u_max is None else u_max)
+        elif not system.is_controlled:
+            raise ValueError("the system has no control: build it with System(..., control=u) or give "
+                             "control_matrix")
+        if q0 is None or v0 is None:
+            raise ValueError("q0 and v0 are required with a bare System")
+        self.system = system
+        self.q0, self.v0 = system.check_state(q0, v0)
+        if not isinstance(N, (int, np.integer)) or isinstance(N, bool) or N < 1:
+            raise ValueError(f"N must be an integer >= 1, got {N!r}")
+        self.N, self.nu = int(N), system.nu
+        lo, hi = system.control_bounds
+        lo = lo if u_min is None else np.broadcast_to(np.asarray(u_min, dtype=float), (self.nu,))
+        hi = hi if u_max is None else np.broadcast_to(np.asarray(u_max, dtype=float), (self.nu,))
+        if np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(lo > hi):
+            raise ValueError(f"u_min and u_max must satisfy u_min <= u_max, got {u_min!r}, {u_max!r}")
+        self.u_min, self.u_max = np.array(lo, dtype=float), np.array(hi, dtype=float)
+        if not isinstance(theta, (int, float, np.floating)) or not 0.5 <= theta <= 1.0:
+            raise ValueError(f"theta must lie in [1/2, 1], got {theta!r}")
+        self.theta = float(theta)
+        self.T = positive("T", T)
+        self.free_time = bool(free_time)
+        self.T_bounds = _pair("T_bounds", T_bounds)
+        if self.free_time and not self.T_bounds[0] <= self.T <= self.T_bounds[1]:
+            raise ValueError(f"T (the initial guess) must lie within T_bounds {T_bounds!r}, got {T!r}")
+        if hold not in HOLDS:
+            raise ValueError(f"hold must be one of {HOLDS}, got {hold!r}")
+        if steps not in ("uniform", "free"):
+            raise ValueError(f"steps must be 'uniform' or 'free', got {steps!r}")
+        self.hold, self.steps = hold, steps
+        self.step_bounds = _pair("step_bounds", step_bounds)
+        if not self.step_bounds[0] <= 1.0 <= self.step_bounds[1]:
+            raise ValueError(f"step_bounds must contain 1 (the uniform step), got {step_bounds!r}")
+        self.node_times = self._check_node_times(node_times)
+        for name, fn in (("stage_cost", stage_cost), ("terminal_cost", terminal_cost),
+                         ("terminal_constraints", terminal_constraints),
+                         ("path_constraints", path_constraints), ("max_cost", max_cost)):
+            if fn is not None and not callable(fn):
+                raise ValueError(f"{name} must be callable or None")
+        self.stage_cost, self.terminal_cost = stage_cost, terminal_cost
+        self.terminal_constraints, self.path_constraints = terminal_constraints, path_constraints
+        self.max_cost = max_cost
+        self.control_rate_weight = positive("control_rate_weight", control_rate_weight, allow_zero=True)
+        self.replay_tol = None if replay_tol is None else positive("replay_tol", replay_tol)
+        self._tr = None
+        self._solvers = {}
+
+    def _check_node_times(self, node_times) -> dict:
+        if node_times is None:
+            return {}
+        if not isinstance(node_times, dict):
+            raise ValueError("node_times must be a dict {node index: time}")
+        out = {}
+        for k, t in node_times.items():
+            if not isinstance(k, (int, np.integer)) or not 0 < k < self.N:
+                raise ValueError(f"node_times keys must be interior node indices in (0, {self.N}), got {k!r}")
+            out[int(k)] = positive(f"node_times[{k}]", t)
+            if self.steps == "uniform" and not self.free_time and abs(out[k] - k * self.T / self.N) > 1e-12 * self.T:
+                raise ValueError(f"node_times[{k}] = {t!r} is not node {k} of the uniform grid; use steps='free'")
+        return out
+
+    @property
+    def B(self):
+        """The control matrix B(t, q) of the system (CasADi SX, n x nu)."""
+        return self.system.control_matrix_expr
+
+    @property
+    def build_time(self) -> float:
+        return 0.0 if self._tr is None else self._tr.build_time
+
+    @staticmethod
+    def make_step(k, t0, h, q0, q1, v0, v1, u0, u1, p_N, p_T) -> Step:
+        """The Step handed to cost and constraint callables."""
+        return Step(k, t0, t0 + h, h, q0, q1, v0, v1, u0, u1, p_N, p_T)
+
+    def schedule(self, t, u) -> ControlSchedule:
+        """The ControlSchedule of node times t and control values u under this problem's hold."""
+        return ControlSchedule(t, u, hold=self.hold)
+
+    # ------------------------------------------------------------------ guesses
+    def guess(self, u=0.0, T: float | None = None, solver: str = "auto") -> OCPGuess:
+        """An initial guess from a simulation: the control ``u`` replayed through :func:`lcp.simulate`.
+
+        Parameters
+        ----------
+        u : float, array_like or callable
+            The control: a constant (nu,), values per interval/node, or a function of t.
+        T : float, optional
+            Horizon (the problem's T by default).
+        solver : str
+            One-step contact solver of the simulation.
+        """
+        from ..simulation import simulate
+
+        T = self.T if T is None else positive("T", T)
+        t = np.linspace(0.0, T, self.N + 1)
+        rows = self.N if self.hold == "constant" else self.N + 1
+        if callable(u):
+            un = np.array([np.broadcast_to(np.asarray(u(tk), dtype=float), (self.nu,)) for tk in t[:rows]])
+        else:
+            ua = np.asarray(u, dtype=float)
+            un = (np.repeat(np.broadcast_to(ua, (self.nu,))[None, :], rows, 0) if ua.size == self.nu
+                  else ua.reshape(rows, self.nu))
+        un = np.clip(un, self.u_min, self.u_max)
+        sim = simulate(self.system, T, h=T / self.N, theta=self.theta, solver=solver, q0=self.q0, v0=self.v0,
+                       control=self.schedule(t, un))
+        if not sim.success or len(sim.t) != self.N + 1:
+            raise ValueError(f"the guess simulation failed: {sim.message}")
+        return OCPGuess(T=T, q=sim.q, v=sim.v, u=un, p_N=sim.p_N, p_T=sim.p_T, source="simulation")
+
+    def _guess_from(self, guess) -> OCPGuess:
+        if guess is None:
+            mid = np.where(np.isfinite(self.u_min) & np.isfinite(self.u_max), 0.5 * (self.u_min + self.u_max),
+                           np.clip(0.0, self.u_min, self.u_max))
+            return self.guess(u=mid)
+        if isinstance(guess, (OCPResult, OCPGuess)):
+            rows = self.N if self.hold == "constant" else self.N + 1
+            if guess.q.shape != (self.N + 1, self.system.n) or guess.u.shape != (rows, self.nu):
+                return resample(guess, self.N, self.hold)
+            return guess
+        raise ValueError(f"guess must be None, an OCPGuess or an OCPResult, got {type(guess).__name__}")
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, guess=None, options: HomotopyOptions | None = None, **option_kw) -> OCPResult:
+        """Solve by the Scholtes homotopy from a guess, then replay the control (:attr:`OCPResult.replay`).
+
+        Parameters
+        ----------
+        guess : OCPGuess, OCPResult or None
+            Initial guess; one on another grid is resampled. By default, the simulation of the
+            mid-range control (:meth:`guess`).
+        options : HomotopyOptions, optional
+        **option_kw
+            Fields of :class:`HomotopyOptions` (instead of ``options``).
+        """
+        if options is None:
+            options = HomotopyOptions(**option_kw)
+        elif option_kw:
+            raise ValueError("give either options or keyword options, not both")
+        if not isinstance(options, HomotopyOptions):
+            raise ValueError(f"options must be HomotopyOptions, got {type(options).__name__}")
+        if self._tr is None:
+            self._tr = Transcription(self)
+        gs = self._guess_from(guess)
+        t0 = time.perf_counter()
+        P0 = np.concatenate([[0.0], self.q0, self.v0])
+        x, cost, diag, status, message, history = run_homotopy(
+            self._tr, x0_from_guess(self, self._tr, gs), P0, options, self._solvers)
+        res = self._result(x, cost, diag, status, message, history, time.perf_counter() - t0)
+        if self.replay_tol is not None and np.all(np.isfinite(res.q)):
+            try:
+                res.replay = replay_check(res, self.replay_tol)
+            except RuntimeError as exc:
+                res.status, res.message = -3, f"{OCP_STATUS_MESSAGES[-3]} The replay failed: {exc}"
+                return res
+            if res.status >= 0 and not res.replay.ok:
+                res.status = -3
+                res.message = (f"{OCP_STATUS_MESSAGES[-3]} Final-state miss {res.replay.final_miss:.2e}, path "
+                               f"violation {res.replay.path_violation:.2e} > {self.replay_tol:.1e} "
+                               f"({res.replay.method} replay).")
+        return res
+
+    def solve_multistart(self, guesses=None, options: HomotopyOptions | None = None, rtol: float = 1e-6,
+                         **option_kw) -> OCPResult:
+        """Solve from several deterministic starts; return the best, saying whether starts disagree.
+
+        Parameters
+        ----------
+        guesses : sequence of (label, guess), optional
+            By default the simulations of u = u_min, 0 (clipped), the mid-range and u_max, each held
+            constant (:meth:`guess`).
+        rtol : float
+            Costs within this relative tolerance count as the same optimum.
+
+        Returns
+        -------
+        OCPResult
+            The successful solve of lowest cost; ``starts`` lists every start (label, cost, status)
+            and ``message`` says how many distinct optima were reached. Each is a local solution of
+            the MPCC: different optima mean the answer is the best found, not a proven global one.
+        """
+        if guesses is None:
+            cands = [("u_min", self.u_min), ("zero", np.clip(0.0, self.u_min, self.u_max)),
+                     ("mid", 0.5 * (self.u_min + self.u_max)), ("u_max", self.u_max)]
+            guesses = [(lab, self.guess(u=np.where(np.isfinite(u), u, 0.0))) for lab, u in cands]
+        results = [(lab, self.solve(gs, options, **option_kw)) for lab, gs in guesses]
+        ok = [(lab, r) for lab, r in results if r.success]
+        pool = ok if ok else results
+        best_lab, best = min(pool, key=lambda lr: lr[1].cost if np.isfinite(lr[1].cost) else np.inf)
+        costs = sorted(r.cost for _, r in ok)
+        distinct = [c for i, c in enumerate(costs) if i == 0 or abs(c - costs[i - 1]) > rtol * max(1.0, abs(c))]
+        best.starts = [{"label": lab, "cost": r.cost, "status": r.status, "success": r.success} for lab, r in results]
+        note = (f" {len(ok)}/{len(results)} starts succeeded, reaching {len(distinct)} distinct "
+                f"optim{'um' if len(distinct) == 1 else 'a'} (costs {', '.join(f'{c:.8g}' for c in distinct)}); "
+                f"best from start '{best_lab}'" + ("; a local solution, the starts disagree." if len(distinct) > 1
+                                                    else "."))
+        best.message += note
+        return best
+
+    def _result(self, x, cost, diag, status, message, history, solve_time) -> OCPResult:
+        T, hs, q, v, u, pN, pT = self._tr.unpack(x)
+        t = np.concatenate([[0.0], np.cumsum(hs)])
+        t[-1] = T
+        peak = float(x[self._tr.ix["z"]].ravel()[0]) if self.max_cost is not None else float("nan")
+        return OCPResult(t=t, q=q, v=v, u=u, control=self.schedule(t, u), hold=self.hold, steps=hs,
+                         p_N=pN, p_T=pT, modes=diag["modes"], T=T, h=T / self.N, cost=cost, peak=peak,
+                         complementarity_residual=diag["residual"], lcp_residual=diag["lcp"],
+                         dynamics_residual=diag["dynamics"], inactive_conflicts=diag["conflicts"],
+                         status=status, message=message, homotopy=history,
+                         iterations=sum(s.iterations for s in history), solve_time=solve_time,
+                         build_time=self.build_time, problem=self)
+
+
+def _pair(name, value) -> tuple[float, float]:
+    try:
+        lo, hi = (float(x) for x in value)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a pair of numbers, got {value!r}") from exc
+    if not (0 < lo <= hi) or np.isnan(hi):
+        raise ValueError(f"{name} must satisfy 0 < lower <= upper, got {value!r}")
+    return lo, hi

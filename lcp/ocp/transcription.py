@@ -1,0 +1,231 @@
+"""Direct transcription of an optimal control problem with Moreau-Jean steps (an MPCC).
+
+The unknowns are, at the nodes k = 0..N, the state (q_k, v_k); the control, one value per step
+(piecewise-constant hold, the default) or per node (linear hold); over each step k the contact
+impulses, lifted into the complementarity pairs of the discrete Coulomb law; and, with
+``steps="free"``, the step lengths h_k (summing to T). Each step is one step of
+:mod:`lcp.timestepping` with the control's impulse integrated exactly over the step:
+
+    W_h (v_{k+1} - v_k) = r_k + H' p_k + G' lambda_k,     G v_{k+1} + phi_t = 0,
+    q_{k+1} = q_k + h_k ((1 - theta) v_k + theta v_{k+1}),
+    r_k = h_k ((1 - theta) F0(t_k, q_k, v_k) + theta F0(t_k + h_k, q_k, v_k)) + B(t_k, q_k) int u dt
+          - h_k^2 theta K v_k,
+
+where F = F0 + B u is the system's force (affine in u), int u dt over the step is h_k u_k for the
+constant hold and h_k (u_k + u_{k+1}) / 2 for the linear hold, W_h = A + h theta C + (h theta)^2 K
+with K = -dF/dq, C = -dF/dv at the step's start. :class:`lcp.assembly.StepAssembly` integrates a
+:class:`lcp.control.ControlSchedule` the same way, so a replay at the same steps repeats the
+optimizer's trajectory to round-off.
+
+The discrete Coulomb law of each contact is the LCP of
+:meth:`lcp.contact_problem.ContactProblem.to_lcp`, with p_T = h (beta+ - beta-):
+
+    0 <= N      perp  wN = u_N + e min(u_N-, 0)    >= 0,
+    0 <= beta+  perp  wp = lambda + u_T            >= 0,
+    0 <= beta-  perp  wm = lambda - u_T            >= 0,
+    0 <= lambda perp  wl = mu N - beta+ - beta-    >= 0,      u = H(q_k) v_{k+1}, u_N- = H_N(q_k) v_k,
+
+with forces (N = p_N / h) as unknowns, so that a product a w is a power whatever the step.
+
+Free steps: switches off the grid
+---------------------------------
+With ``steps="free"`` the step lengths are unknowns and the *cross complementarity* of FESD
+(Nurkanovic et al. 2024) forbids a mode switch inside a step: the pairs of step k are also
+complementary to the slacks of step k - 1 at their shared node,
+
+    beta+_k wp_{k-1} = 0,  beta-_k wm_{k-1} = 0,  wl_k lambda_{k-1} = 0,  N_k wN_{k-1} = 0,
+
+i.e. a block still sliding at node k keeps its friction at the bound, in the same direction, over
+step k: it can stop only at a node. Within a step the forces are then those of one mode, and for
+forces constant over the step the theta = 1/2 step is exact, so switches (stick/slip/stop and the
+control's own switches) become decision variables and the transcription exact between them.
+"""
+from __future__ import annotations
+
+import time
+
+import casadi as ca
+import numpy as np
+
+__all__ = ["PAIRS", "Transcription"]
+
+#: complementarity pairs (multiplier, slack) of one contact, in the order of the module docstring
+PAIRS = (("pN", "wN"), ("bp", "wp"), ("bm", "wm"), ("lam", "wl"))
+
+
+def _scalar(expr, name):
+    x = ca.SX(expr)
+    if x.numel() != 1:
+        raise ValueError(f"{name} must return a scalar, got shape {x.shape}")
+    return x
+
+
+class Transcription:
+    """The NLP of an :class:`~lcp.ocp.OptimalControlProblem` (variables, bounds, constraints).
+
+    Attributes
+    ----------
+    nlp : dict
+        ``x``, ``f``, ``g`` and ``p`` (sigma, q0, v0) for :func:`casadi.nlpsol`.
+    ix : dict
+        Indices of each block of variables in ``x``.
+    lbx, ubx, lbg, ubg : ndarray
+    step : casadi.Function
+        ``(t, h, q, v, u_start, u_mean) -> (W_h, r, H, G, phi_t(t + h), gap)``.
+    cross : bool
+        Whether the cross complementarity (free steps) is imposed.
+    """
+
+    def __init__(self, pb):
+        t_start = time.perf_counter()
+        self.pb = pb
+        self.step = self._step_function()
+        self.cross = pb.steps == "free" and pb.system.n_contacts > 0
+        self._x, self._lbx, self._ubx = [], [], []
+        self._g, self._lbg, self._ubg = [], [], []
+        self.ix = {}
+        self._build()
+        self.build_time = time.perf_counter() - t_start
+
+    def _step_function(self) -> ca.Function:
+        pb = self.pb
+        sys, th = pb.system, pb.theta
+        t, q, v = sys.t_sym, sys.q_sym, sys.v_sym
+        h = ca.SX.sym("h")
+        us, ubar = ca.SX.sym("us", pb.nu), ca.SX.sym("ubar", pb.nu)
+        B = sys.control_matrix_expr
+        F0 = sys.force_expr
+        Fs = F0 + ca.mtimes(B, us)
+        K, C = -ca.jacobian(Fs, q), -ca.jacobian(Fs, v)
+        Wh = sys.mass_expr + h * th * C + (h * th) ** 2 * K
+        F1 = ca.substitute(F0, t, t + h)
+        r = h * ((1 - th) * F0 + th * F1) + h * ca.mtimes(B, ubar) - h * h * th * ca.mtimes(K, v)
+        G = ca.jacobian(sys.constraints_expr, q)
+        phi_t1 = ca.substitute(ca.jacobian(sys.constraints_expr, t), t, t + h)
+        return ca.Function("mj_step", [t, h, q, v, us, ubar], [Wh, r, sys.H_expr, G, phi_t1, sys.gap_expr])
+
+    # ------------------------------------------------------------------ NLP bookkeeping
+    def _var(self, name, size, lb, ub, key=None):
+        s = ca.SX.sym(name, size)
+        start = sum(x.shape[0] for x in self._x)
+        self._x.append(s)
+        self._lbx.append(np.broadcast_to(lb, (size,)).astype(float))
+        self._ubx.append(np.broadcast_to(ub, (size,)).astype(float))
+        idx = np.arange(start, start + size)
+        if key is not None:
+            self.ix.setdefault(key, []).append(idx)
+        return s
+
+    def _constrain(self, expr, lo, hi):
+        expr = ca.vec(ca.SX(expr))
+        self._g.append(expr)
+        self._lbg.append(np.broadcast_to(lo, (expr.shape[0],)).astype(float))
+        self._ubg.append(np.broadcast_to(hi, (expr.shape[0],)).astype(float))
+
+    # ------------------------------------------------------------------ build
+    def _build(self):
+        pb = self.pb
+        sys, N, n, nu, th = pb.system, pb.N, pb.system.n, pb.nu, pb.theta
+        m, nb = sys.n_contacts, sys.n_bilateral
+        mu, e = ca.DM(sys.mu), ca.DM(sys.e)
+        sigma, q0p, v0p = ca.SX.sym("sigma"), ca.SX.sym("q0", n), ca.SX.sym("v0", n)
+        Tv = self._var("T", 1, *pb.T_bounds, key="T") if pb.free_time else ca.SX(pb.T)
+        z = self._var("z", 1, -np.inf, np.inf, key="z") if pb.max_cost is not None else None
+        if pb.steps == "free":
+            lo, hi = pb.step_bounds
+            hmin, hmax = lo * pb.T_bounds[0] / N if pb.free_time else lo * pb.T / N, hi * (
+                pb.T_bounds[1] if pb.free_time else pb.T) / N
+            hs = [self._var(f"h{k}", 1, hmin, hmax, key="h") for k in range(N)]
+            self._constrain(ca.sum1(ca.vertcat(*hs)) - Tv, 0.0, 0.0)
+        else:
+            hs = [Tv / N] * N
+        n_u = N if pb.hold == "constant" else N + 1
+        us = [self._var(f"u{k}", nu, pb.u_min, pb.u_max, key="u") for k in range(n_u)]
+        qs, vs = [q0p], [v0p]
+        for k in range(1, N + 1):
+            qs.append(self._var(f"q{k}", n, -np.inf, np.inf, key="q"))
+            vs.append(self._var(f"v{k}", n, -np.inf, np.inf, key="v"))
+        tk = [ca.SX(0)]
+        for k in range(N):
+            tk.append(tk[-1] + hs[k])
+        for k, tval in pb.node_times.items():
+            self._constrain(tk[k] - tval, 0.0, 0.0)
+        J = ca.SX(0)
+        prev = None  # the previous step's (a, w) blocks, for the cross complementarity
+        if self.cross:
+            HN0, HT0 = sys.H_expr[:m, :], sys.H_expr[m:, :]
+            sub = ca.Function("H0", [sys.q_sym], [HN0, HT0])(q0p)
+            uN0, uT0 = ca.mtimes(sub[0], v0p), ca.mtimes(sub[1], v0p)
+            lam0 = ca.fabs(uT0)
+            prev = {"wN": uN0, "wp": lam0 + uT0, "wm": lam0 - uT0, "lam": lam0}
+        for k in range(N):
+            h = hs[k]
+            blk = {nm: self._var(f"{nm}{k}", m, 0.0, np.inf, key=nm) for a_w in PAIRS for nm in a_w}
+            lamb = self._var(f"lb{k}", nb, -np.inf, np.inf, key="lb")
+            ua = us[k]
+            ub = us[k] if pb.hold == "constant" else us[k + 1]
+            qa, qb, va, vb = qs[k], qs[k + 1], vs[k], vs[k + 1]
+            Wh, r, H, G, phi_t1, _ = self.step(tk[k], h, qa, va, ua, 0.5 * (ua + ub))
+            pN, pT = h * blk["pN"], h * (blk["bp"] - blk["bm"])
+            dyn = ca.mtimes(Wh, vb - va) - r
+            if m:
+                dyn = dyn - ca.mtimes(H.T, ca.vertcat(pN, pT))
+            if nb:
+                dyn = dyn - ca.mtimes(G.T, lamb)
+                self._constrain(ca.mtimes(G, vb) + phi_t1, 0.0, 0.0)
+            self._constrain(dyn, 0.0, 0.0)
+            self._constrain(qb - qa - h * ((1 - th) * va + th * vb), 0.0, 0.0)
+            if m:
+                HN, HT = H[:m, :], H[m:, :]
+                uN, uT = ca.mtimes(HN, vb), ca.mtimes(HT, vb)
+                lam = blk["lam"]
+                self._constrain(blk["wN"] - (uN + e * ca.fmin(ca.mtimes(HN, va), 0)), 0.0, 0.0)
+                self._constrain(blk["wp"] - (lam + uT), 0.0, 0.0)
+                self._constrain(blk["wm"] - (lam - uT), 0.0, 0.0)
+                self._constrain(blk["wl"] - (mu * blk["pN"] - blk["bp"] - blk["bm"]), 0.0, 0.0)
+                a = [blk[x] for x, _ in PAIRS]
+                w = [blk[y] for _, y in PAIRS]
+                if self.cross:  # step k's multipliers against step k - 1's slacks at node k
+                    a += [blk["pN"], blk["bp"], blk["bm"], blk["wl"]]
+                    w += [prev["wN"], prev["wp"], prev["wm"], prev["lam"]]
+                    prev = blk
+                self._constrain(ca.vertcat(*a) * ca.vertcat(*w) - sigma, -np.inf, 0.0)  # Scholtes
+            st = pb.make_step(k, tk[k], h, qa, qb, va, vb, ua, ub, pN, pT)
+            if pb.stage_cost is not None:
+                J = J + h * _scalar(pb.stage_cost(st), "stage_cost")
+            if pb.control_rate_weight and k + 1 < len(us):
+                J = J + pb.control_rate_weight * ca.sumsqr(us[k + 1] - us[k]) / h
+            if pb.path_constraints is not None:
+                self._constrain(ca.vec(ca.SX(pb.path_constraints(st))), -np.inf, 0.0)
+            if pb.max_cost is not None:
+                self._constrain(_scalar(pb.max_cost(st), "max_cost") - z, -np.inf, 0.0)
+        if pb.terminal_cost is not None:
+            J = J + _scalar(pb.terminal_cost(Tv, qs[-1], vs[-1]), "terminal_cost")
+        if pb.terminal_constraints is not None:
+            self._constrain(ca.vec(ca.SX(pb.terminal_constraints(qs[-1], vs[-1]))), 0.0, 0.0)
+        if z is not None:
+            J = J + z
+        g = ca.vertcat(*self._g) if self._g else ca.SX.zeros(0, 1)
+        self.nlp = {"x": ca.vertcat(*self._x), "f": J, "g": g, "p": ca.vertcat(sigma, q0p, v0p)}
+        self.ix = {key: np.array(val) for key, val in self.ix.items()}
+        self.lbx, self.ubx = np.concatenate(self._lbx), np.concatenate(self._ubx)
+        self.lbg = np.concatenate(self._lbg) if self._lbg else np.zeros(0)
+        self.ubg = np.concatenate(self._ubg) if self._ubg else np.zeros(0)
+        del self._x, self._g, self._lbx, self._ubx, self._lbg, self._ubg
+
+    # ------------------------------------------------------------------ numbers out of x
+    def unpack(self, x):
+        """(T, steps, q, v, u, p_N, p_T) of a vector of NLP variables."""
+        pb, ix = self.pb, self.ix
+        N, n, m = pb.N, pb.system.n, pb.system.n_contacts
+        T = float(x[ix["T"]].ravel()[0]) if pb.free_time else pb.T
+        steps = x[ix["h"]].ravel() if pb.steps == "free" else np.full(N, T / N)
+        q = np.vstack([pb.q0] + [x[i] for i in ix["q"]]).reshape(N + 1, n)
+        v = np.vstack([pb.v0] + [x[i] for i in ix["v"]]).reshape(N + 1, n)
+        u = np.vstack([x[i] for i in ix["u"]]).reshape(-1, pb.nu)
+        if m:
+            pN = steps[:, None] * x[ix["pN"]].reshape(N, m)
+            pT = steps[:, None] * (x[ix["bp"]] - x[ix["bm"]]).reshape(N, m)
+        else:
+            pN = pT = np.zeros((N, 0))
+        return T, steps, q, v, u, pN, pT
