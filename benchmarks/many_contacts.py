@@ -20,12 +20,11 @@ Writes CSV files into ``benchmarks/results/``.
 from __future__ import annotations
 
 import argparse
-import json
-from pathlib import Path
 import sys
 import tempfile
 import time
 import tracemalloc
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -308,8 +307,7 @@ def write_rows(path, rows):
     keys = list(rows[0])
     with open(path, "w") as fh:
         fh.write(",".join(keys) + "\n")
-        for r in rows:
-            fh.write(",".join(repr(r[k]) if isinstance(r[k], float) else str(r[k]) for k in keys) + "\n")
+        fh.writelines(",".join(repr(r[k]) if isinstance(r[k], float) else str(r[k]) for k in keys) + "\n" for r in rows)
 
 
 def main(argv=None):

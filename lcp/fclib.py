@@ -34,8 +34,8 @@ Examples
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 import os
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -43,7 +43,7 @@ import scipy.sparse as sp
 from .contact_problem import ContactProblem
 from .friction_contact import blocked, check_problem
 
-__all__ = ["ContactFile", "read_problem", "read_dat", "read_hdf5", "write_dat", "write_hdf5"]
+__all__ = ["ContactFile", "read_dat", "read_hdf5", "read_problem", "write_dat", "write_hdf5"]
 
 
 @dataclass

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["interleave", "blocked", "natural_map_error", "check_problem", "ProblemCheck"]
+__all__ = ["ProblemCheck", "blocked", "check_problem", "interleave", "natural_map_error"]
 
 
 def interleave(k: int) -> np.ndarray:

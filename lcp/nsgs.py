@@ -35,7 +35,7 @@ except ImportError:  # pragma: no cover - exercised by the fallback tests throug
             return f
         return wrap(args[0]) if args and callable(args[0]) else wrap
 
-__all__ = ["HAVE_NUMBA", "local_planar", "nsgs_sweeps", "residual_interleaved", "nsgs"]
+__all__ = ["HAVE_NUMBA", "local_planar", "nsgs", "nsgs_sweeps", "residual_interleaved"]
 
 #: local outcome codes (as lcp.contact_problem's modes; -1: no closed-form case admissible)
 _OPEN, _STICK, _SLIDE_POS, _SLIDE_NEG = 0, 1, 2, 3

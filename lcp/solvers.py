@@ -403,7 +403,7 @@ class NsgsSolver(OneStepSolver):
         # files) reach the same normalised error as large ones
         tol = 0.1 * self.residual_tol * pb.scale
         r0 = None if warm.p is None else warm.p[op.perm]
-        r, sweeps, res, fails = nsgs(op, pb.q[op.perm], pb.mu, r0, tol, self.max_sweeps, self.compiled)
+        r, sweeps, res, _ = nsgs(op, pb.q[op.perm], pb.mu, r0, tol, self.max_sweeps, self.compiled)
         p = np.empty_like(r)
         p[op.perm] = r
         warm.store(p)
@@ -452,7 +452,7 @@ class NewtonSolver(OneStepSolver):
         res = np.inf  # the sweeps below compute it
         its, msg = 0, ""
         qi = pb.q[op.perm]
-        slow, skip_newton = 0, False
+        slow, skip_newton, res_prev = 0, False, np.inf
         for rnd in range(self.max_rounds):
             if res <= tol:
                 break

@@ -27,19 +27,18 @@ from __future__ import annotations
 
 import json
 import os
-from pathlib import Path
 import subprocess
 import tempfile
 import time
+from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
 
 from lcp.fclib import read_problem
 from lcp.friction_contact import natural_map_error
 from lcp.solvers import make_solver
 from studies._common import out_dir, parse_args, save, write_csv
-
-import matplotlib.pyplot as plt  # noqa: E402  (studies._common selects the Agg backend first)
 
 NAME = "fc_benchmark"
 SOLVED = 1e-10
@@ -84,7 +83,8 @@ def siconos_available() -> bool:
     if not os.path.exists(SYSTEM_PYTHON):
         return False
     try:
-        res = subprocess.run([SYSTEM_PYTHON, "-c", "import siconos.numerics"], capture_output=True, timeout=60)
+        res = subprocess.run([SYSTEM_PYTHON, "-c", "import siconos.numerics"], capture_output=True, timeout=60,
+                             check=False)
     except (OSError, subprocess.TimeoutExpired):
         return False
     return res.returncode == 0
@@ -96,7 +96,7 @@ def run_siconos_script(script: str, args, timeout: float = 3600):
         path = Path(tmp) / "peer.py"
         path.write_text(script)
         res = subprocess.run([SYSTEM_PYTHON, str(path), json.dumps(args)], capture_output=True, text=True,
-                             timeout=timeout)
+                             timeout=timeout, check=False)
     if res.returncode != 0:
         raise RuntimeError(f"Siconos peer failed: {res.stderr[-2000:]}")
     return json.loads(res.stdout.strip().splitlines()[-1])

@@ -1,7 +1,7 @@
 """NSGS, semismooth Newton, problem files and the sparse assembly for many contacts."""
-from pathlib import Path
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -36,7 +36,7 @@ def test_iterative_solvers_satisfy_coulomb(name, k, seed):
     assert sol.success, sol.message
     p = sol.p
     u = pb.velocity(p)
-    pN, pT, uN, uT = p[:k], p[k:], u[:k], u[k:]
+    pN, pT, uN = p[:k], p[k:], u[:k]
     scale = max(pb.scale, 1.0)
     assert np.all(pN >= -1e-9 * scale) and np.all(uN >= -1e-8 * scale)
     assert np.all(np.abs(pT) <= pb.mu * pN + 1e-9 * scale)
@@ -75,7 +75,8 @@ def test_nsgs_without_numba_in_a_fresh_interpreter():
         "s = make_solver('nsgs').solve(pb)\n"
         "assert s.success and pb.residual(s.p) < 1e-11, s\n"
         "print('ok')\n")
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                         check=False)
     assert res.returncode == 0 and "ok" in res.stdout, res.stderr
 
 
