@@ -133,8 +133,8 @@ def test_a_sliding_ball_loses_its_speed_at_the_impacts_then_slides_to_rest():
     # from t_inf on: uniform deceleration mu g, then rest
     x_inf = x_stop - vx_inf ** 2 / (2 * mu * G)
     sl = (res.t > t_inf) & ~later
-    np.testing.assert_allclose(res.q[sl, 0], x_inf + vx_inf * (res.t[sl] - t_inf) - mu * G * (res.t[sl] - t_inf) ** 2 / 2,
-                               rtol=0, atol=1e-12)
+    dt = res.t[sl] - t_inf
+    np.testing.assert_allclose(res.q[sl, 0], x_inf + vx_inf * dt - mu * G * dt ** 2 / 2, rtol=0, atol=1e-12)
     assert np.all(res.q[res.t > t_inf, 1] == 0.0) and np.all(res.v[later] == 0.0)
 
 
@@ -321,8 +321,8 @@ def test_control_schedule_holds_a_block_exactly_at_the_friction_bound():
     assert abs(res.events[-1].t - t_stop) <= 1e-12
     assert res.mode_sequence == [("stick",), ("slide+",), ("stick",)]
     t = res.t
-    x = np.where(t < 2, 0.0, np.where(t < 3, a1 * (t - 2) ** 2 / 2,
-                                      a1 / 2 + a1 * (np.minimum(t, t_stop) - 3) + a2 * (np.minimum(t, t_stop) - 3) ** 2 / 2))
+    d3 = np.minimum(t, t_stop) - 3
+    x = np.where(t < 2, 0.0, np.where(t < 3, a1 * (t - 2) ** 2 / 2, a1 / 2 + a1 * d3 + a2 * d3 ** 2 / 2))
     np.testing.assert_allclose(res.q[:, 0], x, rtol=0, atol=1e-13)
     held = (t >= 1) & (t < 2)
     np.testing.assert_allclose(res.force_T[held, 0], -Fb, rtol=1e-14)  # exactly on the bound
@@ -351,7 +351,8 @@ def test_block_between_parallel_walls_says_that_its_motion_is_not_unique():
     # A rigid block touching two parallel walls without preload may stay (friction with any
     # squeeze) or fall (no squeeze, no friction): both motions are consistent.
     q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
-    walls = [Contact(gap=q[0], tangent=q[1], mu=0.5, name="left"), Contact(gap=-q[0], tangent=q[1], mu=0.5, name="right")]
+    walls = [Contact(gap=q[0], tangent=q[1], mu=0.5, name="left"),
+             Contact(gap=-q[0], tangent=q[1], mu=0.5, name="right")]
     res = event_driven(System(q, v, mass=ca.SX.eye(2), force=ca.vertcat(0, -G), contacts=walls), [0.0, 0.0],
                        [0.0, 0.0], 1.0, n_eval=3)
     assert res.success and "motions were consistent" in res.message

@@ -27,6 +27,7 @@ import math
 
 import numpy as np
 
+from ..contact_problem import STICK
 from .model import EPS
 from .records import Accumulation, Event, Impulse
 
@@ -175,7 +176,7 @@ def sum_up(integ, t, q, v, P, at, closed, sol, flight):
     t_inf, q_inf, v_inf, method = lim
     contacts = tuple(sorted(set(at) | set(closed)))
     modes = sol.modes if sol is not None else ()
-    stick = tuple(c for c, md in zip(closed, modes) if md == 1)  # STICK
+    stick = tuple(c for c, md in zip(closed, modes) if md == STICK)
     q_inf, v_inf = integ.projector.project(t_inf, q_inf, v_inf, contacts, contacts, stick)
     data = model.data(t, q, v)
     m, k = integ.m, at_a.size

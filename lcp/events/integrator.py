@@ -259,7 +259,13 @@ class Integrator:
         """After an impact at t (state (q, v) its right limit, ``flight`` the phase that ended
         with it): record it, and when the impacts form an accumulation whose bounces are below
         the length tolerance, jump to its limit. Returns (t_inf, q_inf, v_inf, tail phase) or None."""
-        at = tuple(sorted({imp.contact for imp in self.impulses if imp.t == t and imp.kind == "impact"}))
+        at = set()
+        for imp in reversed(self.impulses):  # the impulses of this instant are the last ones
+            if imp.t != t:
+                break
+            if imp.kind == "impact":
+                at.add(imp.contact)
+        at = tuple(sorted(at))
         if not at:
             self.bounces.reset()
             return None

@@ -335,7 +335,8 @@ class ModeSelector:
         for s in slide:
             n_branches *= 2 if s != 0 else 4
         o = self.o
-        use_enum = (o.mode_solver is ModeSolver.ENUMERATE or (o.mode_solver is ModeSolver.AUTO and n_branches <= o.max_branches))
+        use_enum = (o.mode_solver is ModeSolver.ENUMERATE
+                    or (o.mode_solver is ModeSolver.AUTO and n_branches <= o.max_branches))
         entry = model.mode_memo.get((closed, slide, None, use_enum))
         if entry is None or len(entry[0]) != 1:
             return None
