@@ -34,30 +34,10 @@ closed form or by Aitken's extrapolation; the contacts then persist with zero no
 (exactly zero gap on a flat contact). They are listed in ``EventResult.accumulations``, and every
 resolved impact in ``EventResult.impacts`` (:mod:`~lcp.events.accumulation`).
 
-At each event the next mode comes from the **acceleration-level contact problem**. With the
-closed contacts c (gap 0, normal velocity 0), the contact accelerations are affine in the contact
-forces,
-
-    a = H_c qdd + Hdot_c v = W lam + b,    qdd = qdd_free + S H_c' lam,
-
-with S the inverse mass matrix with the bilateral constraints eliminated (the first block of
-[[A, G'], [G, 0]]^-1), qdd_free the free acceleration and W = H_c S H_c'. The Coulomb law at the
-acceleration level is, per closed contact j:
-
-- normal: 0 <= N_j  perp  a_N,j >= 0;
-- if u_T,j = 0 (stick candidate): |f_j| <= mu_j N_j and f_j = -mu_j N_j sign(a_T,j) if a_T,j != 0,
-  i.e. exactly the complementarity structure of :class:`~lcp.contact_problem.ContactProblem`
-  with impulses replaced by forces and velocities by accelerations;
-- if u_T,j != 0 (sliding): f_j = -mu_j N_j sign(u_T,j), whatever a_T,j.
-
-The sliding contacts are folded into the same :class:`~lcp.contact_problem.ContactProblem`: their
-friction force is carried by the normal force's generalized direction
-``d_j = H_N,j' - mu_j sign(u_T,j) H_T,j'`` (the column of W is ``H_c S d_j``, computed by one solve
-with d_j so that no W_NN - mu W_NT cancellation is left to rounding), and their friction
-coefficient in the problem is 0, which pins their tangential unknown to 0 and leaves only the
-normal complementarity. So the Coulomb law itself stays in one place (``solve_branch``,
-``admissible``, ``residual``); this module only changes variables.
-
+At each event the next mode comes from the **acceleration-level contact problem** of the closed
+contacts (:mod:`~lcp.events.modes`): the Coulomb law with forces and accelerations in place of
+impulses and velocities, sliding contacts folded in, so that the law itself stays in
+:class:`~lcp.contact_problem.ContactProblem`.
 The problem is solved by enumerating every branch (open / stick / slide+ / slide- for stick
 candidates, open / closed for sliding contacts), which finds *all* solutions, or by Lemke's method
 for many contacts. Solutions with the same acceleration are one motion (ties at a mode boundary,

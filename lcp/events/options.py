@@ -49,22 +49,6 @@ def _enum_value(enum, name, value):
 _ENUM_MEMBERS = {enum: {e.value: e for e in enum} for enum in (SmoothIntegrator, ModeSolver)}
 
 
-
-
-def all_finite(x) -> bool:
-    """np.isfinite(x).all() for a 1-D array, without NumPy's per-call overhead when small."""
-    if x.size <= 16:
-        return all(map(math.isfinite, x.tolist()))
-    return bool(np.isfinite(x).all())
-
-
-def absmax(x) -> float:
-    """float(np.max(np.abs(x))) for a non-empty 1-D array, without NumPy's per-call overhead when small."""
-    if x.size <= 16:
-        return float(max(map(abs, x.tolist())))
-    return float(np.max(np.abs(x)))
-
-
 @dataclass(frozen=True, eq=False)
 class EventOptions:
     """Validated options of the event-driven integrator.
