@@ -370,7 +370,47 @@ class _Warm:
             self.cache[self.key] = (self.op, p)
 
 
-class NsgsSolver(OneStepSolver):
+class _IterativeSolver(OneStepSolver):
+    """Bookkeeping shared by the iterative solvers: warm start, tolerance, the optional error check.
+
+    ``residual_tol`` bounds :meth:`ContactProblem.residual` relative to the problem's impulse
+    scale (the iterations stop at a tenth of it). With ``error_tol`` the normalised natural-map
+    error (:func:`lcp.friction_contact.natural_map_error`, Siconos's measure) must be below it
+    too: the iterations go on with a tolerance tightened a hundredfold, up to three times.
+    """
+
+    def __init__(self, residual_tol: float = 1e-10, error_tol: float | None = None, compiled: bool = True):
+        super().__init__(residual_tol)
+        if error_tol is not None and not (np.isfinite(error_tol) and error_tol > 0):
+            raise ValueError(f"error_tol must be finite and > 0, got {error_tol!r}")
+        self.error_tol, self.compiled = error_tol, bool(compiled)
+        self._cache: dict = {}
+
+    def _solve(self, pb):
+        from .friction_contact import natural_map_error
+
+        warm = _Warm(self, pb)
+        # relative to the problem's own impulse scale, so that small-impulse problems (granular
+        # files) reach the same normalised error as large ones
+        tol = 0.1 * self.residual_tol * pb.scale
+        p = None if warm.p is None else warm.p.copy()
+        its = 0
+        for _ in range(4):
+            p, n, res, msg = self._run(pb, warm.op, p, tol)
+            its += n
+            if res > tol or self.error_tol is None or natural_map_error(pb.W, pb.q, pb.mu, p) <= self.error_tol:
+                break
+            tol *= 1e-2
+        warm.store(p)
+        if res > tol:
+            return StepSolution(p, -1, f"{self.name}: {msg}; residual {res:.3g} > tolerance {tol:.3g}", its)
+        return StepSolution(p, 0, "solved", its)
+
+    def _run(self, pb, op, p, tol):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+class NsgsSolver(_IterativeSolver):
     """Nonsmooth Gauss-Seidel with exact closed-form local solves (:mod:`lcp.nsgs`).
 
     Warm-started from the previous step's impulses when the problem's ``key`` recurs.
@@ -379,78 +419,65 @@ class NsgsSolver(OneStepSolver):
     ----------
     max_sweeps : int
         Largest number of sweeps; a solve that stops short reports status -1 naming its residual.
+    residual_tol, error_tol : float
+        See :class:`_IterativeSolver`.
     compiled : bool
         Use the numba sweeps when installed (False: the plain-Python ones, for tests).
-    residual_tol : float
-        See :class:`OneStepSolver`; the sweeps stop at a tenth of it.
     """
 
     name = "nsgs"
 
-    def __init__(self, residual_tol: float = 1e-10, max_sweeps: int = 10000, compiled: bool = True):
-        super().__init__(residual_tol)
+    def __init__(self, residual_tol: float = 1e-10, max_sweeps: int = 10000, compiled: bool = True,
+                 error_tol: float | None = None):
+        super().__init__(residual_tol, error_tol, compiled)
         if int(max_sweeps) < 1:
             raise ValueError(f"max_sweeps must be >= 1, got {max_sweeps!r}")
-        self.max_sweeps, self.compiled = int(max_sweeps), bool(compiled)
-        self._cache: dict = {}
+        self.max_sweeps = int(max_sweeps)
 
-    def _solve(self, pb):
+    def _run(self, pb, op, p, tol):
         from .nsgs import nsgs
 
-        warm = _Warm(self, pb)
-        op = warm.op
-        # relative to the problem's own impulse scale, so that small-impulse problems (granular
-        # files) reach the same normalised error as large ones
-        tol = 0.1 * self.residual_tol * pb.scale
-        r0 = None if warm.p is None else warm.p[op.perm]
+        r0 = None if p is None else p[op.perm]
         r, sweeps, res, _ = nsgs(op, pb.q[op.perm], pb.mu, r0, tol, self.max_sweeps, self.compiled)
         p = np.empty_like(r)
         p[op.perm] = r
-        warm.store(p)
-        if res > tol:
-            return StepSolution(p, -1, f"NSGS stopped after {sweeps} sweeps at residual {res:.3g} "
-                                f"(tolerance {tol:.3g})", sweeps)
-        return StepSolution(p, 0, "solved", sweeps)
+        return p, sweeps, res, f"NSGS stopped after {sweeps} sweeps"
 
 
-class NewtonSolver(OneStepSolver):
+class NewtonSolver(_IterativeSolver):
     """NSGS sweeps, then semismooth Newton (:mod:`lcp.newton`) to rounding level.
 
     Rounds of NSGS sweeps (``sweeps``, doubling each round) and up to ``newton_iter`` Newton
-    iterations alternate, each round starting from the better of the two, until the residual is below tolerance or
-    ``max_rounds`` rounds are spent (status -1 then, with the residual reached).
+    iterations alternate, each round starting from the better of the two, until the residual is
+    below tolerance, ``max_rounds`` rounds are spent or two rounds in a row fail to halve the
+    residual (status -1 then, with the residual reached). A Newton phase that gains nothing is
+    skipped in the next round.
 
     Parameters
     ----------
     sweeps : int
-        NSGS sweeps before each Newton phase (0: Newton alone).
+        NSGS sweeps before the first Newton phase (0: Newton alone).
     newton_iter, max_rounds : int
-    residual_tol : float
-        See :class:`OneStepSolver`; rounds stop at a tenth of it.
+    residual_tol, error_tol : float
+        See :class:`_IterativeSolver`.
     """
 
     name = "newton"
 
     def __init__(self, residual_tol: float = 1e-10, sweeps: int = 20, newton_iter: int = 30,
-                 max_rounds: int = 10, compiled: bool = True):
-        super().__init__(residual_tol)
+                 max_rounds: int = 10, compiled: bool = True, error_tol: float | None = None):
+        super().__init__(residual_tol, error_tol, compiled)
         if int(sweeps) < 0 or int(newton_iter) < 1 or int(max_rounds) < 1:
             raise ValueError("sweeps must be >= 0, newton_iter and max_rounds >= 1")
         self.sweeps, self.newton_iter, self.max_rounds = int(sweeps), int(newton_iter), int(max_rounds)
-        self.compiled = bool(compiled)
-        self._cache: dict = {}
 
-    def _solve(self, pb):
+    def _run(self, pb, op, p, tol):
         from .newton import newton_solve
         from .nsgs import nsgs
 
-        warm = _Warm(self, pb)
-        op = warm.op
-        # relative, as NsgsSolver's; a Newton phase that converges lands at rounding level anyway
-        tol = 0.1 * self.residual_tol * pb.scale
-        p = np.zeros(2 * pb.k) if warm.p is None else warm.p.copy()
+        p = np.zeros(2 * pb.k) if p is None else p
         res = np.inf  # the sweeps below compute it
-        its, msg = 0, ""
+        its, msg = 0, "no rounds"
         qi = pb.q[op.perm]
         slow, skip_newton, res_prev = 0, False, np.inf
         for rnd in range(self.max_rounds):
@@ -488,11 +515,7 @@ class NewtonSolver(OneStepSolver):
             skip_newton = res_n > 0.5 * res
             if res_n <= res:
                 p, res = p_n, res_n
-        warm.store(p)
-        if res > 10 * tol:
-            return StepSolution(p, -1, f"NSGS + Newton stopped at residual {res:.3g} after {its} "
-                                f"iterations ({msg})", its)
-        return StepSolution(p, 0, "solved", its)
+        return p, its, res, f"NSGS + Newton stopped after {its} iterations ({msg})"
 
 
 class AutoSolver(OneStepSolver):
@@ -506,11 +529,11 @@ class AutoSolver(OneStepSolver):
     #: largest number of contacts for which a failed iterative solve is retried by (dense) Lemke
     LEMKE_FALLBACK_MAX = 200
 
-    def __init__(self, residual_tol: float = 1e-10):
+    def __init__(self, residual_tol: float = 1e-10, error_tol: float | None = None):
         super().__init__(residual_tol)
         self.enum = EnumSolver(residual_tol)
         self.lemke = LemkeSolver(residual_tol)
-        self.iterative = NewtonSolver(residual_tol)
+        self.iterative = NewtonSolver(residual_tol, error_tol=error_tol)
         self.fallbacks = 0
 
     def _solve(self, pb):
