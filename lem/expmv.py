@@ -149,8 +149,9 @@ def nonnegative_expm(M: np.ndarray) -> np.ndarray:
     """exp(M) of a small dense matrix with non-negative entries, by scaling and squaring.
 
     With M >= 0 every Taylor term is non-negative, so the series has no cancellation; the result
-    matches :func:`scipy.linalg.expm` to rounding without its fixed overhead (it is called once per
-    LEM segment, on the n x n Jacobian bound that sets the moment scales).
+    matches :func:`scipy.linalg.expm` to ~1e-12 relative at ||M|| ~ 1e3 (the squarings) without
+    its fixed overhead. It is called once per LEM segment, on the n x n Jacobian bound from which
+    the moments' power-of-two scales are chosen.
 
     >>> import numpy as np
     >>> bool(np.allclose(nonnegative_expm(np.array([[0.0, 1.0], [1.0, 0.0]])),

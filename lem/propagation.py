@@ -228,6 +228,9 @@ def _solve_restarted(fld, x0, x1, direction, y0, te, outs, opts, degrees, stats)
         if stats.n_segments >= opts.max_segments:
             status_override = (-4, f"{STATUS_MESSAGES[-4]} ({opts.max_segments}, at t = {t_c:.6g})")
             break
+        if auto and opts.step_hint is not None and not just_rejected \
+                and stats.n_segments < len(opts.step_hint):
+            h = min(opts.step_hint[stats.n_segments], max_step)
         h = min(h, abs(x1 - t_c))
         if abs(x1 - t_c) - h < 1e-14 * max(span, 1.0):
             h = abs(x1 - t_c)

@@ -66,6 +66,11 @@ class LEMOptions:
     first_step, min_step, max_step : float or None
         Segment lengths of the auto restart (defaults: 1/(1 + |Jacobian of f|), 1e-12 of the
         interval, the whole interval).
+    step_hint : sequence of float or None
+        With restart="auto", segment lengths to try first, one per accepted segment (e.g. the
+        restart steps ``numpy.diff(res.restart_points)`` of a solve of a nearby problem, as in
+        shooting): each is accepted or rejected by the same error control as the controller's own
+        proposal, and after a rejection the controller takes over for that segment.
     ivp_method, ivp_rtol, ivp_atol
         ``solve_ivp`` settings for time-varying coefficients (DOP853, 1e-12, 1e-14).
     warn : bool
@@ -85,6 +90,7 @@ class LEMOptions:
     max_segments: int = 10_000
     radius_fraction: float = 0.5
     first_step: float | None = None
+    step_hint: tuple | None = None
     min_step: float | None = None
     max_step: float | None = None
     ivp_method: str = "DOP853"
@@ -111,6 +117,14 @@ class LEMOptions:
             raise ValueError("rtol and atol cannot both be 0")
         for name in ("first_step", "min_step", "max_step"):
             check_float(name, getattr(self, name), 0.0, strict=True, allow_none=True)
+        if self.step_hint is not None:
+            try:
+                hint = tuple(float(v) for v in self.step_hint)
+            except (TypeError, ValueError) as exc:
+                raise ValueError("step_hint must be a sequence of positive segment lengths") from exc
+            if not all(np.isfinite(v) and v > 0 for v in hint):
+                raise ValueError(f"step_hint must hold finite positive lengths, got {self.step_hint!r}")
+            object.__setattr__(self, "step_hint", hint)
         if isinstance(self.centre, str):
             if self.centre not in ("origin", "initial"):
                 raise ValueError(f"centre must be 'origin', 'initial' or an array, got {self.centre!r}")

@@ -66,6 +66,10 @@ def _check_lam(lam) -> float:
     return float(lam)
 
 
+#: options of :func:`shoot` unless given
+_SHOOT_DEFAULTS = {"degree": 16, "restart": "auto", "rtol": 1e-12, "atol": 1e-14}
+
+
 def shoot(lam: float, s: float, **options) -> LEMResult:
     """Integrate y(0) = 0, y'(0) = s over [0, 1] with the (by default auto-restarted) LEM engine.
 
@@ -74,8 +78,7 @@ def shoot(lam: float, s: float, **options) -> LEMResult:
     """
     if not np.isfinite(s):
         raise ValueError(f"s must be finite, got {s!r}")
-    opts = dict(degree=16, restart="auto", rtol=1e-12, atol=1e-14)
-    opts.update(options)
+    opts = {**_SHOOT_DEFAULTS, **options}
     return solve(troesch_field(lam), (0.0, 1.0), [0.0, float(s)], **opts)
 
 
@@ -133,8 +136,11 @@ class TroeschResult:
 
 
 def _initial_slope(lam: float) -> float:
-    # linear problem y'' = lam**2 y for small lam; the asymptotic 8 exp(-lam) for large lam.
-    return min(lam / math.sinh(lam), 8.0 * math.exp(-lam))
+    # linear problem y'' = lam**2 y for small lam; for large lam the shooting solution has its
+    # pole at x_p = ln(8 / s) / lam, and y(1) = 1 needs x_p - 1 = (2/lam) exp(-lam/2) (from
+    # y ~ -(2/lam) ln(lam (x_p - x) / 2) near the pole): s = 8 exp(-lam) exp(-2 exp(-lam/2)),
+    # 0.1 % below the root at lam = 5 and 0.07 % at lam = 10, on the side without a pole.
+    return min(lam / math.sinh(lam), 8.0 * math.exp(-lam - 2.0 * math.exp(-0.5 * lam)))
 
 
 def solve_troesch(lam: float, *, s0: float | None = None, xtol: float = 1e-13, ftol: float = 1e-12,
@@ -146,7 +152,8 @@ def solve_troesch(lam: float, *, s0: float | None = None, xtol: float = 1e-13, f
     lam : float
         lambda > 0.
     s0 : float, optional
-        First guess of y'(0) (default: min(lam/sinh(lam), 8 exp(-lam))).
+        First guess of y'(0) (default: min(lam/sinh(lam), 8 exp(-lam - 2 exp(-lam/2))), the
+        linear and the large-lambda asymptotic slopes).
     xtol, ftol : float
         Stop when the Newton correction is below ``xtol * s`` or |y(1) - 1| <= ftol.
     maxiter : int
@@ -184,10 +191,14 @@ def solve_troesch(lam: float, *, s0: float | None = None, xtol: float = 1e-13, f
     coarse["rtol"] = max(options.get("rtol", 1e-12), 1e-7)
     coarse["atol"] = max(options.get("atol", 1e-14), 1e-9)
     near = False
+    hints = {}
     for it in range(1, maxiter + 1):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", LEMWarning)
-            res = shoot(lam, s, **(options if near else coarse))
+            trial = dict(options if near else coarse)
+            if near in hints and "step_hint" not in options:
+                trial["step_hint"] = hints[near]  # (coarse segments are too long for a fine trial)
+            res = shoot(lam, s, **trial)
         reached = res.status >= 0 or res.status == 1
         if not reached or res.t[-1] != 1.0:
             failed += 1
@@ -195,6 +206,9 @@ def solve_troesch(lam: float, *, s0: float | None = None, xtol: float = 1e-13, f
             hi = min(hi, s)
             s = _bisect(lo, hi)
             continue
+        # the next trial (s moved a little) tries the segments this one accepted: most of the
+        # step controller's rejections are spent finding them again
+        hints[near] = tuple(np.diff(res.restart_points))
         F = float(res.y[0, -1]) - 1.0
         dF = float(res.sensitivity[0, 1, -1])
         history.append((s, F + 1.0, res.status))

@@ -82,3 +82,36 @@ def test_lambda_10_badly_conditioned():
     assert res.status == 0
     assert res.relative_error <= 1e-6
     assert res.dyds > 1e4  # d y(1) / d s: the conditioning physics.md warns about
+
+
+@pytest.mark.parametrize("lam", [5.0, 10.0])
+def test_lambda_5_and_10_to_1e_12(lam):
+    # the shooting is ill-conditioned (dy(1)/ds ~ 1e5 at lambda = 10), but the LEM error estimate
+    # of y(1), divided by it, still bounds the slope error; the target is 1e-12 relative
+    res = solve_troesch(lam)
+    assert res.status == 0 and res.failed_trials == 0
+    assert res.relative_error <= 1e-12
+    assert res.slope_error_estimate <= 1e-12 * res.slope
+    # the last trial re-accepted every segment of the one before (step hints), none rejected
+    assert res.solution.stats.n_rejected == 0
+
+
+def test_start_from_either_side_of_the_root():
+    # from above (the pole near x = 1, y(1) large) the Newton step on the pole-linearized map
+    # must not creep; from below it is Newton's step on y(1) - 1
+    ref = TROESCH_REFERENCE[5.0]
+    for s0 in (1.15 * ref, 0.8 * ref):
+        res = solve_troesch(5.0, s0=s0)
+        assert res.status == 0 and res.relative_error <= 1e-12
+        assert res.iterations <= 8
+
+
+def test_step_hint_reuse_equals_a_fresh_solve():
+    # a hinted trial accepts the same segments as an unhinted one when the hint is its own
+    s = TROESCH_REFERENCE[5.0]
+    fresh = shoot(5.0, s)
+    hinted = shoot(5.0, s, step_hint=tuple(np.diff(fresh.restart_points)))
+    assert hinted.stats.n_rejected == 0
+    assert np.array_equal(hinted.restart_points, fresh.restart_points)
+    assert np.array_equal(hinted.y, fresh.y)
+    assert np.array_equal(hinted.error_estimate, fresh.error_estimate)

@@ -447,3 +447,111 @@ def test_status_table_and_result_fields():
     assert r.status == 2 and r.success and np.isnan(r.error_estimate[0, -1])
     assert all(k in STATUS_MESSAGES for k in (0, 1, 2, -1, -2, -3, -4, -5))
     assert isinstance(AnalyticField(tanh_f, 2).expansion(0.0, [0.0, 0.0], 3).vals, np.ndarray)
+
+
+# ------------------------------------------------------------------ modules, caches, propagator
+def test_truncation_module_is_a_deprecated_alias():
+    import importlib
+
+    import lem.fields
+    import lem.propagation
+    old = importlib.import_module("lem.truncation")
+    with pytest.warns(DeprecationWarning, match=r"import solve from lem\.propagation"):
+        assert old.solve is lem.propagation.solve
+    with pytest.warns(DeprecationWarning, match=r"lem\.fields"):
+        from lem.truncation import AnalyticField as Old  # noqa: N813
+    assert Old is lem.fields.AnalyticField
+    with pytest.warns(DeprecationWarning, match="monomial_space"):
+        assert old._space is monomial_space
+    with pytest.raises(AttributeError):
+        old.no_such_name  # noqa: B018
+
+
+def test_cached_structure_gives_bit_identical_results():
+    # the structure (kept moments, term placement) is reused across restarts and solves of the
+    # same field; a solve on a warm cache must equal one that builds every structure afresh
+    from lem.moments import clear_structure_cache
+    from lem.troesch import troesch_field
+
+    f = troesch_field(5.0)
+    kw = dict(degree=12, restart="auto", rtol=1e-10)
+    clear_structure_cache()
+    fresh = solve(f, (0.0, 1.0), [0.0, 0.046], **kw)
+    warm = solve(f, (0.0, 1.0), [0.0, 0.046], **kw)
+    for a, b in ((fresh.y, warm.y), (fresh.error_estimate, warm.error_estimate),
+                 (fresh.sensitivity, warm.sensitivity), (fresh.restart_points, warm.restart_points)):
+        assert np.array_equal(a, b)
+    assert fresh.status == warm.status == 0
+
+
+@pytest.mark.parametrize("centre", [[0.0, 0.0], [0.3, -0.2], [0.0, 0.7]])
+def test_cached_matrix_equals_direct_assembly(centre):
+    # the cached placement refills values; compare with triplets summed by scipy's COO -> CSR
+    import scipy.sparse as sp
+
+    from lem.fields import as_field
+    from lem.moments import build_system, moment_structure
+
+    fld = as_field(tanh_f, 2)
+    exp = fld.expansion(0.0, centre, 9)
+    S = build_system(exp, 9, (0, 1), True, 10**6)
+    st = moment_structure(exp, 9, (0, 1), True, 10**6)
+    pl = st.placements[0]
+    direct = sp.csr_matrix((pl.mult * exp.vals[pl.terms], (pl.rows, pl.cidx)),
+                           shape=(st.dimension, st.dimension))
+    assert abs(S.A - direct).max() <= 1e-15 * abs(direct).max()
+    # every placed term lands on the moment gamma - e_j + mu of its row
+    comp = exp.comp[pl.terms]
+    target = st.exponents[pl.rows] + exp.exps[pl.terms]
+    target[np.arange(target.shape[0]), comp] -= 1
+    assert np.array_equal(st.exponents[pl.cidx], target)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_expmv_against_dense_exponential(compiled):
+    import scipy.sparse as sp
+    from scipy.linalg import expm
+
+    from lem.expmv import expmv, onenorm
+
+    rng = np.random.default_rng(3)
+    for d, scale in ((5, 0.1), (30, 3.0), (60, 20.0)):
+        A = sp.random(d, d, density=0.2, random_state=rng, format="csr") * scale
+        B = rng.standard_normal((d, 3))
+        assert onenorm(A) == pytest.approx(np.abs(A.toarray()).sum(axis=0).max(), rel=1e-15)
+        for t in (0.0, 0.3, -1.0):
+            ref = expm(t * A.toarray()) @ B
+            got = expmv(A, B, t, compiled=compiled)
+            assert np.max(np.abs(got - ref)) <= 1e-12 * max(1.0, np.abs(ref).max())
+
+
+def test_nonnegative_expm():
+    from scipy.linalg import expm
+
+    from lem.expmv import nonnegative_expm
+
+    rng = np.random.default_rng(0)
+    for scale in (0.0, 1e-3, 1.0, 50.0, 350.0):
+        M = rng.random((3, 3)) * scale
+        # squaring k times costs ~2**k eps (k ~ log2 of the norm): 1e-12 at norm 1e3
+        assert np.allclose(nonnegative_expm(M), expm(M), rtol=1e-11, atol=0)
+    with pytest.raises(ValueError, match="non-negative"):
+        nonnegative_expm(-np.eye(2))
+
+
+def test_step_hint_is_checked_by_the_same_error_control():
+    f = tanh_f
+    base = solve(f, (0.0, 2.0), [0.0, 1.0], degree=16, restart="auto")
+    hint = tuple(np.diff(base.restart_points))
+    again = solve(f, (0.0, 2.0), [0.0, 1.0], degree=16, restart="auto", step_hint=hint)
+    assert again.stats.n_rejected == 0
+    assert np.array_equal(again.restart_points, base.restart_points)
+    assert np.array_equal(again.y, base.y)
+    # a hint far too long is rejected and shortened by the controller: same tolerance met
+    bad = solve(f, (0.0, 2.0), [0.0, 1.0], degree=16, restart="auto", step_hint=(2.0,) * 50)
+    assert bad.status == 0 and bad.stats.n_rejected > 0
+    ref = reference(f, (0.0, 2.0), [0.0, 1.0], [2.0])
+    assert abs(bad.y[0, -1] - ref[0, -1]) <= 1e-9
+    for wrong in ((0.1, -0.2), ("a",), (np.inf,)):
+        with pytest.raises(ValueError, match="step_hint"):
+            solve(f, (0.0, 1.0), [0.0, 1.0], restart="auto", step_hint=wrong)
