@@ -58,6 +58,7 @@ class Integrator:
         else:
             bp = np.asarray(bp, dtype=float).ravel()
             self.breakpoints = np.unique(bp[(bp > 0) & (bp < t_end)]).tolist()
+        self.selector.breakpoints = tuple(self.breakpoints)
 
     def check_initial(self, q0, v0):
         """ValueError if (q0, v0) violates the bilateral constraints or penetrates a contact."""

@@ -221,6 +221,7 @@ class ModeSelector:
         self.t_end, self.gap_tol, self.vel_tol = t_end, gap_tol, vel_tol
         self.m = model.m
         self.used = set()
+        self.breakpoints = ()  # times where the forces jump (set by the integrator)
 
     def solve_modes(self, data, closed, slide, allowed=None):
         """Distinct motions of the acceleration problem: list of groups of ModeSolution.
@@ -297,6 +298,9 @@ class ModeSelector:
         """Break a tie (one motion, several mode sets) by the problem a short time later."""
         qdd = group[0].qdd
         dt = 1e-6 * self.t_end
+        later = [b for b in self.breakpoints if b > t]
+        if later:  # not past a jump of the forces
+            dt = min(dt, 0.5 * (later[0] - t))
         if self.model.polynomial:
             d1 = self.model.data(t + dt, q, v)  # the same at every state
         else:
