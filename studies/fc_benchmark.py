@@ -32,13 +32,14 @@ import tempfile
 import time
 from pathlib import Path
 
-import matplotlib.pyplot as plt
 import numpy as np
 
-from lcp.fclib import read_problem
+from lcp.fclib import read_problem, write_dat
 from lcp.friction_contact import natural_map_error
 from lcp.solvers import make_solver
 from studies._common import out_dir, parse_args, save, write_csv
+
+import matplotlib.pyplot as plt  # noqa: E402  (studies._common selects the Agg backend first)
 
 NAME = "fc_benchmark"
 SOLVED = 1e-10
@@ -56,8 +57,6 @@ out = []
 for path in paths:
     for name, sid in (("siconos-nsgs", sn.SICONOS_FRICTION_2D_NSGS), ("siconos-lemke", sn.SICONOS_FRICTION_2D_LEMKE)):
         try:
-            if "gfc2d" in path.split("/")[-1]:
-                break
             pb = sn.frictionContact_new_from_filename(path)
             n = 2 * pb.numberOfContacts
             if name == "siconos-lemke" and n > 800:
@@ -168,14 +167,28 @@ def run(folder, out=None, quick: bool = False, siconos: bool = True) -> dict:
                              message=str(exc), time=np.nan, iterations=0, error=np.nan, residual=np.nan))
     note = ""
     if siconos and siconos_available():
-        todo = [str(p) for p in files if any(r["file"] == p.name for r in rows)]
-        try:
-            peer = run_siconos_script(_SICONOS_FILES, [todo, SOLVED, 2000 if quick else 100000])
-        except (RuntimeError, subprocess.TimeoutExpired) as exc:
-            peer, note = [], f"Siconos peer failed: {exc}"
+        todo = [p for p in files if any(r["file"] == p.name and r["solver"] != "-" for r in rows)]
+        with tempfile.TemporaryDirectory() as tmp:
+            # Siconos's fc2d solvers take dense or sparse-block storage of the local form: other
+            # files (CSparse storage, global form) are handed over as the same local problem
+            # rewritten in sparse-block storage
+            given = {}
+            for p in todo:
+                cf = read_problem(p)
+                if cf.form == "global" or cf.storage not in ("dense", "sparse-block"):
+                    q = Path(tmp) / p.name
+                    write_dat(q, cf, storage="sparse-block")
+                    given[str(q)] = p
+                else:
+                    given[str(p)] = p
+            try:
+                peer = run_siconos_script(_SICONOS_FILES, [list(given), SOLVED, 2000 if quick else 100000])
+            except (RuntimeError, subprocess.TimeoutExpired) as exc:
+                peer, note = [], f"Siconos peer failed: {exc}"
         for rec in peer:
             if rec.get("info") == -99:
                 continue
+            rec["path"] = str(given[rec["path"]])
             cf = read_problem(rec["path"])
             r = np.asarray(rec["r"])
             err = natural_map_error(cf.W, cf.q, cf.mu, r, order="interleaved")
