@@ -19,7 +19,7 @@ Columns: ``build_s`` = Taylor expansion of f (jets) + reachability search + spar
 ``solve`` with the a-posteriori estimate (four degrees N - 4, N - 2, N, N + 2). Times are medians
 of K repeats after a warm-up. ``error`` is |y_N(1) - y(1)| against a 25-digit mpmath reference
 (solve_ivp at rtol 1e-13 if mpmath is missing).
-Target (issue 3): build + solve at dimension ~2700 under 2 s.
+Target: build + solve at dimension ~2700 under 2 s.
 """
 from __future__ import annotations
 

@@ -27,7 +27,7 @@ def tanh_taylor_coefficients(degree: int, exact: bool = True) -> list:
     """Coefficients of tanh y = sum_k c_k y**k, k = 0..degree, by the corrected (3.13).
 
     c_(2k-1) = 2**(2k) (2**(2k) - 1) B_(2k) / (2k)!  (1, -1/3, 2/15, -17/315, ...); the paper
-    prints D_sigma**k where the power must be 2k - 1 (physics.md §5).
+    prints D_sigma**k where the power must be 2k - 1.
     """
     check_int("degree", degree, 0)
     B = bernoulli_numbers(degree + 1)
@@ -67,8 +67,8 @@ def moment_rhs_3_16(j: int, k: int, degree: int) -> dict:
 def smooth_friction_field(B: float, eps: float) -> AnalyticField:
     """qdd = -B tanh(qd / eps) as (q, v)' = (v, -B tanh(v / eps)): a smooth Coulomb slide.
 
-    As eps -> 0 it tends to the exact slide qdd = -B sign(qd) (physics.md §5 notes that the
-    paper's (2.8) uses tanh(B q), of position, with the wrong sign).
+    As eps -> 0 it tends to the exact slide qdd = -B sign(qd) (the paper's (2.8) uses tanh(B q),
+    of position, with the wrong sign).
     """
     check_float("B", B)
     check_float("eps", eps, 0.0, strict=True)

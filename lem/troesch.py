@@ -1,4 +1,4 @@
-"""Troesch's problem by shooting over the LEM propagator (Toma 1986, physics.md §6).
+"""Troesch's problem by shooting over the LEM propagator (Toma 1986).
 
     y'' = lambda sinh(lambda y),  y(0) = 0,  y(1) = 1.
 
@@ -32,14 +32,14 @@ from .result import LEMResult, LEMWarning
 __all__ = ["TROESCH_REFERENCE", "TROESCH_POLE_10", "STATUS_MESSAGES", "troesch_field", "shoot",
            "TroeschResult", "solve_troesch"]
 
-#: High-accuracy y'(0) (physics.md §6).
+#: High-accuracy y'(0) (20 digits).
 TROESCH_REFERENCE = {
     0.5: 0.95904379541321905,
     1.0: 0.84520268530995106,
     5.0: 0.045750461406318740,
     10.0: 3.5833778463081369e-4,
 }
-#: Position of the pole of the lambda = 10 shooting solution (physics.md §6).
+#: Position of the pole of the lambda = 10 shooting solution.
 TROESCH_POLE_10 = 1.00135
 
 #: status code -> meaning; ``success`` is ``status >= 0``.

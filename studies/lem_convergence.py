@@ -16,7 +16,7 @@ figures/lem_convergence/):
   qdd = -B tanh(qd/eps): the engine's Taylor coefficients beside the printed (4.1) and the exact
   Coulomb slide, and the motions for several eps;
 - ``troesch.csv``, ``troesch.png``: Troesch's problem y'' = lambda sinh(lambda y), y(0) = 0,
-  y(1) = 1 by shooting over the restarted engine, against the reference slopes of physics.md §6.
+  y(1) = 1 by shooting over the restarted engine, against 20-digit reference slopes.
 
 :func:`run` returns the numbers behind every figure (tests check them).
 
@@ -52,7 +52,7 @@ NAME = "lem_convergence"
 XS = (0.5, 1.0, 1.5, 2.0)
 Z0 = 1.0
 RESTART_H = 0.5
-#: the paper's reference slide (physics.md §2): v0 = 1, B = 6.54 (R = 0.5)
+#: the paper's reference slide: v0 = 1, B = 6.54 (R = 0.5)
 V0_SLIDE, B_SLIDE = 1.0, 6.54
 REF = dict(method="DOP853", rtol=1e-13, atol=1e-15)
 
@@ -129,37 +129,73 @@ def auto_restart_check() -> dict:
                 max_estimate=float(np.max(r.error_estimate)))
 
 
+#: the error plot's range: values below FLOOR are drawn on it and marked, values above CEIL are
+#: off the plot and marked at its top edge
+FLOOR, CEIL = 1e-17, 1e25
+
+
+def _clip_markers(ax, N, v, color, name):
+    """Mark the values of series ``name`` outside [FLOOR, CEIL]: a true 0, below the floor, above
+    the ceiling (off scale, annotated with the largest value)."""
+    v = np.asarray(v, dtype=float)
+    zero = v == 0
+    low = (v < FLOOR) & ~zero
+    high = v > CEIL
+    if zero.any():
+        ax.plot(N[zero], np.full(zero.sum(), FLOOR), "o", mfc="white", mec=color, ms=7,
+                label=f"{name}: exactly 0 (drawn at {FLOOR:.0e})")
+    if low.any():
+        ax.plot(N[low], np.full(low.sum(), FLOOR), "v", color=color, ms=7,
+                label=f"{name}: below {FLOOR:.0e}")
+    if high.any():
+        ax.plot(N[high], np.full(high.sum(), CEIL), "^", color=color, ms=8, clip_on=False,
+                label=f"{name}: above {CEIL:.0e} (off scale)")
+        ax.annotate(f"N >= {int(N[high].min())}: off scale, up to {v[high].max():.0e}",
+                    (N[high].min(), CEIL), xytext=(-8, -4), textcoords="offset points",
+                    ha="right", va="top", fontsize=7, color=color)
+
+
 def plot_error_vs_degree(rows, path):
-    fig, axes = plt.subplots(2, 2, figsize=(10, 7.5), sharex=True, sharey=True)
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7.8), sharex=True, sharey=True)
     for ax, x in zip(axes.ravel(), XS):
         rs = [r for r in rows if r["x"] == x]
         N = np.array([r["N"] for r in rs])
-        floor = 1e-17  # exact zeros drawn at the bottom of the log axis
-        pe = np.maximum([r["plain_error_y_mp"] for r in rs], floor)
-        ps = np.maximum([r["plain_estimate_y"] for r in rs], floor)
-        re = np.maximum([r["restart_error_y_mp"] for r in rs], floor)
+        pe = np.array([r["plain_error_y_mp"] for r in rs])
+        ps = np.array([r["plain_estimate_y"] for r in rs])
+        re = np.array([r["restart_error_y_mp"] for r in rs])
         dv = np.array([r["plain_diverging"] for r in rs])
-        ax.semilogy(N, pe, "o-", color="C0", label="plain LEM: error")
-        ax.semilogy(N, ps, ":", color="C0", label="plain LEM: its error estimate")
+        for v, style, color, label, mark in (
+                (pe, "o-", "C0", "plain LEM: error", True),
+                (ps, ":", "C0", "plain LEM: its error estimate", False),
+                (re, "s--", "C2", f"restarted every {RESTART_H}: error", True)):
+            inside = (v >= FLOOR) & (v <= CEIL)
+            # the line joins only points on the plot: clipped ones are marked, not connected
+            ax.semilogy(np.where(inside, N, np.nan), np.where(inside, v, np.nan), style,
+                        color=color, ms=4 if style.startswith("s") else 6, label=label)
+            _clip_markers(ax, N, v, color, label.split(":")[0] if mark else "plain LEM estimate")
         if dv.any():
-            ax.semilogy(N[dv], pe[dv], "x", color="C3", ms=10, mew=2, label="flagged: diverging")
-        ax.semilogy(N, re, "s--", color="C2", ms=4, label=f"restarted every {RESTART_H}: error")
+            inside = dv & (pe <= CEIL)
+            ax.semilogy(N[inside], pe[inside], "x", color="C3", ms=10, mew=2,
+                        label="flagged: diverging")
         ax.axhline(rs[0]["solve_ivp_error_y"], color="C1", lw=1, ls="-.",
                    label="error of solve_ivp (rtol 1e-13) itself")
         ax.axhline(1e-10, color="0.5", lw=0.8)
         ax.set_title(f"x = {x}")
         ax.grid(True, which="major", alpha=0.3)
-        ax.set_ylim(1e-17, 1e25)
+        ax.set_ylim(FLOOR / 10, CEIL * 10)
     for ax in axes[1]:
-        ax.set_xlabel("truncation degree N")
+        ax.set_xlabel("truncation degree N (dimensionless)")
     for ax in axes[:, 0]:
-        ax.set_ylabel("|y_N(x) - y(x)|")
-    handles, labels = axes[1, 1].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=5, fontsize=8)
+        ax.set_ylabel("|y_N(x) - y(x)|  (y dimensionless)")
+    seen = {}
+    for ax in axes.ravel():
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            seen.setdefault(lab, h)
+    fig.legend(list(seen.values()), list(seen), loc="lower center", ncol=3, fontsize=8)
     fig.suptitle("y'' = tanh y, y(0) = 0, y'(0) = 1: error of the truncated LEM system against degree\n"
                  "(reference: 25-digit Taylor integration (mpmath); grey line: 1e-10; plain = one "
                  "expansion about the origin, as in the paper)", fontsize=10)
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    fig.tight_layout(rect=(0, 0.09, 1, 1))
     return save(fig, path)
 
 
@@ -188,7 +224,7 @@ def cost_vs_degree(quick: bool) -> list:
 
 
 def plot_cost(rows, path):
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 5.4))
     for k, (kind, c) in enumerate((("needed moments (odd degrees)", "C0"), ("all moments", "C1"))):
         rs = [r for r in rows if r["kind"] == kind]
         N = [r["N"] for r in rs]
@@ -199,15 +235,16 @@ def plot_cost(rows, path):
                   label=f"{kind}: build + solve to x = 1")
         a2.loglog([r["dimension"] for r in rs], [r["checked_solve_s"] for r in rs], "^--", color=c,
                   label=f"{kind}: with the estimate (4 degrees)")
-    a1.set_xlabel("truncation degree N")
-    a1.set_ylabel("moment dimension")
+    a1.set_xlabel("truncation degree N (dimensionless)")
+    a1.set_ylabel("moment dimension (number of moments)")
     a1.set_title("Size of the truncated system")
-    a1.legend(fontsize=8)
+    a1.legend(fontsize=8, loc="upper left")
     a1.grid(True, alpha=0.3)
-    a2.set_xlabel("moment dimension")
+    a2.set_xlabel("moment dimension (number of moments)")
     a2.set_ylabel("wall time [s]")
     a2.set_title("Cost (sparse build + expm_multiply)")
-    a2.legend(fontsize=7)
+    # below the axes: inside, any corner covers points of one of the six series
+    a2.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)
     a2.grid(True, which="both", alpha=0.3)
     fig.suptitle("y'' = tanh y: cost of the LEM engine against the truncation degree")
     fig.tight_layout()
@@ -361,14 +398,14 @@ def plot_troesch(rows, path):
     for i, r in enumerate(rows):
         target = 1e-9 if r["lam"] <= 1 else 1e-6
         a2.plot([i - 0.4, i + 0.4], [target, target], "k--", lw=1,
-                label="required (issue 3)" if i == 0 else None)
+                label="required accuracy" if i == 0 else None)
         txt = "0 (all 17 digits)" if r["relative_error"] == 0 else f"{r['relative_error']:.1e}"
         a2.text(i, max(r["relative_error"], floor) * 3, txt, ha="center", fontsize=8)
     a2.set_yscale("log")
     a2.set_ylim(floor, 1e-3)
     a2.set_xlabel("lambda")
     a2.set_ylabel("|y'(0) / reference - 1|")
-    a2.set_title("Relative error of y'(0) against physics.md §6")
+    a2.set_title("Relative error of y'(0) against the 20-digit reference")
     a2.legend(fontsize=8, loc="upper left")
     a2.grid(True, axis="y", alpha=0.3)
     fig.suptitle("Troesch's problem y'' = lambda sinh(lambda y), y(0) = 0, y(1) = 1, "

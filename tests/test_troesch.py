@@ -1,4 +1,4 @@
-"""Troesch's problem by LEM shooting (lem.troesch) against the reference slopes of physics.md §6."""
+"""Troesch's problem by LEM shooting (lem.troesch) against 20-digit reference slopes."""
 import math
 
 import numpy as np
@@ -81,7 +81,7 @@ def test_lambda_10_badly_conditioned():
     res = solve_troesch(10.0)
     assert res.status == 0
     assert res.relative_error <= 1e-6
-    assert res.dyds > 1e4  # d y(1) / d s: the conditioning physics.md warns about
+    assert res.dyds > 1e4  # d y(1) / d s: the ill-conditioning of the shooting
 
 
 @pytest.mark.parametrize("lam", [5.0, 10.0])

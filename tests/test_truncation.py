@@ -19,7 +19,7 @@ from lem.propagation import solve
 from lem.result import STATUS_MESSAGES, LEMOptions, LEMWarning
 from lem.taylor import double_series, initial_data_coefficients, taylor_coefficients
 
-#: reference integrations (issue 3: solve_ivp with rtol 1e-13)
+#: reference integrations (solve_ivp with rtol 1e-13)
 REF = dict(method="DOP853", rtol=1e-13, atol=1e-15)
 
 
@@ -94,7 +94,7 @@ def test_x2_plain_flags_divergence_restarted_within_1e10(tanh_ref):
 
 
 def test_generated_coefficients_equal_exact_series_through_x7():
-    # physics.md section 5: y = z0 x + z0 x^3/6 - z0(2 z0^2 - 1) x^5/120
+    # the true series: y = z0 x + z0 x^3/6 - z0(2 z0^2 - 1) x^5/120
     #                           + z0(16 z0^4 - 22 z0^2 + 1) x^7/5040
     for z0 in (Fraction(1), Fraction(2), Fraction(1, 2), Fraction(-3, 7)):
         c = taylor_coefficients(tanh_ode_field(7), [0, z0], 7)[0]
