@@ -423,3 +423,31 @@ def test_eight_legged_table_past_the_enumeration_limit(mu, kind):
     else:
         assert res.events[0].contact == 0 and res.mode_sequence[1][-1] == "stick"
         assert all(md == "open" for md in res.mode_sequence[1][:-1])
+
+
+@pytest.mark.parametrize("alpha, mu", [(0.5, 0.2), (0.7, 0.3)])
+def test_ball_bouncing_down_an_incline(alpha, mu):
+    # The normal motion is a ball on a floor under g cos(alpha); friction acts at the impacts only
+    # (mu (1 + e) u_k against the slide) until the accumulation, then while sliding or sticking.
+    e, h = 0.8, 1.0
+    ca_, sa = math.cos(alpha), math.sin(alpha)
+    q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
+    s = System(q, v, mass=ca.SX.eye(2), force=ca.vertcat(0, -G),
+               contacts=[Contact(gap=-sa * q[0] + ca_ * q[1], tangent=ca_ * q[0] + sa * q[1], mu=mu, e=e)])
+    res = event_driven(s, [-sa * h, ca_ * h], [0.0, 0.0], 8.0, n_eval=81)
+    assert res.success, res.message
+    (acc,) = res.accumulations
+    gn = G * ca_
+    vn0 = math.sqrt(2 * gn * h)
+    t_k = math.sqrt(2 * h / gn) + np.concatenate([[0.0], np.cumsum(2 * vn0 * e ** np.arange(1, acc.n_impacts) / gn)])
+    t_inf = math.sqrt(2 * h / gn) + 2 * e * vn0 / (gn * (1 - e))
+    np.testing.assert_allclose([imp.t for imp in res.impacts], t_k, rtol=0, atol=1e-13)
+    assert acc.method == "closed-form" and abs(acc.t - t_inf) <= 1e-12
+    # (these slopes are steep enough for the ball to slide down at every impact, and after)
+    vt_inf = -G * sa * t_inf + mu * (1 + e) * vn0 / (1 - e)
+    after = res.t > t_inf
+    vt = ca_ * res.v[after, 0] + sa * res.v[after, 1]
+    np.testing.assert_allclose(vt, vt_inf - G * (sa - mu * ca_) * (res.t[after] - t_inf), rtol=1e-13)
+    assert res.mode_sequence[-1] == ("slide-",)
+    on_slope = -sa * res.q[after, 0] + ca_ * res.q[after, 1]
+    assert np.max(np.abs(on_slope)) <= 8 * np.finfo(float).eps * np.max(np.abs(res.q[after]))

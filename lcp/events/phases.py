@@ -17,7 +17,7 @@ import numpy as np
 from ..contact_problem import MODE_NAMES, OPEN, SLIDE_NEG, SLIDE_POS
 from .event_location import first_landing, first_stop
 from .indeterminate import branch_forces, force_margin
-from .model import coordinate_rows, mass_projection
+from .model import EPS, coordinate_rows, mass_projection
 from .modes import AccelProblem
 
 __all__ = ["phase_static", "SmoothPhase", "ClosedFormPhase", "closed_form_output"]
@@ -136,9 +136,14 @@ class ClosedFormPhase(SmoothPhase):
             if dt < best[0]:
                 best = (dt, "stop", int(j))
         if len(self.open_idx):
-            gap = self.model.gaps(self.q0)
+            model = self.model
+            gap = model.gaps(self.q0)
+            # a gap at the rounding level of its own evaluation is zero (a contact just left):
+            # divided by a small departure speed it would shift the landing time
+            noise = 8 * EPS * (np.abs(model.gap0) + np.abs(model.HN) @ np.abs(self.q0))
             for j in self.open_idx:
-                dt = first_landing(gap[j], H[j] @ self.v0, H[j] @ self.qdd)
+                g0 = gap[j] if abs(gap[j]) > noise[j] else 0.0
+                dt = first_landing(g0, H[j] @ self.v0, H[j] @ self.qdd)
                 if dt < best[0]:
                     best = (dt, "impact", int(j))
         dt, kind, j = best
