@@ -449,8 +449,8 @@ class NewtonSolver(_IterativeSolver):
 
     Rounds of NSGS sweeps (``sweeps``, doubling each round) and up to ``newton_iter`` Newton
     iterations alternate, each round starting from the better of the two, until the residual is
-    below tolerance, ``max_rounds`` rounds are spent or two rounds in a row fail to halve the
-    residual (status -1 then, with the residual reached). A Newton phase that gains nothing is
+    below tolerance, ``max_rounds`` rounds are spent or two rounds in a row gain less than 10 %
+    on the residual (status -1 then, with the residual reached). A Newton phase that gains nothing is
     skipped in the next round.
 
     Parameters
@@ -483,9 +483,9 @@ class NewtonSolver(_IterativeSolver):
         for rnd in range(self.max_rounds):
             if res <= tol:
                 break
-            if rnd >= 2 and res > 0.5 * res_prev:
+            if rnd >= 2 and res > 0.9 * res_prev:
                 slow += 1
-                if slow >= 2:  # two rounds in a row without halving the residual: stalled
+                if slow >= 2:  # two rounds in a row (of doubling work) gaining < 10 %: stalled
                     msg = f"stalled after {rnd} rounds"
                     break
             else:
