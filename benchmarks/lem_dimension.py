@@ -1,7 +1,7 @@
 """Cost of the LEM engine against the moment dimension, with the error it buys.
 
-Run: ``python benchmarks/lem_dimension.py [--quick] [--repeats K]``. Prints a table and writes
-``benchmarks/results/lem_dimension.csv``.
+Run: ``python benchmarks/lem_dimension.py [--quick] [--repeats K] [--out DIR]``. Prints a table and
+writes ``lem_dimension.csv`` into DIR (default ``benchmarks/out/``, untracked).
 
 Problem: y'' = tanh y, y(0) = 0, y'(0) = 1 (the paper's (3.9) with z0 = 1), solved to x = 1 by
 one truncated moment system (no restart). Three families of systems:
@@ -87,6 +87,8 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="small sizes only (smoke test)")
     p.add_argument("--repeats", type=int, default=3, help="timing repeats (median)")
+    p.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "out",
+                   help="output folder")
     args = p.parse_args(argv)
     if args.quick:
         cases = [("odd (needed)", 21), ("all moments", 20), ("centred at y0", 20)]
@@ -111,7 +113,8 @@ def main(argv=None):
         print(f"dimension {r['dimension']} ({r['kind']}, N = {r['N']}): build + solve "
               f"{r['total_s']:.2f} s -> {'under' if r['under_target'] else 'OVER'} the "
               f"{TARGET_S:g} s target")
-    path = Path(__file__).resolve().parent / "results" / "lem_dimension.csv"
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / "lem_dimension.csv"
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)

@@ -9,14 +9,15 @@ figures/lem_convergence/):
   its own error estimate and divergence flag, and for the engine restarted every 0.5;
 - ``cost_vs_degree.csv``, ``cost_vs_degree.png``: moment dimension and build/solve time against N,
   for the moments the output needs (odd degrees only, the paper's (3.17)) and for all moments;
-- ``coefficients_3_20.csv``, ``series_3_20.png``: the printed (3.20) coefficient by coefficient
-  beside the engine's exact series and an independent exact recursion, and the three curves
-  (printed series, true series, numerical solution) against x;
-- ``smooth_friction_coefficients.csv``, ``smooth_friction.png``: the smooth slide
-  qdd = -B tanh(qd/eps): the engine's Taylor coefficients beside the printed (4.1) and the exact
-  Coulomb slide, and the motions for several eps;
-- ``troesch.csv``, ``troesch.png``: Troesch's problem y'' = lambda sinh(lambda y), y(0) = 0,
-  y(1) = 1 by shooting over the restarted engine, against 20-digit reference slopes.
+- ``coefficients_3_20.csv``, ``series_3_20_curves.csv``, ``series_3_20.png``: the printed (3.20)
+  coefficient by coefficient beside the engine's exact series and an independent exact
+  recursion, and the three curves (printed series, true series, numerical solution) against x;
+- ``smooth_friction_coefficients.csv``, ``smooth_friction_motions.csv``, ``smooth_friction.png``:
+  the smooth slide qdd = -B tanh(qd/eps): the engine's Taylor coefficients beside the printed
+  (4.1) and the exact Coulomb slide, and the motions for several eps;
+- ``troesch.csv``, ``troesch_solutions.csv``, ``troesch.png``: Troesch's problem
+  y'' = lambda sinh(lambda y), y(0) = 0, y(1) = 1 by shooting over the restarted engine, against
+  20-digit reference slopes.
 
 :func:`run` returns the numbers behind every figure (tests check them).
 
@@ -39,7 +40,7 @@ from scipy.integrate import solve_ivp
 
 from lem import series
 from lem.troesch import TROESCH_REFERENCE, solve_troesch, troesch_field
-from lem.moments import moment_system
+from lem.moments import clear_structure_cache, moment_system
 from lem.paper_equations import smooth_friction_field, tanh_ode_field
 from lem.propagation import solve
 from lem.result import LEMWarning
@@ -134,25 +135,31 @@ def auto_restart_check() -> dict:
 FLOOR, CEIL = 1e-17, 1e25
 
 
-def _clip_markers(ax, N, v, color, name):
+def _clip_markers(ax, N, v, color, name, hollow=False, slot=0):
     """Mark the values of series ``name`` outside [FLOOR, CEIL]: a true 0, below the floor, above
-    the ceiling (off scale, annotated with the largest value)."""
+    the ceiling (off scale, annotated with the largest value). ``hollow`` draws the markers open
+    (an estimate rather than an error); ``slot`` stacks the annotations of several series."""
     v = np.asarray(v, dtype=float)
     zero = v == 0
     low = (v < FLOOR) & ~zero
     high = v > CEIL
+    face = "white" if hollow else color
     if zero.any():
-        ax.plot(N[zero], np.full(zero.sum(), FLOOR), "o", mfc="white", mec=color, ms=7,
-                label=f"{name}: exactly 0 (drawn at {FLOOR:.0e})")
+        ax.plot(N[zero], np.full(zero.sum(), FLOOR), "D" if hollow else "o", mfc="white", mec=color,
+                ms=6, label=f"{name}: exactly 0 (drawn at {FLOOR:.0e})")
     if low.any():
-        ax.plot(N[low], np.full(low.sum(), FLOOR), "v", color=color, ms=7,
+        ax.plot(N[low], np.full(low.sum(), FLOOR), "v", mfc=face, mec=color, ms=7,
                 label=f"{name}: below {FLOOR:.0e}")
     if high.any():
-        ax.plot(N[high], np.full(high.sum(), CEIL), "^", color=color, ms=8, clip_on=False,
+        # open markers larger and below, filled ones on top: both stay visible at the same N
+        ax.plot(N[high], np.full(high.sum(), CEIL), "^", mfc=face, mec=color, clip_on=False,
+                ms=10 if hollow else 6, zorder=3 if hollow else 4,
                 label=f"{name}: above {CEIL:.0e} (off scale)")
-        ax.annotate(f"N >= {int(N[high].min())}: off scale, up to {v[high].max():.0e}",
-                    (N[high].min(), CEIL), xytext=(-8, -4), textcoords="offset points",
-                    ha="right", va="top", fontsize=7, color=color)
+        # the text goes where this plot has no data: right of the middle, between the curves
+        ax.text(0.98, 0.52 - 0.07 * slot,
+                f"{name}, N >= {int(N[high].min())}: above {CEIL:.0e}, up to {v[high].max():.0e}",
+                transform=ax.transAxes, ha="right", va="top", fontsize=7, color=color,
+                bbox=dict(facecolor="white", edgecolor="none", alpha=0.8, pad=1))
 
 
 def plot_error_vs_degree(rows, path):
@@ -164,15 +171,15 @@ def plot_error_vs_degree(rows, path):
         ps = np.array([r["plain_estimate_y"] for r in rs])
         re = np.array([r["restart_error_y_mp"] for r in rs])
         dv = np.array([r["plain_diverging"] for r in rs])
-        for v, style, color, label, mark in (
-                (pe, "o-", "C0", "plain LEM: error", True),
-                (ps, ":", "C0", "plain LEM: its error estimate", False),
-                (re, "s--", "C2", f"restarted every {RESTART_H}: error", True)):
+        for slot, (v, style, color, label, name) in enumerate((
+                (pe, "o-", "C0", "plain LEM: error", "plain LEM"),
+                (ps, ":", "C0", "plain LEM: its error estimate", "plain LEM estimate"),
+                (re, "s--", "C2", f"restarted every {RESTART_H}: error", f"restarted every {RESTART_H}"))):
             inside = (v >= FLOOR) & (v <= CEIL)
             # the line joins only points on the plot: clipped ones are marked, not connected
             ax.semilogy(np.where(inside, N, np.nan), np.where(inside, v, np.nan), style,
                         color=color, ms=4 if style.startswith("s") else 6, label=label)
-            _clip_markers(ax, N, v, color, label.split(":")[0] if mark else "plain LEM estimate")
+            _clip_markers(ax, N, v, color, name, hollow="estimate" in name, slot=slot)
         if dv.any():
             inside = dv & (pe <= CEIL)
             ax.semilogy(N[inside], pe[inside], "x", color="C3", ms=10, mew=2,
@@ -208,6 +215,7 @@ def cost_vs_degree(quick: bool) -> list:
     for kind, Ns in (("needed moments (odd degrees)", pruned), ("all moments", full)):
         for N in Ns:
             prune = kind.startswith("needed")
+            clear_structure_cache()  # time a build from scratch, not a refill of a cached structure
             t0 = time.perf_counter()
             S = moment_system(tanh_f, N, n=2, prune=prune)
             build = time.perf_counter() - t0
@@ -287,12 +295,20 @@ def plot_series(rows, curves, path):
         ax.plot(c["x"], c["true7"], "C0-", label="true series to x^7 (engine, exact)")
         ax.plot(c["x"], c["true21"], "C0:", label="true series to x^21")
         ax.plot(c["x"], c["printed"], "C3-", label="printed (3.20), 5 terms")
-        ax.set_xlabel("x")
-        ax.set_ylabel("y(x)")
+        ax.set_xlabel("x (dimensionless)")
+        ax.set_ylabel("y(x) (dimensionless)")
         ax.set_title(f"y'' = tanh y, y(0) = 0, y'(0) = z0 = {z0:g}")
         ax.grid(True, alpha=0.3)
         lo, hi = c["reference"].min(), c["reference"].max()
-        ax.set_ylim(lo - 0.5, hi + 0.5 * (hi - lo))
+        top = hi + 0.5 * (hi - lo)
+        ax.set_ylim(lo - 0.5, top)
+        cut = [name for name, key in (("printed (3.20)", "printed"), ("true series to x^7", "true7"),
+                                      ("true series to x^21", "true21"))
+               if np.nanmax(c[key]) > top]
+        if cut:
+            ax.text(0.98, 0.03, "clipped at the top (diverging):\n" + "\n".join(cut),
+                    transform=ax.transAxes, ha="right", va="bottom", fontsize=7,
+                    bbox=dict(facecolor="white", edgecolor="0.7", alpha=0.9))
     axes[0].legend(fontsize=8)
     ax = axes[2]
     for i, z0 in enumerate(sorted({r["z0"] for r in rows})):
@@ -306,8 +322,8 @@ def plot_series(rows, curves, path):
     ax.set_yscale("symlog", linthresh=1e-2)
     top = max(abs(r["printed_3_20"]) for r in rows if r["k"] <= 5)
     ax.set_ylim(-3 * top, 3 * top)
-    ax.set_xlabel("power k of x")
-    ax.set_ylabel("coefficient c_k of x^k (symmetric log scale)")
+    ax.set_xlabel("power k of x (dimensionless)")
+    ax.set_ylabel("c_k (dimensionless, symlog)")
     ax.set_title("Coefficients: printed (3.20) vs true")
     ax.set_xticks(range(1, 6))
     ax.grid(True, alpha=0.3)
@@ -349,12 +365,18 @@ def plot_smooth_friction(motions, path):
     ax.plot(t / tau0, motions["coulomb"], "k-", lw=3, alpha=0.35, label="exact Coulomb slide and stick")
     ax.plot(t / tau0, motions["printed"], "C3-", label="printed (4.1), 5 terms")
     for i, eps in enumerate(e for e in motions if isinstance(e, float)):
-        ax.plot(t / tau0, motions[eps]["q"], "--", color=f"C{i}",
+        # C3 (red) is the printed series'
+        ax.plot(t / tau0, motions[eps]["q"], "--", color=("C0", "C1", "C2", "C4", "C5", "C6")[i % 6],
                 label=f"LEM, qdd = -B tanh(qd/eps), eps = {eps:g}")
     ax.axvline(1.0, color="0.5", lw=0.8)
-    ax.set_xlabel("t / tau0  (tau0 = v0 / B)")
+    ax.set_xlabel("t / tau0 (dimensionless; tau0 = v0 / B)")
     ax.set_ylabel("q [m]")
-    ax.set_ylim(0.0, 1.6 * V0_SLIDE**2 / (2 * B_SLIDE))
+    top = 1.6 * V0_SLIDE**2 / (2 * B_SLIDE)
+    ax.set_ylim(0.0, top)
+    if np.nanmax(motions["printed"]) > top:
+        ax.text(0.98, 0.03, f"printed (4.1) clipped at the top (reaches {np.nanmax(motions['printed']):.2g} m)",
+                transform=ax.transAxes, ha="right", va="bottom", fontsize=8, color="C3",
+                bbox=dict(facecolor="white", edgecolor="0.7", alpha=0.9))
     ax.set_title(f"Smooth slide v0 = {V0_SLIDE:g}, B = {B_SLIDE:g}: the printed (4.1) against the "
                  f"true motions")
     ax.grid(True, alpha=0.3)
@@ -386,8 +408,8 @@ def plot_troesch(rows, path):
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.3))
     for i, r in enumerate(rows):
         a1.plot(r["x"], r["y"], color=f"C{i}", label=f"lambda = {r['lam']:g}, y'(0) = {r['slope']:.6g}")
-    a1.set_xlabel("x")
-    a1.set_ylabel("y(x)")
+    a1.set_xlabel("x (dimensionless)")
+    a1.set_ylabel("y(x) (dimensionless)")
     a1.set_title("Solutions (restarted LEM engine)")
     a1.legend(fontsize=8)
     a1.grid(True, alpha=0.3)
@@ -403,8 +425,8 @@ def plot_troesch(rows, path):
         a2.text(i, max(r["relative_error"], floor) * 3, txt, ha="center", fontsize=8)
     a2.set_yscale("log")
     a2.set_ylim(floor, 1e-3)
-    a2.set_xlabel("lambda")
-    a2.set_ylabel("|y'(0) / reference - 1|")
+    a2.set_xlabel("lambda (dimensionless)")
+    a2.set_ylabel("|y'(0) / reference - 1| (relative)")
     a2.set_title("Relative error of y'(0) against the 20-digit reference")
     a2.legend(fontsize=8, loc="upper left")
     a2.grid(True, axis="y", alpha=0.3)
@@ -432,16 +454,28 @@ def run(out=None, quick: bool = False) -> dict:
     curves = series_curves(quick)
     files.append(write_csv(folder / "coefficients_3_20.csv", list(coef[0]), [list(r.values()) for r in coef]))
     files.append(plot_series(coef, curves, folder / "series_3_20.png"))
+    keys = ("x", "reference", "lem", "true7", "true21", "printed")
+    files.append(write_csv(folder / "series_3_20_curves.csv", ("z0",) + keys,
+                           [[z0] + [float(c[k][i]) for k in keys]
+                            for z0, c in curves.items() for i in range(c["x"].size)]))
 
     fr_rows, motions = smooth_friction(quick)
     files.append(write_csv(folder / "smooth_friction_coefficients.csv", list(fr_rows[0]),
                            [list(r.values()) for r in fr_rows]))
     files.append(plot_smooth_friction(motions, folder / "smooth_friction.png"))
+    epss = [e for e in motions if isinstance(e, float)]
+    files.append(write_csv(folder / "smooth_friction_motions.csv",
+                           ["t_s", "coulomb_q_m", "printed_4_1_q_m"] + [f"lem_q_m_eps_{e:g}" for e in epss],
+                           [[float(motions["t"][i]), float(motions["coulomb"][i]),
+                             float(motions["printed"][i])] + [float(motions[e]["q"][i]) for e in epss]
+                            for i in range(motions["t"].size)]))
 
     tr = troesch(quick)
     keys = [k for k in tr[0] if k not in ("x", "y")]
     files.append(write_csv(folder / "troesch.csv", keys, [[r[k] for k in keys] for r in tr]))
     files.append(plot_troesch(tr, folder / "troesch.png"))
+    files.append(write_csv(folder / "troesch_solutions.csv", ["lam", "x", "y"],
+                           [[r["lam"], float(x), float(y)] for r in tr for x, y in zip(r["x"], r["y"])]))
 
     def pick(x, N, key):
         return next(r[key] for r in ev if r["x"] == x and r["N"] == N)
