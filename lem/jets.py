@@ -11,7 +11,7 @@ Examples
 >>> from lem.jets import Jet, monomial_space
 >>> space = monomial_space(1, 5)
 >>> x = Jet.variable(space, 0, 0.0)
->>> [round(v, 6) for v in np.tanh(x).c]
+>>> [round(float(v), 6) for v in np.tanh(x).c]
 [0.0, 1.0, 0.0, -0.333333, 0.0, 0.133333]
 """
 from __future__ import annotations

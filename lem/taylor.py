@@ -54,6 +54,7 @@ def taylor_coefficients(fun, y0, order: int, *, x0: float = 0.0, exact=None, out
     Examples
     --------
     >>> from fractions import Fraction
+    >>> from lem.paper_equations import tanh_ode_field
     >>> c = taylor_coefficients(tanh_ode_field(7), [0, Fraction(1)], 7)
     >>> [str(v) for v in c[0]]
     ['0', '1', '0', '1/6', '0', '-1/120', '0', '-1/1008']
@@ -143,6 +144,7 @@ def double_series(fun, order: int, degree: int, *, centre=None, outputs=None, ex
     --------
     The x**5 term of y'' = tanh y, y(0) = 0, y'(0) = z0 is -z0 (2 z0**2 - 1) / 120:
 
+    >>> from lem.paper_equations import tanh_ode_field
     >>> c = double_series(tanh_ode_field(5), 5, 5)
     >>> [str(c[(5, (0, 1))][0]), str(c[(5, (0, 3))][0])]
     ['1/120', '-1/60']

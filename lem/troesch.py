@@ -190,7 +190,9 @@ def solve_troesch(lam: float, *, s0: float | None = None, xtol: float = 1e-13, f
     coarse = dict(options)
     coarse["rtol"] = max(options.get("rtol", 1e-12), 1e-7)
     coarse["atol"] = max(options.get("atol", 1e-14), 1e-9)
-    near = False
+    # the default first slope is within 1 % of the root for every lambda (linear or pole
+    # asymptotics): Newton from it needs the requested tolerance at once, not a coarse trial
+    near = s0 is None
     hints = {}
     for it in range(1, maxiter + 1):
         with warnings.catch_warnings():
