@@ -54,7 +54,7 @@ def _jacobian(W, mu, rho, closed, stick, sgn):
     return (A + B @ W).tocsc()
 
 
-def newton_solve(W, q, mu, rho, p0, tol: float, max_iter: int = 50, residual=None):
+def newton_solve(W, q, mu, rho, p0, tol: float, max_iter: int = 50, residual=None, max_damped: int = 8):
     """Semismooth Newton from p0 until ``residual(p) <= tol``.
 
     Parameters
@@ -68,6 +68,8 @@ def newton_solve(W, q, mu, rho, p0, tol: float, max_iter: int = 50, residual=Non
         Stopping value of ``residual``.
     residual : callable, optional
         The stopping measure (default: max |Phi|).
+    max_damped : int
+        Stop after this many damped (t < 1) steps in a row.
 
     Returns
     -------
@@ -83,6 +85,7 @@ def newton_solve(W, q, mu, rho, p0, tol: float, max_iter: int = 50, residual=Non
         return p, 0, res, "converged"
     phi, _, closed, stick, sgn = alart_curnier(W, q, mu, rho, p)
     merit = float(phi @ phi)
+    damped = 0
     for it in range(1, max_iter + 1):
         J = _jacobian(W, mu, rho, closed, stick, sgn)
         try:
@@ -111,4 +114,9 @@ def newton_solve(W, q, mu, rho, p0, tol: float, max_iter: int = 50, residual=Non
         res = resid(p)
         if res <= tol:
             return p, it, res, "converged"
+        # near a solution the full step is taken; a run of damped steps means Newton is far from
+        # one (or the problem is degenerate): hand back to the caller rather than factorize on
+        damped = damped + 1 if t < 1.0 else 0
+        if damped >= max_damped:
+            return p, it, res, f"{damped} damped steps in a row at iteration {it} (residual {res:.3g})"
     return p, max_iter, res, f"no convergence in {max_iter} Newton iterations (residual {res:.3g})"

@@ -450,8 +450,8 @@ class NewtonSolver(_IterativeSolver):
     Rounds of NSGS sweeps (``sweeps``, doubling each round) and up to ``newton_iter`` Newton
     iterations alternate, each round starting from the better of the two, until the residual is
     below tolerance, ``max_rounds`` rounds are spent or two rounds in a row gain less than 10 %
-    on the residual (status -1 then, with the residual reached). A Newton phase that gains nothing is
-    skipped in the next round.
+    on the residual (status -1 then, with the residual reached). After a Newton phase that
+    gains nothing, Newton waits until the sweeps have cut the residual a hundredfold.
 
     Parameters
     ----------
@@ -479,7 +479,7 @@ class NewtonSolver(_IterativeSolver):
         res = np.inf  # the sweeps below compute it
         its, msg = 0, "no rounds"
         qi = pb.q[op.perm]
-        slow, skip_newton, res_prev = 0, False, np.inf
+        slow, res_failed, res_prev = 0, np.inf, np.inf
         for rnd in range(self.max_rounds):
             if res <= tol:
                 break
@@ -506,13 +506,12 @@ class NewtonSolver(_IterativeSolver):
                     p, res = p_s, res_s
                 if res <= tol:
                     break
-            if skip_newton:  # Newton gained nothing last round: sweeps only this time
-                skip_newton = False
+            if res > 0.01 * res_failed:  # Newton failed here before: sweeps first gain 100x
                 continue
             p_n, it, _, msg = newton_solve(pb.W, pb.q, pb.mu, pb.rho, p, tol, self.newton_iter, pb.residual)
             its += it
             res_n = pb.residual(p_n)
-            skip_newton = res_n > 0.5 * res
+            res_failed = res if res_n > 0.5 * res else np.inf
             if res_n <= res:
                 p, res = p_n, res_n
         return p, its, res, f"NSGS + Newton stopped after {its} iterations ({msg})"

@@ -147,7 +147,8 @@ def performance_profile(table: dict, taus: np.ndarray) -> dict:
     best = np.min(costs, axis=0)
     out = {}
     for name, c in zip(table, costs):
-        ratio = np.where(np.isfinite(c) & np.isfinite(best), c / np.where(best > 0, best, 1.0), np.inf)
+        with np.errstate(invalid="ignore", divide="ignore"):  # unsolved problems: inf / inf
+            ratio = np.where(np.isfinite(c) & np.isfinite(best), c / np.where(best > 0, best, 1.0), np.inf)
         out[name] = np.array([np.mean(ratio <= t) for t in taus])
     return out
 
