@@ -1,23 +1,44 @@
-"""Optimal control of the Jean-Pratt block through frictional contact (issue 6).
+"""Optimal control of the Jean-Pratt block through frictional contact.
 
-Two problems on the Jean-Pratt scene (m = M = 1, alpha = pi/4, g = 9.81), with a horizontal force
-u on the block (the scene's ``phi`` slot) as the control, solved with :mod:`lcp.ocp` (Moreau-Jean
-transcription, Scholtes homotopy, IPOPT) and verified by open-loop replay through
-:func:`lcp.simulate` (Moreau-Jean at a finer step, and the event-driven integrator):
+Problems on the Jean-Pratt scene (m = M = 1, alpha = pi/4, g = 9.81), the control a horizontal
+force u on the block, solved with :mod:`lcp.ocp` (Moreau-Jean transcription, Scholtes homotopy,
+IPOPT), every solution replayed open loop on the same System:
 
-1. **Rest to rest.** R = 0.5 (kappa = 0.25), |u| <= 20 N, from rest at x = 0 to rest at x = 0.5 m
-   (a) in minimum time, against the bang-bang bound T* = sqrt(2 d (1/a1 + 1/a2)), with
-   a1 = (u_max - c)/D, a2 = (u_max + c)/D, c = R (m+M) g, D = A (1 - kappa); (b) with minimum effort
-   int u^2 dt over T = 1 s, against J* = (4/3) c^2 L*, L* = (36 D^2 d^2 / c^2)^(1/4): the block
-   sticks, then slides for L* while u falls linearly from 2c to 0.
-2. **Shock avoidance.** A block launched at v0 = 1 m/s with kappa close to 1 (R = 1.9: kappa = 0.95)
-   stops with the uncontrolled peak normal force N0 = (m+M) g / (1 - kappa) = 392 N. Stopping it by
-   T = 0.2 s with the smallest peak normal force, |u| <= 39 N (below the 39.24 N that would lift it
-   off), gives the bound (m+M) g + M tan(alpha) v0 / T = 24.62 N: a constant deceleration held by a
-   forward push just below the friction force.
+1. **Rest to rest** (R = 0.5, kappa = 0.25, |u| <= 20 N, from rest at x = 0 to rest at 0.5 m):
+   (a) minimum time, against the bang-bang optimum T* = sqrt(2 d (1/a1 + 1/a2)), a1 = (u_max - c)/D,
+   a2 = (u_max + c)/D, c = R (m+M) g, D = A (1 - kappa) (forward sliding: D a = u - c);
+   (b) minimum effort int u^2 dt over T = 1 s, against J* = (4/3) c^2 L*, L* = (36 D^2 d^2/c^2)^(1/4):
+   the block sticks, then slides for L* while u falls linearly from 2c to 0.
+2. **Move and hold** (same block): to rest at x = 0.3 m by t = 0.4 s, held there (at rest) until
+   0.6 s, back to rest at x = 0 by T = 1.2 s, with minimum effort. Backward sliding has the larger
+   inertia D- = A (1 + kappa) (the friction's reaction lifts M), so the way back needs more time
+   (with T = 1 s it could not be done: its minimum time is 0.4445 s > 0.4 s). Each move is shorter
+   than its free optimum L*, so u is affine in t and clipped at u_max: u = min(u_max, alpha + beta t)
+   (:func:`move_effort`, closed form; :func:`hold_bound` = 168.49986 N^2 s).
+3. **Shock avoidance** (R = 1.9, kappa = 0.95, v0 = 1 m/s): stop by T = 0.2 s with the smallest
+   peak normal force, |u| <= 39 N; bound (m+M) g + M tan(alpha) v0 / T = 24.62 N against the
+   uncontrolled N0 = 392 N.
 
-Documented initial guess for every solve: the simulation of u = 0 (the block at rest for problem 1,
-the uncontrolled stop for problem 2), on the problem's grid.
+Three transcriptions are compared (``METHODS``): uniform steps with the control linear between
+nodes (the former default); uniform steps with a piecewise-constant control (consistent with the
+step's impulse: replayed exactly wherever the mode does not change inside a step); and free step
+lengths with FESD cross complementarity (the stop and the control's switches placed on nodes, so
+that the transcription is exact between them and the objective converges at high order).
+
+Why the linear hold made the minimum-effort control ring before the block moves: while the block
+sticks, the dynamics only require |u| <= c, so the cost alone picks u; the linear hold's cost
+(u_k^2 + u_k u_{k+1} + u_{k+1}^2)/3 couples neighbouring nodes, and its minimizer given the first
+moving value is the geometric sequence of ratio -(2 - sqrt(3)). It is the true discrete optimum of
+that parametrization, an artefact of it; the piecewise-constant hold's cost decouples and gives
+u = 0 exactly while the block sticks.
+
+Documented initial guesses: the simulation of u = 0 on the problem's grid
+(:meth:`~lcp.ocp.OptimalControlProblem.guess`) for uniform steps; for free steps a deterministic
+multi-start from that simulation and from the uniform-step, constant-hold solution at the same N
+(with sigma0 = 1 and 1e-4): the free-step MPCC has local minima, and ``message`` and the CSV column
+``distinct_optima`` say when the starts disagree. The hold problem also runs the deterministic
+multi-start (:meth:`~lcp.ocp.OptimalControlProblem.solve_multistart`) and reports whether the
+starts agree.
 
 ``python -m studies.optimal_control [--out DIR] [--quick]`` writes the figures and CSV tables.
 """
@@ -34,18 +55,26 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import lcp  # noqa: E402
 from lcp.contact_problem import MODE_NAMES, OPEN, SLIDE_NEG, SLIDE_POS, STICK  # noqa: E402
-from lcp.ocp import OptimalControlProblem, effort, replay, tangential_push  # noqa: E402
+from lcp.ocp import OptimalControlProblem, add_control, effort, replay, tangential_push  # noqa: E402
 
 NAME = "optimal_control"
-DESCRIPTION = "Optimal control through frictional contact: rest-to-rest and shock avoidance (Jean-Pratt)."
+DESCRIPTION = "Optimal control through frictional contact: rest to rest, move and hold, shock avoidance."
 
 G = 9.81
-BASE = dict(m=1.0, M=1.0, alpha=math.pi / 4, g=G)
+BASE = {"m": 1.0, "M": 1.0, "alpha": math.pi / 4, "g": G}
 #: problem 1 (rest to rest)
-REST = dict(R=0.5, d=0.5, u_max=20.0, T_effort=1.0)
-#: problem 2 (shock avoidance)
-SHOCK = dict(R=1.9, v0=1.0, T=0.2, u_max=39.0, rate_weight=1e-6)
+REST = {"R": 0.5, "d": 0.5, "u_max": 20.0, "T_effort": 1.0}
+#: problem 2 (move, hold, return)
+HOLD = {"d": 0.3, "t_hold": (0.4, 0.6), "T": 1.2}
+#: problem 3 (shock avoidance)
+SHOCK = {"R": 1.9, "v0": 1.0, "T": 0.2, "u_max": 39.0, "rate_weight": 1e-6}
 SHOCK_SWEEP_R = (1.8, 1.9, 1.98)  # kappa = 0.9, 0.95, 0.99
+#: transcriptions compared: label -> OptimalControlProblem options
+METHODS = {"uniform, linear hold": {"hold": "linear", "steps": "uniform"},
+           "uniform, constant hold": {"hold": "constant", "steps": "uniform"},
+           "free steps, constant hold": {"hold": "constant", "steps": "free"}}
+#: the replay tolerance that success requires
+REPLAY_TOL = 1e-6
 
 
 # ---------------------------------------------------------------------------------------- references
@@ -79,6 +108,39 @@ def min_effort_bound(R=REST["R"], d=REST["d"], u_max=REST["u_max"], T=REST["T_ef
     return 4.0 / 3.0 * c * c * L
 
 
+def move_effort(L, d, R=REST["R"], u_max=REST["u_max"], backward: bool = False) -> float:
+    """Least int u^2 dt for one slide from rest to rest over d in exactly L, |u| <= u_max.
+
+    Forward, u = c + D a with D = A (1 - kappa); backward (mirrored: x -> -x, u -> -u) the same
+    with D = A (1 + kappa). The optimality conditions make u affine in t, clipped at the bounds. Unclipped:
+    c^2 L + 12 D^2 d^2 / L^3. Clipped at u_max over [0, tau) and then u_max + beta (t - tau) over
+    s = L - tau: int u = c L and int (L - t) u = D d + c L^2 / 2 give s = 3 (L/2 - D d/((u_max - c) L))
+    and beta = -2 (u_max - c) L / s^2. Raises when the lower bound would also be active, when the
+    block would stop early, or when L exceeds the free optimum L*.
+    """
+    sc, c, D, _ = _scene_constants(R)
+    if backward:
+        D = sc.A * (1.0 + sc.kappa)
+    a0 = 6 * d / L ** 2  # initial acceleration of the unclipped (linear) profile
+    if c + D * a0 <= u_max:
+        return c * c * L + 12 * D * D * d * d / L ** 3
+    U = u_max
+    s = 3.0 * (L / 2 - D * d / ((U - c) * L))
+    if not 0 < s <= L:
+        raise ValueError("no clipped-affine slide of this length")
+    beta = -2.0 * (U - c) * L / s ** 2
+    if U + beta * s < -U:
+        raise ValueError("the lower control bound would be active too")
+    tau = L - s
+    return U * U * tau + U * U * s + U * beta * s * s + beta * beta * s ** 3 / 3.0
+
+
+def hold_bound(R=REST["R"], d=HOLD["d"], u_max=REST["u_max"]) -> float:
+    """Move-and-hold minimum effort: a forward slide over [0, t_a], a backward one over [t_b, T]."""
+    t_a, t_b = HOLD["t_hold"]
+    return move_effort(t_a, d, R, u_max) + move_effort(HOLD["T"] - t_b, d, R, u_max, backward=True)
+
+
 def peak_bound(R=SHOCK["R"], v0=SHOCK["v0"], T=SHOCK["T"]) -> float:
     """Smallest possible peak normal force when stopping by T: (m+M) g + M tan(alpha) v0 / T."""
     _, _, _, Mt = _scene_constants(R)
@@ -86,62 +148,116 @@ def peak_bound(R=SHOCK["R"], v0=SHOCK["v0"], T=SHOCK["T"]) -> float:
 
 
 # ---------------------------------------------------------------------------------------- problems
-def rest_to_rest_problem(N: int, objective: str = "time") -> OptimalControlProblem:
+def controlled_block(R=REST["R"], u_max=REST["u_max"], v0=0.0):
+    """The Jean-Pratt scene and its System with the horizontal push u as control input."""
+    sc = lcp.scenes.jean_pratt(R=R, v0=v0, **BASE)
+    return sc, add_control(sc.system, tangential_push(sc.system), -u_max, u_max)
+
+
+def rest_to_rest_problem(N: int, objective: str = "time", hold: str = "constant",
+                         steps: str = "uniform") -> OptimalControlProblem:
     """Problem 1 on N control intervals, ``objective`` "time" (T free) or "effort" (T = 1 s)."""
-    sc = lcp.scenes.jean_pratt(R=REST["R"], v0=0.0, **BASE)
-    d, umax = REST["d"], REST["u_max"]
-    common = dict(control_matrix=tangential_push(sc.system), u_min=-umax, u_max=umax,
-                  terminal_constraints=lambda q, v: ca.vertcat(q[0] - d, v[0]))
+    sc, system = controlled_block()
+    d = REST["d"]
+    common = {"q0": sc.q0, "v0": sc.v0, "hold": hold, "steps": steps, "replay_tol": REPLAY_TOL,
+              "terminal_constraints": lambda q, v: ca.vertcat(q[0] - d, v[0])}
     if objective == "time":
-        return OptimalControlProblem(sc, N, T=1.0, free_time=True, T_bounds=(0.05, 5.0),
+        return OptimalControlProblem(system, N, T=0.5, free_time=True, T_bounds=(0.05, 5.0),
                                      terminal_cost=lambda T, q, v: T, **common)
     if objective == "effort":
-        return OptimalControlProblem(sc, N, T=REST["T_effort"], stage_cost=effort, **common)
+        return OptimalControlProblem(system, N, T=REST["T_effort"], stage_cost=effort, **common)
     raise ValueError(f"objective must be 'time' or 'effort', got {objective!r}")
 
 
+def hold_problem(N: int, hold: str = "constant", steps: str = "uniform") -> OptimalControlProblem:
+    """Problem 2 on N intervals (N a multiple of 6: the hold's ends are nodes of the uniform grid)."""
+    if N % 6:
+        raise ValueError(f"N must be a multiple of 6 (the hold's ends are nodes), got {N}")
+    sc, system = controlled_block()
+    d, (t_a, t_b), T = HOLD["d"], HOLD["t_hold"], HOLD["T"]
+    k_a, k_b = round(N * t_a / T), round(N * t_b / T)
+
+    def at_rest_on_hold(s):  # steps ending in [t_a, t_b] end at rest at x = d
+        if k_a - 1 <= s.k < k_b:
+            return ca.vertcat(s.q1[0] - d, s.v1[0])
+        return ca.SX.zeros(0, 1)
+
+    return OptimalControlProblem(system, N, q0=sc.q0, v0=sc.v0, T=T, stage_cost=effort, hold=hold, steps=steps,
+                                 node_times={k_a: t_a, k_b: t_b} if steps == "free" else None,
+                                 path_equalities=at_rest_on_hold, replay_tol=REPLAY_TOL,
+                                 terminal_constraints=lambda q, v: ca.vertcat(q[0], v[0]))
+
+
 def shock_problem(N: int, R: float = SHOCK["R"]) -> OptimalControlProblem:
-    """Problem 2 on N control intervals: stop by T with the smallest peak normal force."""
-    sc = lcp.scenes.jean_pratt(R=R, v0=SHOCK["v0"], **BASE)
-    return OptimalControlProblem(sc, N, control_matrix=tangential_push(sc.system), u_min=-SHOCK["u_max"],
-                                 u_max=SHOCK["u_max"], T=SHOCK["T"], max_cost=lambda s: s.N[0],
-                                 terminal_constraints=lambda q, v: v[0],
+    """Problem 3 on N control intervals: stop by T with the smallest peak normal force."""
+    sc, system = controlled_block(R, SHOCK["u_max"], SHOCK["v0"])
+    return OptimalControlProblem(system, N, q0=sc.q0, v0=sc.v0, T=SHOCK["T"], max_cost=lambda s: s.N[0],
+                                 terminal_constraints=lambda q, v: v[0], replay_tol=REPLAY_TOL,
                                  control_rate_weight=SHOCK["rate_weight"])
 
 
+def hold_violation(res, rp) -> float:
+    """max |x - d| and |xdot| over the hold window on a replay (event pieces or Moreau-Jean)."""
+    t_a, t_b = HOLD["t_hold"]
+    sims = rp.pieces if rp.pieces else [rp.sim]
+    offsets = res.t[:-1] if rp.pieces else [0.0]
+    worst = 0.0
+    for sim, t0 in zip(sims, offsets):
+        t = np.asarray(sim.t) + t0
+        sel = (t >= t_a - 1e-12) & (t <= t_b + 1e-12)
+        if np.any(sel):
+            worst = max(worst, float(np.max(np.abs(sim.q[sel, 0] - HOLD["d"]))),
+                        float(np.max(np.abs(sim.v[sel, 0]))))
+    return worst
+
+
+def _distinct(res) -> int:
+    """Distinct optimal costs (relative 1e-6) among the successful starts of a multi-start (1 without)."""
+    costs = sorted(s["cost"] for s in res.starts if s["success"])
+    return max(1, sum(1 for i, c in enumerate(costs) if i == 0 or abs(c - costs[i - 1]) > 1e-6 * abs(c)))
+
+
 def _event_available() -> bool:
-    try:
-        import lcp.events  # noqa: F401
-    except ImportError:
-        return False
     return "event" in lcp.METHODS
 
 
-def solve_and_verify(ocp: OptimalControlProblem, h_fine: float, event: bool = True) -> dict:
-    """Solve from the u = 0 simulation guess; replay at the same h, at about h_fine, and by events."""
-    res = ocp.solve(ocp.guess(u=0.0))
+def solve_and_verify(ocp: OptimalControlProblem, h_fine: float, multistart: bool = False, guess=None) -> dict:
+    """Solve from ``guess`` (default: the u = 0 simulation; or all multi-start guesses); replay by
+    Moreau-Jean at the same h (uniform steps), at about h_fine, and by the event integrator."""
+    if multistart and guess is not None:  # free steps: from rest, and from the uniform-step solution
+        res = ocp.solve_multistart(guesses=[("u = 0", ocp.guess(u=0.0)), ("uniform-step solution", guess),
+                                            ("uniform-step solution, sigma0 = 1e-4", guess, {"sigma0": 1e-4})])
+    elif multistart:
+        res = ocp.solve_multistart()
+    else:
+        res = ocp.solve(ocp.guess(u=0.0) if guess is None else guess)
     out = {"result": res}
-    out["same_h"] = replay(res, refine=1)
+    out["same_h"] = replay(res, refine=1) if ocp.steps == "uniform" else None
     refine = max(1, int(math.ceil(res.h / h_fine - 1e-9)))
     out["mj"] = replay(res, refine=refine)
-    out["event"] = replay(res, method="event") if event else None
+    out["event"] = replay(res, method="event") if _event_available() and res.hold == "constant" else None
     return out
 
 
-def _row(problem: str, N: int, v: dict, reference: float, value: float) -> dict:
+def _row(problem: str, method: str, N: int, v: dict, reference: float, value: float) -> dict:
     res = v["result"]
-    return {"problem": problem, "N": N, "value": value, "reference": reference,
+    rp = res.replay
+    return {"problem": problem, "method": method, "N": N, "value": value, "reference": reference,
             "rel_gap": (value - reference) / abs(reference), "T": res.T, "success": res.success,
-            "residual": res.complementarity_residual, "lcp_residual": res.lcp_residual,
+            "status": res.status, "residual": res.complementarity_residual, "lcp_residual": res.lcp_residual,
             "dynamics_residual": res.dynamics_residual, "iterations": res.iterations,
             "homotopy_steps": res.homotopy_steps, "solve_time": res.solve_time, "build_time": res.build_time,
-            "err_same_h": v["same_h"].max_error_q, "err_mj": float(v["mj"].error_q[0]),
-            "h_replay": v["mj"].h,
+            "replay_method": rp.method, "final_miss": rp.final_miss, "path_violation": rp.path_violation,
+            "err_same_h": v["same_h"].max_error_q if v["same_h"] is not None else float("nan"),
+            "err_mj": float(v["mj"].error_q[0]), "h_replay": v["mj"].h,
             "err_event": float(v["event"].error_q[0]) if v["event"] is not None else float("nan"),
-            "peak_N_opt": float(res.N.max()),
-            "peak_N_event": (float(v["event"].sim.force_N.max()) if v["event"] is not None else float("nan"))}
+            "hold_violation": (hold_violation(res, v["event"] if v["event"] is not None else v["mj"])
+                               if problem == "hold" else float("nan")),
+            "peak_N_opt": float(res.N.max()), "starts": len(res.starts),
+            "distinct_optima": _distinct(res)}
 
 
+# ---------------------------------------------------------------------------------------- figures
 # ---------------------------------------------------------------------------------------- figures
 _MODE_COLORS = {OPEN: "0.75", STICK: "tab:blue", SLIDE_POS: "tab:orange", SLIDE_NEG: "tab:green"}
 
@@ -178,258 +294,300 @@ def _modes_panel(ax, rows):
               loc="lower right", bbox_to_anchor=(1.0, 1.0), frameon=False, borderaxespad=0.1)
 
 
-def _trajectory_panels(axes, v: dict, title: str, u_max: float, extra=None):
+def _legend_below(ax, ncol=2, **kw):
+    """Legends go below the axes: they never cover data."""
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=ncol, fontsize=7, frameon=False, **kw)
+
+
+def _step_u(ax, res, **kw):
+    """The control as held: stairs for the constant hold, lines between nodes for the linear hold."""
+    if res.hold == "constant":
+        ax.stairs(res.u[:, 0], res.t, baseline=None, **kw)
+    else:
+        ax.plot(res.t, res.u[:, 0], **kw)
+
+
+def _trajectory_panels(axes, v: dict, title: str, u_max: float, lower_visible: bool = True, extra=None):
     res, mj, ev = v["result"], v["mj"], v["event"]
     t = res.t
     ax = axes[0]
-    ax.plot(t, res.u[:, 0], "o-", ms=3, color="k", label="optimal u (nodes, linear between)")
-    ax.axhline(u_max, ls=":", color="0.5", lw=1)
-    ax.axhline(-u_max, ls=":", color="0.5", lw=1, label=r"$\pm u_{max}$")
+    _step_u(ax, res, color="k", lw=1.5, label=f"optimal u ({res.hold} hold)")
+    ax.axhline(u_max, ls=":", color="0.5", lw=1, label=r"$+u_{max}$")
+    if lower_visible:
+        ax.axhline(-u_max, ls="--", color="0.5", lw=1, label=r"$-u_{max}$")
     ax.set_ylabel("force u [N]")
-    ax.set_title(title, fontsize=10)
-    ax.legend(fontsize=7, loc="best")
+    ax.set_title(title, fontsize=9)
+    _legend_below(ax, ncol=3)
     ax = axes[1]
-    ax.plot(mj.sim.t, mj.sim.v[:, 0], "-", color="tab:red", lw=1.5, label=f"replay Moreau-Jean h = {mj.h:.1e}")
+    ax.plot(mj.sim.t, mj.sim.v[:, 0], "-", color="tab:red", lw=1.5, label=f"replay Moreau-Jean h = {mj.h:.1e} s")
     if ev is not None:
-        ax.plot(ev.sim.t, ev.sim.v[:, 0], "--", color="tab:purple", lw=1.2, label="replay event-driven")
-    ax.plot(t, res.v[:, 0], "o", ms=3, color="k", label=f"optimizer (N = {len(t) - 1})")
+        for i, (piece, t0) in enumerate(zip(ev.pieces, t[:-1])):
+            ax.plot(np.asarray(piece.t) + t0, piece.v[:, 0], "--", color="tab:purple", lw=1.2,
+                    label="replay event-driven" if i == 0 else None)
+    ax.plot(t, res.v[:, 0], "o", ms=3, color="k", label=f"optimizer nodes (N = {len(t) - 1})")
     ax.set_ylabel(r"velocity $\dot x$ [m/s]")
-    ax.legend(fontsize=7, loc="best")
+    _legend_below(ax, ncol=3)
     ax = axes[2]
     ax.stairs(res.N[:, 0], t, baseline=None, color="k", lw=1.5, label="optimizer p_N / h")
     ax.stairs(mj.sim.N[:, 0], mj.sim.t, baseline=None, color="tab:red", lw=1, label="replay Moreau-Jean")
-    if ev is not None:
-        ax.plot(ev.sim.t, ev.sim.force_N[:, 0], "--", color="tab:purple", lw=1, label="replay event-driven")
     if extra is not None:
         extra(ax)
     ax.set_ylabel("normal force N [N]")
-    ax.legend(fontsize=7, loc="best")
-    rows = [("optimizer", t, res.modes[:, 0]), ("Moreau-Jean", mj.sim.t, mj.sim.modes[:, 0])]
-    if ev is not None:
-        rows.append(("event",) + _event_modes(ev.sim))
-    _modes_panel(axes[3], rows)
+    _legend_below(ax, ncol=3)
+    _modes_panel(axes[3], [("optimizer", t, res.modes[:, 0]), ("Moreau-Jean", mj.sim.t, mj.sim.modes[:, 0])])
     axes[3].set_xlabel("time t [s]")
     axes[3].set_title("contact mode", fontsize=9, loc="left")
 
 
-def _fig_rest_to_rest(vt, ve, path):
-    fig, axes = plt.subplots(4, 2, figsize=(11, 10), sharex="col",
+def _fig_trajectories(cases, path, suptitle):
+    """cases: list of (v, title, u_max). One column per case."""
+    fig, axes = plt.subplots(4, len(cases), figsize=(5.2 * len(cases), 12), sharex="col", squeeze=False,
                              gridspec_kw={"height_ratios": [1, 1, 1, 0.45]})
-    _trajectory_panels(axes[:, 0], vt, f"minimum time: T = {vt['result'].T:.4f} s "
-                       f"(bang-bang bound {min_time_bound():.4f} s)", REST["u_max"])
-    _trajectory_panels(axes[:, 1], ve, f"minimum effort over T = {REST['T_effort']:g} s: "
-                       f"J = {ve['result'].cost:.2f} (continuous optimum {min_effort_bound():.2f}) N²s",
-                       REST["u_max"])
-    for ax in axes[2]:
-        ax.axhline((BASE["m"] + BASE["M"]) * G, ls=":", color="0.5", lw=1, label="(m+M) g (no acceleration)")
-        ax.legend(fontsize=7, loc="best")
-    fig.suptitle(f"Jean-Pratt block, R = {REST['R']}: rest at x = 0 to rest at x = {REST['d']} m, "
-                 f"|u| <= {REST['u_max']:g} N", fontsize=11)
+    for j, (v, title, u_max) in enumerate(cases):
+        _trajectory_panels(axes[:, j], v, title, u_max)
+    fig.suptitle(suptitle, fontsize=11)
     fig.tight_layout()
     return save(fig, path)
 
 
 def _fig_shock(v, unc, path):
-    fig, axes = plt.subplots(4, 1, figsize=(8, 10), sharex=True,
-                             gridspec_kw={"height_ratios": [1, 1, 1.2, 0.55]})
+    fig, axes = plt.subplots(4, 1, figsize=(8, 12), sharex=True, gridspec_kw={"height_ratios": [1, 1, 1.2, 0.55]})
     res = v["result"]
     sc = lcp.scenes.jean_pratt(R=SHOCK["R"], v0=SHOCK["v0"], **BASE)
 
     def extra(ax):
         ax.stairs(unc.N[:, 0], unc.t, baseline=None, color="0.5", lw=1.2,
-                  label=f"uncontrolled (u = 0), MJ h = {unc.h:.0e}")
-        ax.axhline(sc.N0, ls=":", color="0.4", lw=1)
-        ax.text(SHOCK["T"] * 0.3, sc.N0 * 1.15, f"uncontrolled peak N0 = (m+M)g/(1-kappa) = {sc.N0:.0f} N",
-                fontsize=8, color="0.3")
-        ax.axhline(peak_bound(), ls=":", color="tab:blue", lw=1)
-        ax.text(SHOCK["T"] * 0.3, peak_bound() * 1.12, f"lower bound (m+M)g + Mt v0/T = {peak_bound():.2f} N",
-                fontsize=8, color="tab:blue")
+                  label=f"uncontrolled (u = 0), MJ h = {unc.h:.0e} s")
+        ax.axhline(sc.N0, ls=":", color="0.4", lw=1, label=f"uncontrolled peak N0 = (m+M)g/(1-kappa) = {sc.N0:.0f} N")
+        ax.axhline(peak_bound(), ls=":", color="tab:blue", lw=1,
+                   label=f"lower bound (m+M)g + Mt v0/T = {peak_bound():.2f} N")
         ax.set_yscale("log")
         ax.set_ylim(5, sc.N0 * 3)
 
+    _, c, _, _ = _scene_constants(SHOCK["R"])
     _trajectory_panels(axes, v, f"shock avoidance, kappa = {sc.kappa:.2f}: optimal peak N = {res.peak:.3f} N "
-                       f"(N = {len(res.t) - 1})", SHOCK["u_max"], extra=extra)
+                       f"(N = {len(res.t) - 1}); the lower bound -u_max = -{SHOCK['u_max']:g} N is off-scale",
+                       SHOCK["u_max"], lower_visible=False, extra=extra)
     axes[1].plot(unc.t, unc.v[:, 0], color="0.5", lw=1.2, label="uncontrolled (u = 0)")
-    axes[1].legend(fontsize=7, loc="best")
-    _, c, D, _ = _scene_constants(SHOCK["R"])
-    axes[0].axhline(c, color="tab:orange", lw=1, ls="--",
-                    label=f"R(m+M)g = {c:.2f} N: sliding without deceleration")
+    _legend_below(axes[1], ncol=2)
+    axes[0].axhline(c, color="tab:orange", lw=1, ls="--", label=f"R(m+M)g = {c:.2f} N: sliding without deceleration")
     axes[0].axhline(0.0, color="0.5", lw=1.2, label="uncontrolled (u = 0)")
     axes[0].set_ylim(-3, SHOCK["u_max"] * 1.12)
-    axes[0].legend(fontsize=7, loc="center right")
+    _legend_below(axes[0], ncol=2)
     fig.tight_layout()
     return save(fig, path)
 
 
-def _fig_convergence(rows, histories, N_hist, path):
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.4))
-    ax = axes[0]
-    styles = {"min_time": ("tab:red", "o"), "min_effort": ("tab:green", "s"), "shock": ("tab:blue", "^")}
-    Ns = np.array(sorted({r["N"] for r in rows}), dtype=float)
-    for prob, (col, mk) in styles.items():
-        rr = [r for r in rows if r["problem"] == prob]
-        N = np.array([r["N"] for r in rr])
-        ax.loglog(N, [r["err_mj"] for r in rr], mk + "-", color=col, label=prob)
-        ev = np.array([r["err_event"] for r in rr])
-        if np.any(np.isfinite(ev)):
-            ax.loglog(N[np.isfinite(ev)], ev[np.isfinite(ev)], mk, color=col, mfc="none", ms=10)
-        ax.loglog(N, np.maximum([r["err_same_h"] for r in rr], 1e-17), mk + ":", color=col, ms=3, alpha=0.6)
-    ax.loglog(Ns, 1.2e-2 * (Ns / Ns[0]) ** -2, "k--", lw=1, label=r"$\propto N^{-2}$")
-    ax.plot([], [], "k-", label="replay, Moreau-Jean at fine h")
-    ax.plot([], [], "ko", mfc="none", ms=10, label="replay, event-driven")
-    ax.plot([], [], "k:", label="replay, Moreau-Jean at the same h")
-    ax.set_xticks(Ns)
-    ax.set_xticklabels([f"{int(n)}" for n in Ns])
-    ax.minorticks_off()
-    ax.set_xlabel("control intervals N")
-    ax.set_ylabel(r"max$_k$ |x_opt(t_k) - x_replay(t_k)| [m]")
-    ax.set_title("replay mismatch (open loop)", fontsize=10)
-    ax.legend(fontsize=7, loc="center right")
-    ax = axes[1]
-    for prob, lab in (("min_time", "min time: (T_N - T*)/T*"), ("min_effort", "min effort: (J_N - J*)/J*"),
-                      ("shock", "shock: (peak_N - bound)/bound (at IPOPT tolerance)")):
-        rr = [r for r in rows if r["problem"] == prob]
-        col, mk = styles[prob]
-        ax.loglog([r["N"] for r in rr], np.maximum(np.abs([r["rel_gap"] for r in rr]), 1e-16), mk + "-",
-                  color=col, label=lab)
-    ax.set_xticks(Ns)
-    ax.set_xticklabels([f"{int(n)}" for n in Ns])
-    ax.minorticks_off()
-    ax.set_xlabel("control intervals N")
-    ax.set_ylabel("relative gap to the continuous optimum")
-    ax.set_title("optimal value vs analytic reference", fontsize=10)
-    ax.legend(fontsize=7)
-    ax = axes[2]
+_METHOD_STYLE = {"uniform, linear hold": ("tab:red", "o", "-"), "uniform, constant hold": ("tab:blue", "s", "-"),
+                 "free steps, constant hold": ("tab:green", "^", "-")}
+_PROBLEMS = {"min_time": "minimum time", "min_effort": "minimum effort", "hold": "move and hold"}
+FLOOR = 1e-16
+
+
+def _fig_convergence(rows, path):
+    """Per problem: replay miss (top) and relative gap of the objective (bottom) against N per method."""
+    fig, axes = plt.subplots(2, 3, figsize=(15, 8.5))
+    for j, (prob, label) in enumerate(_PROBLEMS.items()):
+        for meth, (col, mk, ls) in _METHOD_STYLE.items():
+            rr = sorted((r for r in rows if r["problem"] == prob and r["method"] == meth), key=lambda r: r["N"])
+            if not rr:
+                continue
+            N = [r["N"] for r in rr]
+            axes[0, j].loglog(N, np.maximum([r["final_miss"] for r in rr], FLOOR), mk + ls, color=col, label=meth)
+            axes[1, j].loglog(N, np.maximum(np.abs([r["rel_gap"] for r in rr]), FLOOR), mk + ls, color=col,
+                              label=meth + " (open: below J*)")
+            below = [(n, abs(r["rel_gap"])) for n, r in zip(N, rr) if r["rel_gap"] < 0]
+            if below:
+                axes[1, j].loglog(*zip(*below), mk, color="white", ms=4)
+        axes[0, j].axhline(REPLAY_TOL, color="k", ls=":", lw=1, label=f"replay_tol = {REPLAY_TOL:g} (success)")
+        axes[0, j].set_title(f"{label}: replay miss of the final state", fontsize=10)
+        axes[0, j].set_ylabel("max |x, xdot (opt) - (replay)| at T [m, m/s]")
+        axes[1, j].set_title(f"{label}: objective vs continuous optimum", fontsize=10)
+        axes[1, j].set_ylabel("|J_N - J*| / J*")
+        for ax in axes[:, j]:
+            Ns = sorted({r["N"] for r in rows if r["problem"] == prob})
+            ax.set_xticks(Ns)
+            ax.set_xticklabels([str(n) for n in Ns])
+            ax.minorticks_off()
+            ax.set_xlabel("control intervals N")
+            _legend_below(ax, ncol=1)
+    fig.text(0.5, 0.005, f"values below {FLOOR:g} (round-off) are drawn at {FLOOR:g}", ha="center", fontsize=8)
+    fig.tight_layout()
+    return save(fig, path)
+
+
+def _fig_homotopy(histories, N_hist, path):
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    cols = {"min_time": "tab:red", "min_effort": "tab:green", "hold": "tab:purple", "shock": "tab:blue"}
     for prob, hist in histories.items():
-        col, mk = styles[prob]
         hs = [s for s in hist if s.sigma > 0]
-        ax.loglog([s.sigma for s in hs], [max(s.residual, 1e-17) for s in hs], mk + "-", color=col,
+        ax.loglog([s.sigma for s in hs], [max(s.residual, FLOOR) for s in hs], "o-", color=cols[prob],
                   label=f"{prob} ({sum(s.iterations for s in hist)} IPOPT it.)")
         pol = [s for s in hist if s.sigma == 0]
         if pol:
-            ax.loglog([hs[-1].sigma * 0.1], [max(pol[0].residual, 1e-17)], mk, color=col, mfc="none", ms=9)
+            ax.loglog([hs[-1].sigma * 0.1], [max(pol[0].residual, FLOOR)], "o", color=cols[prob], mfc="none", ms=9)
     ax.axhline(1e-8, color="k", ls=":", lw=1, label="target 1e-8")
     ax.invert_xaxis()
-    ax.set_xlabel(r"Scholtes relaxation $\sigma$ (open markers: polishing solve)")
+    ax.set_xlabel(r"Scholtes relaxation $\sigma$ [W] (open markers: polishing solve)")
     ax.set_ylabel("Coulomb residual (impulse) [N s]")
-    ax.set_title(f"homotopy history (N = {N_hist})", fontsize=10)
-    ax.legend(fontsize=7)
+    ax.set_title(f"homotopy history, free steps, constant hold (N = {N_hist}); residuals < {FLOOR:g} drawn at it",
+                 fontsize=9)
+    _legend_below(ax, ncol=2)
     fig.tight_layout()
     return save(fig, path)
 
 
 def _fig_sweep(sweep, path):
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = plt.subplots(figsize=(6, 4.5))
     k = [r["kappa"] for r in sweep]
     ax.semilogy(k, [r["N0"] for r in sweep], "o-", color="0.4", label="uncontrolled peak N0 = (m+M)g/(1-kappa)")
-    ax.semilogy(k, [r["peak_uncontrolled"] for r in sweep], "x", color="k", label="uncontrolled, simulated")
+    ax.semilogy(k, [r["peak_uncontrolled"] for r in sweep], "x", color="k", ms=9, label="uncontrolled, simulated")
     ax.semilogy(k, [r["peak_opt"] for r in sweep], "s-", color="tab:blue", label="optimal control: peak (optimizer)")
-    ax.semilogy(k, [r["peak_replay"] for r in sweep], "+", ms=10, color="tab:red",
-                label="optimal control: peak (replay)")
+    ax.semilogy(k, [r["peak_replay"] for r in sweep], "+", ms=12, color="tab:red", label="optimal control: peak (replay)")
     ax.semilogy(k, [r["bound"] for r in sweep], ":", color="tab:blue", label="bound (m+M)g + Mt v0/T")
-    ax.set_xlabel(r"shock number $\kappa$ = R M tan(alpha) / A")
+    ax.set_xlabel(r"shock number $\kappa$ = R M tan(alpha) / A [-]")
     ax.set_ylabel("peak normal force [N]")
     ax.set_title(f"stopping from v0 = {SHOCK['v0']} m/s by T = {SHOCK['T']} s", fontsize=10)
-    ax.legend(fontsize=7)
+    _legend_below(ax, ncol=2)
     fig.tight_layout()
     return save(fig, path)
 
 
 # ---------------------------------------------------------------------------------------- the study
+def _value(prob, res):
+    return res.T if prob == "min_time" else (res.peak if prob == "shock" else res.cost)
+
+
 def run(out=None, quick: bool = False) -> dict:
-    """Solve both problems for several N, replay every control, write CSV tables and figures.
+    """Solve every problem for several N and methods, replay every control, write CSV and figures.
 
     Returns
     -------
     dict
-        ``rows`` (one dict per problem and N: value, reference, rel_gap, residual, iterations,
-        homotopy_steps, solve_time, err_same_h, err_mj, err_event, ...), ``sweep`` (shock avoidance
-        per kappa: N0, peak_opt, peak_replay, bound, peak_uncontrolled), ``references`` (T*, J*,
-        peak bound), ``event_available`` and ``files``.
+        ``rows`` (one dict per problem, method and N: value, reference, rel_gap, success,
+        final_miss, path_violation, hold_violation, err_same_h, err_mj, err_event, residual,
+        iterations, solve_time, ...), ``sweep`` (shock avoidance per kappa), ``references``,
+        ``multistart`` (the hold problem's starts), ``event_available``, ``N_figure`` and ``files``.
     """
     path = out_dir(out, NAME)
-    Ns = (10, 20, 40) if quick else (10, 20, 40, 80, 160)
-    N_fig = 40
+    Ns = (10, 20, 40) if quick else (10, 20, 40, 80)
+    hold_Ns = (12, 24, 48) if quick else (12, 24, 48, 96)  # the hold's ends on the uniform grid
+    N_fig = 20 if quick else 40
+    N_fig_hold = 24 if quick else 48
     h_fine = 5e-4 if quick else 5e-5
-    event = _event_available()
-    refs = {"T_star": min_time_bound(), "J_star": min_effort_bound(), "peak_bound": peak_bound()}
+    refs = {"min_time": min_time_bound(), "min_effort": min_effort_bound(), "hold": hold_bound(),
+            "shock": peak_bound()}
+    make = {"min_time": lambda N, kw: rest_to_rest_problem(N, "time", **kw),
+            "min_effort": lambda N, kw: rest_to_rest_problem(N, "effort", **kw),
+            "hold": lambda N, kw: hold_problem(N, **kw)}
     rows, keep = [], {}
+    for prob, build in make.items():
+        for N in (hold_Ns if prob == "hold" else Ns):
+            for meth, kw in METHODS.items():
+                # free steps: a multi-start from rest and from the uniform-step solution (the
+                # free-step MPCC has local minima; from rest IPOPT fails on the hold problem)
+                uni = keep.get((prob, "uniform, constant hold", N))
+                free = kw["steps"] == "free" and uni is not None
+                v = solve_and_verify(build(N, kw), h_fine, multistart=free, guess=uni["result"] if free else None)
+                keep[(prob, meth, N)] = v
+                rows.append(_row(prob, meth, N, v, refs[prob], _value(prob, v["result"])))
+                if N == (N_fig_hold if prob == "hold" else N_fig):
+                    keep[(prob, meth)] = v
     for N in Ns:
-        for prob in ("min_time", "min_effort", "shock"):
-            if prob == "shock":
-                ocp, ref = shock_problem(N), refs["peak_bound"]
-            else:
-                ocp = rest_to_rest_problem(N, "time" if prob == "min_time" else "effort")
-                ref = refs["T_star"] if prob == "min_time" else refs["J_star"]
-            # the event replay is the slow part (DOP853 through every kink of the control): in quick
-            # mode only for the figures
-            v = solve_and_verify(ocp, h_fine, event=event and (not quick or N == N_fig))
-            res = v["result"]
-            value = res.T if prob == "min_time" else (res.cost if prob == "min_effort" else res.peak)
-            rows.append(_row(prob, N, v, ref, value))
-            if N == N_fig:
-                keep[prob] = v
+        v = solve_and_verify(shock_problem(N), h_fine)
+        rows.append(_row("shock", "uniform, constant hold", N, v, refs["shock"], v["result"].peak))
+        if N == N_fig:
+            keep[("shock", "uniform, constant hold")] = v
+    # multi-start on the hold problem, uniform steps (the default guesses: u held at u_min, 0,
+    # mid-range, u_max)
+    ms = solve_and_verify(hold_problem(N_fig_hold), h_fine, multistart=True)["result"]
     files = []
     cols = list(rows[0].keys())
     files.append(write_csv(path / "convergence.csv", cols, [[r[c] for c in cols] for r in rows]))
+    files.append(write_csv(path / "multistart_hold.csv", ["label", "cost", "status", "success"],
+                           [[s["label"], s["cost"], s["status"], s["success"]] for s in ms.starts]))
 
     # shock avoidance against kappa, with the uncontrolled stop
     sweep = []
     N_sweep = 20 if quick else 40
     for R in SHOCK_SWEEP_R:
         sc = lcp.scenes.jean_pratt(R=R, v0=SHOCK["v0"], **BASE)
-        v = solve_and_verify(shock_problem(N_sweep, R), h_fine, event=event and not quick)
-        if event:
-            unc = lcp.simulate(sc, SHOCK["T"], method="event")
-            peak_unc = float(unc.force_N.max())
-        else:
-            unc = lcp.simulate(sc, SHOCK["T"], h=h_fine)
-            peak_unc = float(unc.N.max())
+        v = solve_and_verify(shock_problem(N_sweep, R), h_fine)
+        unc = lcp.simulate(sc, SHOCK["T"], h=h_fine)
         ev = v["event"]
-        sweep.append({"R": R, "kappa": sc.kappa, "N": N_sweep, "N0": sc.N0, "peak_uncontrolled": peak_unc,
-                      "peak_opt": v["result"].peak, "bound": peak_bound(R=R),
-                      "peak_replay": float(ev.sim.force_N.max()) if ev is not None else float(v["mj"].sim.N.max()),
-                      "residual": v["result"].complementarity_residual, "err_mj": float(v["mj"].error_q[0]),
+        peak_rep = (max(float(np.max(p.force_N)) for p in ev.pieces) if ev is not None
+                    else float(v["mj"].sim.N.max()))
+        sweep.append({"R": R, "kappa": sc.kappa, "N": N_sweep, "N0": sc.N0, "peak_uncontrolled": float(unc.N.max()),
+                      "peak_opt": v["result"].peak, "bound": peak_bound(R=R), "peak_replay": peak_rep,
+                      "residual": v["result"].complementarity_residual, "final_miss": v["result"].replay.final_miss,
                       "solve_time": v["result"].solve_time, "iterations": v["result"].iterations,
                       "u_mean": float(np.mean(v["result"].u[:, 0]))})
     cols = list(sweep[0].keys())
     files.append(write_csv(path / "shock_sweep.csv", cols, [[r[c] for c in cols] for r in sweep]))
 
-    # trajectories behind the figures
-    for prob, v in keep.items():
-        res = v["result"]
-        modes = np.append(res.modes[:, 0], -1)
-        Nf = np.append(res.N[:, 0], np.nan)
-        files.append(write_csv(path / f"trajectory_{prob}.csv", ["t", "u", "x", "xdot", "N_step", "mode"],
-                               [[float(a), float(b), float(c), float(d), float(e), MODE_NAMES.get(int(f), "")]
-                                for a, b, c, d, e, f in zip(res.t, res.u[:, 0], res.q[:, 0], res.v[:, 0], Nf,
-                                                            modes)]))
-        files.append(write_csv(path / f"homotopy_{prob}.csv",
-                               ["sigma", "iterations", "residual", "max_product", "cost", "return_status", "time"],
-                               [[s.sigma, s.iterations, s.residual, s.max_product, s.cost, s.return_status, s.time]
-                                for s in res.homotopy]))
+    keep = {key: v for key, v in keep.items() if len(key) == 2}
+    # every plotted trajectory series, per case
+    for (prob, meth), v in keep.items():
+        res, mj = v["result"], v["mj"]
+        tag = f"{prob}_{meth.replace(', ', '_').replace(' ', '_')}"
+        u_nodes = res.control(res.t[:-1])[:, 0] if res.hold == "constant" else res.u[:-1, 0]
+        files.append(write_csv(path / f"trajectory_{tag}.csv",
+                               ["t_start", "t_end", "u_start", "x_end", "xdot_end", "N_step", "mode"],
+                               [[float(res.t[k]), float(res.t[k + 1]), float(u_nodes[k]), float(res.q[k + 1, 0]),
+                                 float(res.v[k + 1, 0]), float(res.N[k, 0]), MODE_NAMES.get(int(res.modes[k, 0]), "")]
+                                for k in range(len(res.t) - 1)]))
+        files.append(write_csv(path / f"replay_{tag}.csv", ["t", "x", "xdot", "N_step_start", "mode"],
+                               [[float(mj.sim.t[i]), float(mj.sim.q[i, 0]), float(mj.sim.v[i, 0]),
+                                 float(mj.sim.N[i, 0]) if i < len(mj.sim.N) else float("nan"),
+                                 MODE_NAMES.get(int(mj.sim.modes[i, 0]), "") if i < len(mj.sim.modes) else ""]
+                                for i in range(len(mj.sim.t))]))
+        if v["event"] is not None:
+            ev = v["event"]
+            files.append(write_csv(path / f"replay_event_{tag}.csv", ["t", "x", "xdot"],
+                                   [[float(t0 + tt), float(p.q[i, 0]), float(p.v[i, 0])]
+                                    for p, t0 in zip(ev.pieces, res.t[:-1]) for i, tt in enumerate(p.t)]))
+    hist = {p: keep[(p, "free steps, constant hold")]["result"].homotopy for p in _PROBLEMS}
+    hist["shock"] = keep[("shock", "uniform, constant hold")]["result"].homotopy
+    files.append(write_csv(path / "homotopy.csv", ["problem", "sigma", "iterations", "residual", "max_product",
+                                                   "cost", "return_status", "time"],
+                           [[p, s.sigma, s.iterations, s.residual, s.max_product, s.cost, s.return_status, s.time]
+                            for p, hh in hist.items() for s in hh]))
+    umax = REST["u_max"]
+    files.append(_fig_trajectories(
+        [(keep[("min_time", m)], f"min time, {m}: T = {keep[('min_time', m)]['result'].T:.6f} s "
+          f"(T* = {refs['min_time']:.6f})", umax) for m in METHODS], path / "rest_to_rest_min_time.png",
+        f"Jean-Pratt block, R = {REST['R']}: rest to rest over {REST['d']} m in minimum time, |u| <= {umax:g} N"))
+    files.append(_fig_trajectories(
+        [(keep[("min_effort", m)], f"min effort, {m}: J = {keep[('min_effort', m)]['result'].cost:.4f} N²s "
+          f"(J* = {refs['min_effort']:.4f})", umax) for m in METHODS], path / "rest_to_rest_min_effort.png",
+        f"rest to rest over {REST['d']} m within {REST['T_effort']:g} s with minimum effort int u² dt"))
+    files.append(_fig_trajectories(
+        [(keep[("hold", m)], f"move and hold, {m}: J = {keep[('hold', m)]['result'].cost:.4f} N²s "
+          f"(J* = {refs['hold']:.4f})", umax) for m in METHODS], path / "move_and_hold.png",
+        f"to {HOLD['d']} m, held at rest on [{HOLD['t_hold'][0]}, {HOLD['t_hold'][1]}] s, back by {HOLD['T']:g} s"))
     sc = lcp.scenes.jean_pratt(R=SHOCK["R"], v0=SHOCK["v0"], **BASE)
-    unc = lcp.simulate(sc, SHOCK["T"], h=keep["shock"]["mj"].h)
-    files.append(_fig_rest_to_rest(keep["min_time"], keep["min_effort"], path / "rest_to_rest.png"))
-    files.append(_fig_shock(keep["shock"], unc, path / "shock_avoidance.png"))
-    hist = {p: keep[p]["result"].homotopy for p in keep}
-    files.append(_fig_convergence(rows, hist, N_fig, path / "convergence.png"))
+    unc = lcp.simulate(sc, SHOCK["T"], h=keep[("shock", "uniform, constant hold")]["mj"].h)
+    files.append(_fig_shock(keep[("shock", "uniform, constant hold")], unc, path / "shock_avoidance.png"))
+    files.append(_fig_convergence(rows, path / "convergence.png"))
+    files.append(_fig_homotopy(hist, N_fig, path / "homotopy.png"))
     files.append(_fig_sweep(sweep, path / "shock_sweep.png"))
-    return {"rows": rows, "sweep": sweep, "references": refs, "event_available": event, "N_figure": N_fig,
-            "files": [Path(f) for f in files]}
+    return {"rows": rows, "sweep": sweep, "references": refs, "multistart": ms, "event_available": _event_available(),
+            "N_figure": N_fig, "files": [Path(f) for f in files]}
 
 
 def main(argv=None):
     args = parse_args(NAME, DESCRIPTION, argv)
     out = run(args.out, quick=args.quick)
-    print(f"references: T* = {out['references']['T_star']:.6f} s, J* = {out['references']['J_star']:.4f} N^2 s, "
-          f"peak bound = {out['references']['peak_bound']:.4f} N; event replay: {out['event_available']}")
-    print(f"{'problem':>10} {'N':>4} {'value':>10} {'rel_gap':>9} {'residual':>9} {'iter':>5} {'hom':>4} "
-          f"{'solve[s]':>8} {'err_same_h':>10} {'err_mj':>9} {'err_event':>9}")
+    r = out["references"]
+    print(f"references: T* = {r['min_time']:.9f} s, J* = {r['min_effort']:.6f} N^2 s, hold J* = {r['hold']:.6f} "
+          f"N^2 s, peak bound = {r['shock']:.4f} N; event replay: {out['event_available']}")
+    print(f"{'problem':>10} {'method':>26} {'N':>4} {'value':>12} {'rel_gap':>9} {'ok':>3} {'final_miss':>10} "
+          f"{'path_viol':>9} {'hold_viol':>9} {'iter':>5} {'solve[s]':>8} {'replay':>10}")
     for r in out["rows"]:
-        print(f"{r['problem']:>10} {r['N']:>4} {r['value']:>10.6g} {r['rel_gap']:>9.2e} {r['residual']:>9.1e} "
-              f"{r['iterations']:>5} {r['homotopy_steps']:>4} {r['solve_time']:>8.3f} {r['err_same_h']:>10.1e} "
-              f"{r['err_mj']:>9.2e} {r['err_event']:>9.2e}")
+        print(f"{r['problem']:>10} {r['method']:>26} {r['N']:>4} {r['value']:>12.9g} {r['rel_gap']:>9.2e} "
+              f"{'yes' if r['success'] else 'no':>3} {r['final_miss']:>10.2e} {r['path_violation']:>9.1e} "
+              f"{r['hold_violation']:>9.1e} {r['iterations']:>5} {r['solve_time']:>8.3f} {r['replay_method']:>10}")
+    print(f"hold problem, multi-start: {out['multistart'].message}")
     for r in out["sweep"]:
         print(f"kappa = {r['kappa']:.2f}: uncontrolled peak {r['peak_uncontrolled']:.1f} N (N0 = {r['N0']:.1f}), "
               f"optimal peak {r['peak_opt']:.4f} N (replay {r['peak_replay']:.4f}, bound {r['bound']:.4f})")

@@ -70,6 +70,10 @@ class OptimalControlProblem:
         Equalities at the final node.
     path_constraints : callable(Step) -> vector, optional
         Inequalities (<= 0) at every step (``Step.k`` selects steps).
+    path_equalities : callable(Step) -> vector, optional
+        Equalities (= 0) at every step, e.g. a hold ``lambda s: ca.vertcat(s.q1[0] - d, s.v1[0])
+        if 8 <= s.k < 12 else ca.SX.zeros(0, 1)`` (an equality written as two inequalities leaves
+        IPOPT no interior).
     max_cost : callable(Step) -> scalar, optional
         Minimizes its maximum over the steps (an epigraph variable).
     control_rate_weight : float
@@ -101,7 +105,7 @@ class OptimalControlProblem:
                  hold: str = "constant", steps: str = "uniform", step_bounds=(0.05, 4.0), node_times=None,
                  stage_cost: Callable | None = None, terminal_cost: Callable | None = None,
                  terminal_constraints: Callable | None = None, path_constraints: Callable | None = None,
-                 max_cost: Callable | None = None, control_rate_weight: float = 0.0,
+                 path_equalities: Callable | None = None, max_cost: Callable | None = None, control_rate_weight: float = 0.0,
                  replay_tol: float | None = 1e-6):
         from ..scenes import Scene
 
@@ -149,11 +153,13 @@ class OptimalControlProblem:
         self.node_times = self._check_node_times(node_times)
         for name, fn in (("stage_cost", stage_cost), ("terminal_cost", terminal_cost),
                          ("terminal_constraints", terminal_constraints),
-                         ("path_constraints", path_constraints), ("max_cost", max_cost)):
+                         ("path_constraints", path_constraints), ("path_equalities", path_equalities),
+                         ("max_cost", max_cost)):
             if fn is not None and not callable(fn):
                 raise ValueError(f"{name} must be callable or None")
         self.stage_cost, self.terminal_cost = stage_cost, terminal_cost
         self.terminal_constraints, self.path_constraints = terminal_constraints, path_constraints
+        self.path_equalities = path_equalities
         self.max_cost = max_cost
         self.control_rate_weight = positive("control_rate_weight", control_rate_weight, allow_zero=True)
         self.replay_tol = None if replay_tol is None else positive("replay_tol", replay_tol)
@@ -281,9 +287,10 @@ class OptimalControlProblem:
 
         Parameters
         ----------
-        guesses : sequence of (label, guess), optional
+        guesses : sequence of (label, guess) or (label, guess, option dict), optional
             By default the simulations of u = u_min, 0 (clipped), the mid-range and u_max, each held
-            constant (:meth:`guess`).
+            constant (:meth:`guess`). An option dict overrides homotopy options for that start
+            (e.g. ``{"sigma0": 1e-4}`` to stay near a guess that is already a solution).
         rtol : float
             Costs within this relative tolerance count as the same optimum.
 
@@ -298,7 +305,11 @@ class OptimalControlProblem:
             cands = [("u_min", self.u_min), ("zero", np.clip(0.0, self.u_min, self.u_max)),
                      ("mid", 0.5 * (self.u_min + self.u_max)), ("u_max", self.u_max)]
             guesses = [(lab, self.guess(u=np.where(np.isfinite(u), u, 0.0))) for lab, u in cands]
-        results = [(lab, self.solve(gs, options, **option_kw)) for lab, gs in guesses]
+        results = []
+        for entry in guesses:
+            lab, gs, extra = (tuple(entry) + ({},))[:3]
+            opts = options if options is not None else HomotopyOptions(**{**option_kw, **extra})
+            results.append((lab, self.solve(gs, opts)))
         ok = [(lab, r) for lab, r in results if r.success]
         pool = ok if ok else results
         best_lab, best = min(pool, key=lambda lr: lr[1].cost if np.isfinite(lr[1].cost) else np.inf)

@@ -13,6 +13,7 @@ problem's own controlled System with it (``System.with_control``), so there is n
 """
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 
 from ..control import ControlSchedule
@@ -132,8 +133,8 @@ def replay_check(result: OCPResult, tol: float, refine: int = 50) -> ReplayCheck
     The event-driven replay (exact, restarted at the control's nodes) for a piecewise-constant
     control when the event integrator is available and the drift does not depend on time;
     otherwise (linear hold) Moreau-Jean at T / (N refine), which reports its method and step.
-    Path constraints are evaluated on the replayed states at the nodes (the optimizer's impulses
-    and controls).
+    Path constraints (the largest value) and path equalities (the largest magnitude) are
+    evaluated on the replayed states at the nodes (with the optimizer's impulses and controls).
     """
     pb = result.problem
     # the event replay is exact for the constant hold (closed-form phases); a linear hold makes
@@ -147,14 +148,20 @@ def replay_check(result: OCPResult, tol: float, refine: int = 50) -> ReplayCheck
     final = float(max(np.max(np.abs(rp.q[-1] - result.q[-1])), np.max(np.abs(rp.v[-1] - result.v[-1]))))
     nodes = float(max(rp.max_error_q, rp.max_error_v))
     viol = 0.0
-    if pb.path_constraints is not None:
+    if pb.path_constraints is not None or pb.path_equalities is not None:
         u = result.u
         for k in range(len(result.t) - 1):
             ua = u[k]
             ub = u[k] if result.hold == "constant" else u[k + 1]
             st = pb.make_step(k, result.t[k], result.steps[k], rp.q[k], rp.q[k + 1], rp.v[k], rp.v[k + 1],
                               ua, ub, result.p_N[k], result.p_T[k])
-            val = np.array(pb.path_constraints(st), dtype=float).ravel()
-            if val.size:
-                viol = max(viol, float(val.max()))
+            for fn, absolute in ((pb.path_constraints, False), (pb.path_equalities, True)):
+                if fn is None:
+                    continue
+                val = fn(st)
+                if isinstance(val, ca.SX):  # built with CasADi operations on numbers: constant
+                    val = ca.evalf(val)
+                val = np.array(val, dtype=float).ravel()
+                if val.size:
+                    viol = max(viol, float(np.max(np.abs(val) if absolute else val)))
     return ReplayCheck(method=method, final_miss=final, node_miss=nodes, path_violation=viol, tol=tol)

@@ -138,8 +138,8 @@ class ReplayCheck:
     node_miss : float
         The same, maximum over all nodes.
     path_violation : float
-        Largest path-constraint value (<= 0 wanted) on the replayed states at the nodes (0 without
-        path constraints).
+        Largest path-constraint value (<= 0 wanted) or path-equality magnitude on the replayed
+        states at the nodes (0 without either).
     tol : float
         The tolerance ``success`` requires of ``final_miss`` and ``path_violation``.
     """

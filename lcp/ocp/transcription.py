@@ -197,6 +197,8 @@ class Transcription:
                 J = J + pb.control_rate_weight * ca.sumsqr(us[k + 1] - us[k]) / h
             if pb.path_constraints is not None:
                 self._constrain(ca.vec(ca.SX(pb.path_constraints(st))), -np.inf, 0.0)
+            if pb.path_equalities is not None:
+                self._constrain(ca.vec(ca.SX(pb.path_equalities(st))), 0.0, 0.0)
             if pb.max_cost is not None:
                 self._constrain(_scalar(pb.max_cost(st), "max_cost") - z, -np.inf, 0.0)
         if pb.terminal_cost is not None:
