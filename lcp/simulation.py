@@ -33,9 +33,10 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
     theta : float
         Theta of the Moreau-Jean theta-method, in [1/2, 1]. 1/2 is exact while a block slides
         under constant forces (physics.md section 3); 1 is the first-order scheme.
-    solver : {"auto", "enum", "lemke", "osqp"}
-        One-step contact solver. ``"auto"`` picks the fastest exact one (closed-form enumeration
-        for a single contact, Lemke otherwise, each falling back on the other).
+    solver : {"auto", "enum", "lemke", "osqp", "nsgs", "newton"}
+        One-step contact solver. ``"auto"`` picks the fastest one that meets the tolerance
+        (closed-form enumeration for a single contact, NSGS with a semismooth Newton finish for
+        several, Lemke retrying a failure); see :mod:`lcp.solvers`.
     method : {"moreau-jean", "event"}
         Integration method: Moreau-Jean time stepping, or event-driven integration with exact
         mode switches (:mod:`lcp.events`; ``h``, ``theta`` and ``solver`` are then ignored).
