@@ -218,7 +218,7 @@ def lem_cases(quick: bool):
     """(group, name, run) for the LEM engine; run() -> (status, success, y, estimate, reference)."""
     import warnings
 
-    from lem.truncation import solve
+    from lem import solve
 
     def tanh_ode(x_end, restart=None, degree=61):
         def run():

@@ -28,7 +28,7 @@ Methods:
   (``enum``, ``lemke``, ``osqp``; ``fast=False``), the latter down to ``h_min_python``;
 - the event-driven integrator (``method="event"``);
 - the paper's printed series (4.1)/(4.2), with the paper's B and tau0, held after tau0;
-- the LEM engine (:func:`lem.truncation.solve`) on the tanh-regularized model, degree 12, restarted
+- the LEM engine (:func:`lem.solve`) on the tanh-regularized model, degree 12, restarted
   every eps/|a| (|a| the exact deceleration) or with ``restart="auto"``;
 - the tanh-regularized law f = -R N tanh(xd/eps), N = (m+M) g - M tan(alpha) xdd (linear in xdd,
   so xdd = (phi - R(m+M)g th) / (A - R M tan(alpha) th), th = tanh(xd/eps)), integrated by
@@ -311,7 +311,7 @@ def run_printed_series(key, scene, T, cfg) -> dict:
 
 
 def run_lem(key, scene, T, eps, restart_kind, cfg, ref_cache) -> dict:
-    from lem.truncation import solve
+    from lem import solve
 
     a1 = abs(first_accel(scene))
     te = np.linspace(0.0, T, cfg["n_out_lem"])
