@@ -1,77 +1,94 @@
-"""Optimal control through frictional contact (lcp.ocp): solve time and iterations per problem and N.
+"""Optimal control through frictional contact (lcp.ocp): solve time at equal accuracy, per transcription.
 
-Run: ``python benchmarks/ocp.py [--quick]``. Prints a table and writes ``benchmarks/results/ocp.csv``.
-The problems are those of ``studies/optimal_control.py`` (Jean-Pratt scene): rest to rest in minimum
-time and with minimum effort, and shock avoidance at kappa = 0.95. Each solve starts from the
-documented guess (the simulation of u = 0). ``build_s`` is building the NLP and IPOPT once per
-problem; ``solve_s`` is the median over repeats of the whole homotopy plus the polishing solve
-(the NLP is reused); ``first_call_s`` is the first ``solve`` call, building included. Times are
-wall-clock on a shared machine: compare rows within one run.
+Run: ``python benchmarks/ocp.py [--quick]``. Prints two tables and writes ``benchmarks/results/ocp.csv``.
+The problems are those of ``studies/optimal_control.py`` (Jean-Pratt block): rest to rest in minimum
+time and with minimum effort, and move-and-hold. Each transcription (``studies.optimal_control.METHODS``:
+uniform steps with a linear or a piecewise-constant control, free steps with cross complementarity)
+is solved over a range of N as the study does (uniform steps from the u = 0 simulation, free steps
+by the multi-start from it and from the uniform-step solution, whose time is included). The first
+table lists every solve (value, relative gap to the closed-form optimum, replay miss of the final
+state, success, ``solve_s`` = the homotopy and polishing solves, building excluded, ``total_s`` =
+everything the study's solve takes, guesses and multi-start included). The second, for each
+accuracy target, the cheapest successful solve (replay within tolerance) whose gap meets it.
+Times are wall-clock on a shared machine: compare rows within one run.
 """
 from __future__ import annotations
 
 import argparse
 import csv
-import statistics
 import time
 from pathlib import Path
 
-from lcp.ocp import replay
-from studies.optimal_control import (min_effort_bound, min_time_bound, peak_bound, rest_to_rest_problem,
-                                     shock_problem)
+from studies.optimal_control import (METHODS, hold_bound, hold_problem, min_effort_bound, min_time_bound,
+                                     rest_to_rest_problem, solve_and_verify)
 
 PROBLEMS = {
-    "rest_to_rest_min_time": (lambda N: rest_to_rest_problem(N, "time"), lambda r: r.T, min_time_bound),
-    "rest_to_rest_min_effort": (lambda N: rest_to_rest_problem(N, "effort"), lambda r: r.cost, min_effort_bound),
-    "shock_avoidance_kappa_0.95": (shock_problem, lambda r: r.peak, peak_bound),
+    "min_time": (lambda N, kw: rest_to_rest_problem(N, "time", **kw), lambda r: r.T, min_time_bound),
+    "min_effort": (lambda N, kw: rest_to_rest_problem(N, "effort", **kw), lambda r: r.cost, min_effort_bound),
+    "hold": (lambda N, kw: hold_problem(N, **kw), lambda r: r.cost, hold_bound),
 }
+TARGETS = (1e-2, 1e-3, 1e-4, 1e-6)
 
 
-def measure(name: str, N: int, repeats: int = 3) -> dict:
+def measure(name: str, Ns) -> list[dict]:
     make, value, reference = PROBLEMS[name]
-    t0 = time.perf_counter()
-    ocp = make(N)
-    guess = ocp.guess(u=0.0)
-    t_guess = time.perf_counter() - t0
-    times, res, first = [], None, None
-    for _ in range(repeats):
-        t1 = time.perf_counter()
-        res = ocp.solve(guess)
-        first = time.perf_counter() - t1 if first is None else first
-        times.append(res.solve_time)  # the homotopy and polishing solves, without building
-    solve = statistics.median(times)
     ref = reference()
-    return dict(problem=name, N=N, value=value(res), reference=ref, rel_gap=(value(res) - ref) / ref,
-                build_s=ocp.build_time, guess_s=t_guess, first_call_s=first, solve_s=solve,
-                ipopt_iterations=res.iterations,
-                homotopy_steps=res.homotopy_steps,
-                relaxed_residual=[s.residual for s in res.homotopy if s.sigma > 0][-1],
-                final_sigma=[s.sigma for s in res.homotopy if s.sigma > 0][-1],
-                residual=res.complementarity_residual,
-                replay_same_h=replay(res, refine=1).max_error_q, status=res.status)
+    rows, uniform = [], {}
+    for N in Ns:
+        for meth, kw in METHODS.items():
+            t0 = time.perf_counter()
+            free = kw["steps"] == "free"
+            v = solve_and_verify(make(N, kw), h_fine=1e9, multistart=free,
+                                 guess=uniform[N] if free else None)
+            total = time.perf_counter() - t0
+            res = v["result"]
+            if meth == "uniform, constant hold":
+                uniform[N] = v["result"]
+            if free:  # the multi-start needs the uniform-step solve first
+                total += uniform[N].solve_time
+            rows.append(dict(problem=name, method=meth, N=N, value=value(res), reference=ref,
+                             rel_gap=(value(res) - ref) / ref, final_miss=res.replay.final_miss,
+                             replay=res.replay.method, success=res.success, solve_s=res.solve_time,
+                             build_s=res.build_time, total_s=total, ipopt_iterations=res.iterations))
+    return rows
+
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--quick", action="store_true", help="N = 10, 20, 40 and one repeat")
+    ap.add_argument("--quick", action="store_true", help="fewer N")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     args = ap.parse_args(argv)
-    Ns = (10, 20, 40) if args.quick else (10, 20, 30, 40, 50, 80, 160)
-    rows = [measure(name, N, repeats=1 if args.quick else 3) for name in PROBLEMS for N in Ns]
+    rows = []
+    for name in PROBLEMS:
+        if name == "hold":
+            Ns = (12, 24, 48) if args.quick else (12, 24, 48, 96)
+        else:
+            Ns = (10, 20, 40) if args.quick else (10, 20, 40, 80)
+        rows += measure(name, Ns)
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "ocp.csv"
     with path.open("w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
-    print(f"{'problem':28s} {'N':>4s} {'value':>9s} {'rel_gap':>9s} {'build(s)':>8s} {'solve(s)':>8s} "
-          f"{'IPOPT it':>8s} {'homotopy':>8s} {'sigma':>7s} {'relaxed':>9s} {'residual':>9s} {'replay':>8s} "
-          f"{'status':>6s}")
+    print(f"{'problem':>10} {'method':>26} {'N':>4} {'value':>12} {'rel_gap':>9} {'miss':>8} {'ok':>3} "
+          f"{'solve(s)':>8} {'total(s)':>8} {'IPOPT it':>8}")
     for r in rows:
-        print(f"{r['problem']:28s} {r['N']:4d} {r['value']:9.5g} {r['rel_gap']:9.2e} {r['build_s']:8.3f} "
-              f"{r['solve_s']:8.3f} {r['ipopt_iterations']:8d} {r['homotopy_steps']:8d} {r['final_sigma']:7.0e} "
-              f"{r['relaxed_residual']:9.1e} {r['residual']:9.1e} "
-              f"{r['replay_same_h']:8.1e} {r['status']:6d}")
+        print(f"{r['problem']:>10} {r['method']:>26} {r['N']:>4} {r['value']:>12.9g} {r['rel_gap']:>9.2e} "
+              f"{r['final_miss']:>8.1e} {'yes' if r['success'] else 'no':>3} {r['solve_s']:>8.3f} "
+              f"{r['total_s']:>8.3f} {r['ipopt_iterations']:>8d}")
+    print("\nequal accuracy: the cheapest successful solve (replay within tolerance) with |gap| <= target")
+    print(f"{'problem':>10} {'target':>7} " + " ".join(f"{m:>28}" for m in METHODS))
+    for name in PROBLEMS:
+        for tgt in TARGETS:
+            cells = []
+            for meth in METHODS:
+                ok = [r for r in rows if r["problem"] == name and r["method"] == meth and r["success"]
+                      and abs(r["rel_gap"]) <= tgt]
+                best = min(ok, key=lambda r: r["total_s"]) if ok else None
+                cells.append(f"N={best['N']:<3d} {best['total_s']:7.2f} s" if best else "not reached")
+            print(f"{name:>10} {tgt:>7.0e} " + " ".join(f"{c:>28}" for c in cells))
     print(f"written to {path}")
 
 
