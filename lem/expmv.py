@@ -4,9 +4,10 @@ The LEM engine propagates thousands of small moment systems (dimension ~ 10**2, 
 per solve. :func:`scipy.sparse.linalg.expm_multiply` spends most of its time there estimating
 norms of powers of ``A`` to choose its Taylor degree; its arithmetic is a truncated Taylor series
 with scaling (Al-Mohy and Higham, SIAM J. Sci. Comput. 33, 2011). :func:`expmv` runs the same
-algorithm with the exact 1-norm of ``A`` (cheap for a CSR matrix) in place of the estimates, and
-the Taylor loop compiled with numba when it is installed (``pip install .[fast]``), in NumPy
-otherwise. There is no shift by trace(A)/n: for moment matrices (diagonal ~ degree x growth rate)
+algorithm with the exact 1-norm of ``A`` (cheap for a CSR matrix) and, compiled, cheap upper
+bounds of the norms of its powers (products of a row vector with ``|A|``) in place of the
+estimates, and the Taylor loop compiled with numba when it is installed (``pip install .[fast]``),
+in NumPy otherwise. There is no shift by trace(A)/n: for moment matrices (diagonal ~ degree x growth rate)
 the shift costs digits.
 
 Examples
@@ -48,15 +49,28 @@ def onenorm(A: sp.csr_matrix) -> float:
     return float(np.bincount(A.indices, weights=np.abs(A.data), minlength=A.shape[1]).max())
 
 
-def taylor_parameters(norm_tA: float) -> tuple:
-    """(m, s): Taylor degree and number of sub-steps minimizing m*s with ||tA||_1 / s <= theta_m."""
+def taylor_parameters(norm_tA: float, power_norms=None) -> tuple:
+    """(m, s): Taylor degree and number of sub-steps minimizing m*s with alpha / s <= theta_m.
+
+    alpha is ||tA||_1, or, given upper bounds ``power_norms[p - 1] >= ||(tA)**p||_1**(1/p)``
+    (p = 1, 2, ...), the smaller alpha_p = max(d_p, d_(p+1)) of Al-Mohy and Higham (2011),
+    admissible for m >= p (p - 1) - 1: for non-normal matrices such as moment matrices
+    ||A**p||**(1/p) falls below ||A||. Upper bounds keep the error guarantee.
+    """
     if norm_tA == 0.0:
         return 0, 1
+    candidates = [(1, norm_tA)]
+    if power_norms is not None:
+        d = list(power_norms)
+        candidates += [(p, max(d[p - 1], d[p])) for p in range(2, len(d))]
     best = None
-    for m, theta in THETA.items():
-        s = max(1, math.ceil(norm_tA / theta))
-        if best is None or m * s < best[0] * best[1]:
-            best = (m, s)
+    for p, alpha in candidates:
+        for m, theta in THETA.items():
+            if m < p * (p - 1) - 1:
+                continue
+            s = max(1, math.ceil(alpha / theta))
+            if best is None or m * s < best[0] * best[1]:
+                best = (m, s)
     return best
 
 
@@ -76,6 +90,21 @@ def _taylor_numpy(A, B, t, m, s):
 
 
 if HAVE_NUMBA:
+    @njit(cache=True)
+    def _power_norm_bounds(indptr, indices, data, pmax):  # pragma: no cover - compiled
+        # ||A**p||_1 <= max_j (1^T |A|**p)_j: one product of a row vector with |A| per power
+        d = indptr.size - 1
+        r = np.ones(d)
+        out = np.empty(pmax)
+        for p in range(pmax):
+            nxt = np.zeros(d)
+            for k in range(d):
+                for q in range(indptr[k], indptr[k + 1]):
+                    nxt[indices[q]] += r[k] * abs(data[q])
+            r = nxt
+            out[p] = r.max() ** (1.0 / (p + 1)) if d else 0.0
+        return out
+
     @njit(cache=True)
     def _taylor_compiled(indptr, indices, data, B, t, m, s, tol):  # pragma: no cover - compiled
         d, k = B.shape
@@ -136,7 +165,13 @@ def expmv(A: sp.csr_matrix, B: np.ndarray, t: float, norm: float | None = None,
     """
     B = np.ascontiguousarray(B, dtype=float)
     norm = onenorm(A) if norm is None else norm
-    m, s = taylor_parameters(norm * abs(t))
+    if compiled and HAVE_NUMBA and norm * abs(t) > THETA[55]:
+        # more than one sub-step: bounds of the norms of powers may save some
+        A = A.tocsr()
+        bounds = _power_norm_bounds(A.indptr, A.indices, A.data, 8) * abs(t)
+        m, s = taylor_parameters(norm * abs(t), bounds)
+    else:
+        m, s = taylor_parameters(norm * abs(t))
     if m == 0:
         return B.copy()
     if compiled and HAVE_NUMBA:

@@ -555,3 +555,17 @@ def test_step_hint_is_checked_by_the_same_error_control():
     for wrong in ((0.1, -0.2), ("a",), (np.inf,)):
         with pytest.raises(ValueError, match="step_hint"):
             solve(f, (0.0, 1.0), [0.0, 1.0], restart="auto", step_hint=wrong)
+
+
+def test_taylor_parameters_use_power_norm_bounds():
+    from lem.expmv import THETA, taylor_parameters
+
+    assert taylor_parameters(0.0) == (0, 1)
+    m, s = taylor_parameters(100.0)
+    assert 100.0 / s <= THETA[m]
+    # a nilpotent-like matrix: ||A**p||**(1/p) far below ||A||, fewer products
+    m2, s2 = taylor_parameters(100.0, [100.0, 30.0, 20.0, 15.0, 12.0])
+    assert m2 * s2 < m * s
+    # admissible for some p: m >= p (p - 1) - 1 and alpha_p = max(d_p, d_(p+1)) within theta_m
+    assert any(m2 >= p * (p - 1) - 1 and alpha / s2 <= THETA[m2]
+               for p, alpha in [(1, 100.0), (2, 30.0), (3, 20.0), (4, 15.0)])
