@@ -3,9 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from .options import HomotopyOptions
 from .results import OCPGuess
 
-__all__ = ["resample", "x0_from_guess"]
+__all__ = ["multistart", "resample", "simulate_guess", "x0_from_guess"]
 
 
 def _interp(a, told, tnew):
@@ -72,3 +73,49 @@ def x0_from_guess(pb, tr, gs: OCPGuess) -> np.ndarray:
     if pb.max_cost is not None:
         x0[ix["z"]] = 0.0
     return np.clip(x0, tr.lbx, tr.ubx)
+
+
+def simulate_guess(pb, u, T: float, solver: str = "auto") -> OCPGuess:
+    """The simulation of the control ``u`` (constant, per interval/node, or a function of t) on pb's grid."""
+    from ..simulation import simulate
+
+    t = np.linspace(0.0, T, pb.N + 1)
+    rows = pb.N if pb.hold == "constant" else pb.N + 1
+    if callable(u):
+        un = np.array([np.broadcast_to(np.asarray(u(tk), dtype=float), (pb.nu,)) for tk in t[:rows]])
+    else:
+        ua = np.asarray(u, dtype=float)
+        un = (np.repeat(np.broadcast_to(ua, (pb.nu,))[None, :], rows, 0) if ua.size == pb.nu
+              else ua.reshape(rows, pb.nu))
+    un = np.clip(un, pb.u_min, pb.u_max)
+    sim = simulate(pb.system, T, h=T / pb.N, theta=pb.theta, solver=solver, q0=pb.q0, v0=pb.v0,
+                   control=pb.schedule(t, un))
+    if not sim.success or len(sim.t) != pb.N + 1:
+        raise ValueError(f"the guess simulation failed: {sim.message}")
+    return OCPGuess(T=T, q=sim.q, v=sim.v, u=un, p_N=sim.p_N, p_T=sim.p_T, source="simulation")
+
+
+def multistart(pb, guesses, options, rtol: float, **option_kw):
+    """:meth:`OptimalControlProblem.solve_multistart` (see there)."""
+    if guesses is None:
+        cands = [("u_min", pb.u_min), ("zero", np.clip(0.0, pb.u_min, pb.u_max)),
+                 ("mid", 0.5 * (pb.u_min + pb.u_max)), ("u_max", pb.u_max)]
+        guesses = [(lab, pb.guess(u=np.where(np.isfinite(u), u, 0.0))) for lab, u in cands]
+    results = []
+    for entry in guesses:
+        lab, gs, extra = (tuple(entry) + ({},))[:3]
+        opts = options if options is not None else HomotopyOptions(**{**option_kw, **extra})
+        results.append((lab, pb.solve(gs, opts)))
+    ok = [(lab, r) for lab, r in results if r.success]
+    pool = ok if ok else results
+    best_lab, best = min(pool, key=lambda lr: lr[1].cost if np.isfinite(lr[1].cost) else np.inf)
+    costs = sorted(r.cost for _, r in ok)
+    distinct = [c for i, c in enumerate(costs) if i == 0 or abs(c - costs[i - 1]) > rtol * max(1.0, abs(c))]
+    best.starts = [{"label": lab, "cost": r.cost, "status": r.status, "success": r.success} for lab, r in results]
+    note = (f" {len(ok)}/{len(results)} starts succeeded, reaching {len(distinct)} distinct "
+            f"optim{'um' if len(distinct) == 1 else 'a'} (costs {', '.join(f'{c:.8g}' for c in distinct)}); "
+            f"best from start '{best_lab}'" + ("; a local solution, the starts disagree." if len(distinct) > 1
+                                                else "."))
+    best.message += note
+    return best
+

@@ -9,7 +9,7 @@ import numpy as np
 from ..control import HOLDS, ControlSchedule
 from ..system import System
 from .complementarity import run_homotopy
-from .guess import resample, x0_from_guess
+from .guess import multistart, resample, simulate_guess, x0_from_guess
 from .model import add_control
 from .options import OCP_STATUS_MESSAGES, HomotopyOptions, positive
 from .replay import replay_check
@@ -211,23 +211,7 @@ class OptimalControlProblem:
         solver : str
             One-step contact solver of the simulation.
         """
-        from ..simulation import simulate
-
-        T = self.T if T is None else positive("T", T)
-        t = np.linspace(0.0, T, self.N + 1)
-        rows = self.N if self.hold == "constant" else self.N + 1
-        if callable(u):
-            un = np.array([np.broadcast_to(np.asarray(u(tk), dtype=float), (self.nu,)) for tk in t[:rows]])
-        else:
-            ua = np.asarray(u, dtype=float)
-            un = (np.repeat(np.broadcast_to(ua, (self.nu,))[None, :], rows, 0) if ua.size == self.nu
-                  else ua.reshape(rows, self.nu))
-        un = np.clip(un, self.u_min, self.u_max)
-        sim = simulate(self.system, T, h=T / self.N, theta=self.theta, solver=solver, q0=self.q0, v0=self.v0,
-                       control=self.schedule(t, un))
-        if not sim.success or len(sim.t) != self.N + 1:
-            raise ValueError(f"the guess simulation failed: {sim.message}")
-        return OCPGuess(T=T, q=sim.q, v=sim.v, u=un, p_N=sim.p_N, p_T=sim.p_T, source="simulation")
+        return simulate_guess(self, u, self.T if T is None else positive("T", T), solver)
 
     def _guess_from(self, guess) -> OCPGuess:
         if guess is None:
@@ -301,27 +285,7 @@ class OptimalControlProblem:
             and ``message`` says how many distinct optima were reached. Each is a local solution of
             the MPCC: different optima mean the answer is the best found, not a proven global one.
         """
-        if guesses is None:
-            cands = [("u_min", self.u_min), ("zero", np.clip(0.0, self.u_min, self.u_max)),
-                     ("mid", 0.5 * (self.u_min + self.u_max)), ("u_max", self.u_max)]
-            guesses = [(lab, self.guess(u=np.where(np.isfinite(u), u, 0.0))) for lab, u in cands]
-        results = []
-        for entry in guesses:
-            lab, gs, extra = (tuple(entry) + ({},))[:3]
-            opts = options if options is not None else HomotopyOptions(**{**option_kw, **extra})
-            results.append((lab, self.solve(gs, opts)))
-        ok = [(lab, r) for lab, r in results if r.success]
-        pool = ok if ok else results
-        best_lab, best = min(pool, key=lambda lr: lr[1].cost if np.isfinite(lr[1].cost) else np.inf)
-        costs = sorted(r.cost for _, r in ok)
-        distinct = [c for i, c in enumerate(costs) if i == 0 or abs(c - costs[i - 1]) > rtol * max(1.0, abs(c))]
-        best.starts = [{"label": lab, "cost": r.cost, "status": r.status, "success": r.success} for lab, r in results]
-        note = (f" {len(ok)}/{len(results)} starts succeeded, reaching {len(distinct)} distinct "
-                f"optim{'um' if len(distinct) == 1 else 'a'} (costs {', '.join(f'{c:.8g}' for c in distinct)}); "
-                f"best from start '{best_lab}'" + ("; a local solution, the starts disagree." if len(distinct) > 1
-                                                    else "."))
-        best.message += note
-        return best
+        return multistart(self, guesses, options, rtol, **option_kw)
 
     def _result(self, x, cost, diag, status, message, history, solve_time) -> OCPResult:
         T, hs, q, v, u, pN, pT = self._tr.unpack(x)
