@@ -25,5 +25,5 @@ from .propagation import solve
 from .result import LEMResult, LEMWarning
 from .troesch import solve_troesch
 
-__all__ = ["series", "troesch", "solve", "solve_troesch", "LEMResult", "LEMWarning",
+__all__ = ["series", "troesch", "jean_pratt", "solve", "solve_troesch", "LEMResult", "LEMWarning",
            "PolynomialField", "AnalyticField"]
