@@ -178,7 +178,20 @@ def clear_structure_cache() -> None:
 
 def moment_structure(exp: Expansion, N: int, out_components, prune: bool,
                      max_dimension: int) -> MomentStructure:
-    """The (cached) :class:`MomentStructure` of an expansion's sparsity pattern at degree N."""
+    """The (cached) :class:`MomentStructure` of an expansion's sparsity pattern at degree N.
+
+    Examples
+    --------
+    Two centres of Troesch's field with non-zero sinh and cosh terms share one structure:
+
+    >>> import numpy as np
+    >>> from lem.fields import AnalyticField
+    >>> f = AnalyticField(lambda t, y: [y[1], 5 * np.sinh(5 * y[0])], 2)
+    >>> a = moment_structure(f.expansion(0.0, [0.1, 0.2], 8), 8, (0, 1), True, 10**6)
+    >>> b = moment_structure(f.expansion(0.0, [0.3, 0.7], 8), 8, (0, 1), True, 10**6)
+    >>> a is b, a.dimension
+    (True, 45)
+    """
     groups = [(exp.comp, exp.exps)] + [(c, e) for _, c, e, _ in exp.varying]
     key = (exp.n, N, tuple(out_components), prune, bool(prune or exp.has_constant),
            tuple((np.ascontiguousarray(c, np.int64).tobytes(),

@@ -164,7 +164,7 @@ class LEMStats:
     n_systems : int
         Moment systems built (all degrees, all segments, rejected ones included).
     n_propagations : int
-        expm_multiply / solve_ivp calls.
+        Propagator calls (lem.expmv.expmv, expm_multiply, a dense exponential or solve_ivp).
     build_time, solve_time : float
         Seconds spent building moment systems (Taylor expansion + sparse assembly) and solving them.
     max_nnz : int
