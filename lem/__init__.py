@@ -25,5 +25,14 @@ from .propagation import solve
 from .result import LEMResult, LEMWarning
 from .troesch import solve_troesch
 
-__all__ = ["series", "troesch", "jean_pratt", "solve", "solve_troesch", "LEMResult", "LEMWarning",
-           "PolynomialField", "AnalyticField"]
+__all__ = [
+           "AnalyticField",
+           "LEMResult",
+           "LEMWarning",
+           "PolynomialField",
+           "jean_pratt",
+           "series",
+           "solve",
+           "solve_troesch",
+           "troesch",
+]

@@ -33,7 +33,7 @@ except ImportError:  # pragma: no cover - depends on the environment
     HAVE_NUMBA = False
     njit = None
 
-__all__ = ["HAVE_NUMBA", "THETA", "onenorm", "taylor_parameters", "expmv", "nonnegative_expm"]
+__all__ = ["HAVE_NUMBA", "THETA", "expmv", "nonnegative_expm", "onenorm", "taylor_parameters"]
 
 #: theta_m of Al-Mohy and Higham (2011), Table 3.1, for a backward error of 2**-53: a Taylor
 #: polynomial of degree m approximates exp(X) to that accuracy when ||X||_1 <= theta_m.
@@ -129,12 +129,10 @@ if HAVE_NUMBA:
                     for c in range(k):
                         X[r, c] = Y[r, c]
                         v = abs(Y[r, c])
-                        if v > c2:
-                            c2 = v
+                        c2 = max(c2, v)
                         F[r, c] += Y[r, c]
                         w = abs(F[r, c])
-                        if w > fmax:
-                            fmax = w
+                        fmax = max(fmax, w)
                 if c1 + c2 <= tol * fmax:
                     break
                 c1 = c2

@@ -9,16 +9,16 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
-from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
 from .jets import Jet, monomial_space
 from .validation import is_exact_number
 
-__all__ = ["Expansion", "PolynomialField", "AnalyticField", "as_field"]
+__all__ = ["AnalyticField", "Expansion", "PolynomialField", "as_field"]
 
 
 @dataclass
@@ -35,7 +35,7 @@ class Expansion:
     # sum |a| |w|**e, in y and t) must stay below R, the distance to a singularity of f
     radii: list = field(default_factory=list)
 
-    def truncated(self, D: int) -> "Expansion":
+    def truncated(self, D: int) -> Expansion:
         keep = self.exps.sum(axis=1) <= D
         var = []
         for a, c, e, v in self.varying:

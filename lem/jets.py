@@ -22,7 +22,7 @@ import numbers
 
 import numpy as np
 
-__all__ = ["RADIUS_TRUST", "MonomialSpace", "monomial_space", "index_powers", "Jet"]
+__all__ = ["RADIUS_TRUST", "Jet", "MonomialSpace", "index_powers", "monomial_space"]
 
 #: A state whose singular arguments (tanh(v/eps), 1/u, log u, ...) move this fraction of the way to
 #: the nearest singularity of f is outside what f's Taylor series can be trusted to represent.
@@ -141,7 +141,7 @@ def _univariate(name: str, u0: float, D: int, p: float = 0.0) -> np.ndarray:
     raise ValueError(f"unknown univariate function {name!r}")
 
 
-def _merge(a: "Jet", b: "Jet") -> tuple:
+def _merge(a: Jet, b: Jet) -> tuple:
     if not b.sing or b.sing is a.sing:
         return a.sing
     if not a.sing:
@@ -183,7 +183,7 @@ class Jet:
     raise ``TypeError``: LEM cannot expand them.
     """
 
-    __slots__ = ("space", "c", "sing")
+    __slots__ = ("c", "sing", "space")
     __array_priority__ = 1000
 
     def __init__(self, space: MonomialSpace, coeffs: np.ndarray, sing: tuple = ()):
@@ -195,13 +195,13 @@ class Jet:
 
     # construction ------------------------------------------------------------------------------
     @classmethod
-    def constant(cls, space: MonomialSpace, value: float) -> "Jet":
+    def constant(cls, space: MonomialSpace, value: float) -> Jet:
         c = np.zeros(space.size)
         c[0] = value
         return cls(space, c)
 
     @classmethod
-    def variable(cls, space: MonomialSpace, i: int, value: float) -> "Jet":
+    def variable(cls, space: MonomialSpace, i: int, value: float) -> Jet:
         c = np.zeros(space.size)
         c[0] = value
         if space.D >= 1:
@@ -230,7 +230,7 @@ class Jet:
             return Jet.constant(self.space, float(other))
         return None
 
-    def _mulc(self, other: "Jet") -> np.ndarray:
+    def _mulc(self, other: Jet) -> np.ndarray:
         sp_ = self.space
         a, b = self.c, other.c
         ia, ib = np.flatnonzero(a), np.flatnonzero(b)
@@ -310,7 +310,7 @@ class Jet:
     def __rpow__(self, base):
         return (self * math.log(float(base))).exp()
 
-    def _compose(self, name: str, p: float = 0.0) -> "Jet":
+    def _compose(self, name: str, p: float = 0.0) -> Jet:
         u0 = float(self.c[0])
         g = _univariate(name, u0, self.space.D, p)
         delta = Jet(self.space, self.c.copy())

@@ -22,8 +22,15 @@ from .fields import Expansion, as_field
 from .jets import index_powers, monomial_space
 from .validation import check_int, check_outputs, finite_vector, is_exact_number
 
-__all__ = ["MomentSystem", "MomentStructure", "Placement", "moment_structure", "clear_structure_cache",
-           "moment_system", "build_system"]
+__all__ = [
+    "MomentStructure",
+    "MomentSystem",
+    "Placement",
+    "build_system",
+    "clear_structure_cache",
+    "moment_structure",
+    "moment_system",
+]
 
 
 @dataclass

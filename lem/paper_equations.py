@@ -9,8 +9,13 @@ import numpy as np
 from .fields import AnalyticField, PolynomialField
 from .validation import check_float, check_int
 
-__all__ = ["bernoulli_numbers", "tanh_taylor_coefficients", "tanh_ode_field", "moment_rhs_3_16",
-           "smooth_friction_field"]
+__all__ = [
+    "bernoulli_numbers",
+    "moment_rhs_3_16",
+    "smooth_friction_field",
+    "tanh_ode_field",
+    "tanh_taylor_coefficients",
+]
 
 
 def bernoulli_numbers(m: int) -> list:

@@ -8,7 +8,7 @@ import numpy as np
 from .jets import RADIUS_TRUST
 from .validation import check_float, check_int, finite_vector
 
-__all__ = ["STATUS_MESSAGES", "LEMWarning", "LEMOptions", "LEMStats", "LEMResult"]
+__all__ = ["STATUS_MESSAGES", "LEMOptions", "LEMResult", "LEMStats", "LEMWarning"]
 
 #: status code -> meaning; ``success`` is ``status >= 0``.
 STATUS_MESSAGES = {
@@ -143,7 +143,7 @@ class LEMOptions:
                 raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
 
     @classmethod
-    def from_kwargs(cls, **kwargs) -> "LEMOptions":
+    def from_kwargs(cls, **kwargs) -> LEMOptions:
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(kwargs) - known)
         if unknown:

@@ -8,9 +8,15 @@ from scipy.sparse.linalg import expm_multiply
 
 from .fields import as_field
 from .moments import build_system, moment_system
-from .validation import check_float, check_int, check_outputs, finite_vector, is_exact_number
+from .validation import (
+    check_float,
+    check_int,
+    check_outputs,
+    finite_vector,
+    is_exact_number,
+)
 
-__all__ = ["taylor_coefficients", "initial_data_coefficients", "double_series"]
+__all__ = ["double_series", "initial_data_coefficients", "taylor_coefficients"]
 
 
 def _rows_dict(rows, cols, vals):

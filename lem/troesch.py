@@ -29,8 +29,15 @@ from .fields import AnalyticField
 from .propagation import solve
 from .result import LEMResult, LEMWarning
 
-__all__ = ["TROESCH_REFERENCE", "TROESCH_POLE_10", "STATUS_MESSAGES", "troesch_field", "shoot",
-           "TroeschResult", "solve_troesch"]
+__all__ = [
+    "STATUS_MESSAGES",
+    "TROESCH_POLE_10",
+    "TROESCH_REFERENCE",
+    "TroeschResult",
+    "shoot",
+    "solve_troesch",
+    "troesch_field",
+]
 
 #: High-accuracy y'(0) (20 digits).
 TROESCH_REFERENCE = {

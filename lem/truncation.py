@@ -34,7 +34,30 @@ _HOMES = {
 # private names that callers used before the split, and their public successors
 _RENAMED = {"_space": ("lem.jets", "monomial_space")}
 
-__all__ = [*_HOMES]  # the deprecated names, resolved lazily by __getattr__
+# the deprecated names, resolved lazily by __getattr__
+__all__ = [
+    "RADIUS_TRUST",
+    "STATUS_MESSAGES",
+    "AnalyticField",
+    "Jet",
+    "LEMOptions",
+    "LEMResult",
+    "LEMStats",
+    "LEMWarning",
+    "MomentSystem",
+    "PolynomialField",
+    "as_field",
+    "bernoulli_numbers",
+    "double_series",
+    "initial_data_coefficients",
+    "moment_rhs_3_16",
+    "moment_system",
+    "smooth_friction_field",
+    "solve",
+    "tanh_ode_field",
+    "tanh_taylor_coefficients",
+    "taylor_coefficients",
+]
 
 
 def __getattr__(name: str):

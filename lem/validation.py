@@ -5,7 +5,7 @@ import numbers
 
 import numpy as np
 
-__all__ = ["is_exact_number", "check_int", "check_float", "finite_vector", "check_outputs"]
+__all__ = ["check_float", "check_int", "check_outputs", "finite_vector", "is_exact_number"]
 
 
 def is_exact_number(x) -> bool:

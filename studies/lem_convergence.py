@@ -35,19 +35,18 @@ import time
 import warnings
 from fractions import Fraction
 
+import matplotlib.pyplot as plt
 import numpy as np
 from scipy.integrate import solve_ivp
 
 from lem import series
-from lem.troesch import TROESCH_REFERENCE, solve_troesch, troesch_field
 from lem.moments import clear_structure_cache, moment_system
 from lem.paper_equations import smooth_friction_field, tanh_ode_field
 from lem.propagation import solve
 from lem.result import LEMWarning
 from lem.taylor import taylor_coefficients
+from lem.troesch import TROESCH_REFERENCE, solve_troesch, troesch_field
 from studies._common import out_dir, parse_args, save, write_csv
-
-import matplotlib.pyplot as plt  # noqa: E402  (studies._common selects the Agg backend first)
 
 NAME = "lem_convergence"
 XS = (0.5, 1.0, 1.5, 2.0)
