@@ -488,8 +488,9 @@ def write_hdf5(path, cf: ContactFile, form: str | None = None) -> None:
             v["f"], v["w"] = np.asarray(cf.f, float), np.asarray(cf.w, float)
         v["mu"] = cf.mu
         info = g.create_group("info")
-        info["title"] = cf.name or "problem"
-        info["description"] = f"{cf.n_contacts} planar contacts, written by lcp.fclib"
+        # fixed-length ASCII strings, as FCLib's C library writes and reads them
+        info["title"] = np.bytes_(cf.name or "problem")
+        info["description"] = np.bytes_(f"{cf.n_contacts} planar contacts, written by lcp.fclib")
 
 
 def read_problem(path) -> ContactFile:
