@@ -35,7 +35,7 @@ u = 0 exactly while the block sticks.
 Documented initial guesses: the simulation of u = 0 on the problem's grid
 (:meth:`~lcp.ocp.OptimalControlProblem.guess`) for uniform steps; for free steps a deterministic
 multi-start from that simulation and from the uniform-step, constant-hold solution at the same N
-(with sigma0 = 1 and 1e-4): the free-step MPCC has local minima, and ``message`` and the CSV column
+(with sigma0 = 1, 1e-2 and 1e-4): the free-step MPCC has local minima, and ``message`` and the CSV column
 ``distinct_optima`` say when the starts disagree. The hold problem also runs the deterministic
 multi-start (:meth:`~lcp.ocp.OptimalControlProblem.solve_multistart`) and reports whether the
 starts agree.
@@ -226,6 +226,8 @@ def solve_and_verify(ocp: OptimalControlProblem, h_fine: float, multistart: bool
     Moreau-Jean at the same h (uniform steps), at about h_fine, and by the event integrator."""
     if multistart and guess is not None:  # free steps: from rest, and from the uniform-step solution
         res = ocp.solve_multistart(guesses=[("u = 0", ocp.guess(u=0.0)), ("uniform-step solution", guess),
+                                            ("uniform-step solution, sigma0 = 1e-2", guess,
+                                             {"sigma0": 1e-2, "max_iter": 3000}),
                                             ("uniform-step solution, sigma0 = 1e-4", guess, {"sigma0": 1e-4})])
     elif multistart:
         res = ocp.solve_multistart()
@@ -326,17 +328,16 @@ def _trajectory_panels(axes, v: dict, title: str, u_max: float, lower_visible: b
                     label="replay event-driven" if i == 0 else None)
     ax.plot(t, res.v[:, 0], "o", ms=3, color="k", label=f"optimizer nodes (N = {len(t) - 1})")
     ax.set_ylabel(r"velocity $\dot x$ [m/s]")
-    _legend_below(ax, ncol=3)
+    _legend_below(ax, ncol=2)
     ax = axes[2]
     ax.stairs(res.N[:, 0], t, baseline=None, color="k", lw=1.5, label="optimizer p_N / h")
     ax.stairs(mj.sim.N[:, 0], mj.sim.t, baseline=None, color="tab:red", lw=1, label="replay Moreau-Jean")
     if extra is not None:
         extra(ax)
     ax.set_ylabel("normal force N [N]")
-    _legend_below(ax, ncol=3)
+    _legend_below(ax, ncol=2)
     _modes_panel(axes[3], [("optimizer", t, res.modes[:, 0]), ("Moreau-Jean", mj.sim.t, mj.sim.modes[:, 0])])
-    axes[3].set_xlabel("time t [s]")
-    axes[3].set_title("contact mode", fontsize=9, loc="left")
+    axes[3].set_xlabel("time t [s]; contact mode per step")
 
 
 def _fig_trajectories(cases, path, suptitle):
