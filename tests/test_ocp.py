@@ -425,3 +425,37 @@ def test_multistart_reports_every_start():
     assert res.success and len(res.starts) == 4
     assert res.cost == min(s["cost"] for s in res.starts if s["success"])
     assert "distinct" in res.message and "start" in res.message
+
+
+# ---------------------------------------------------------------------------------------- control schedules
+def test_control_schedule_impulses_are_exact():
+    rng = np.random.default_rng(0)
+    t = np.cumsum(rng.uniform(0.1, 1.0, 8))
+    u = rng.normal(size=(7, 2))
+    s = ControlSchedule(t, u)
+    # a window across several pieces: sum of the overlaps times the piece values
+    a, b = 0.5 * (t[1] + t[2]), 0.25 * t[5] + 0.75 * t[6]
+    overl = np.clip(np.minimum(t[1:], b) - np.maximum(t[:-1], a), 0.0, None)
+    assert np.allclose(s.impulse(a, b), overl @ u, rtol=0, atol=1e-14)
+    assert np.array_equal(s(t[3]), u[3]) and np.array_equal(s.left(t[3]), u[2])  # right-continuous
+    assert s.breakpoints.tolist() == t[1:-1].tolist()
+    lin = ControlSchedule(t, rng.normal(size=(8, 1)), hold="linear")
+    # the trapezoid per piece, exactly
+    assert lin.impulse(t[0], t[-1])[0] == pytest.approx(np.sum(np.diff(t) * 0.5 * (lin.values[1:, 0] + lin.values[:-1, 0])),
+                                                        rel=1e-14)
+    mid = 0.5 * (t[2] + t[3])
+    assert lin.impulse(t[2], mid)[0] == pytest.approx(0.5 * (mid - t[2]) * (lin.values[2, 0] + lin(mid)[0]), rel=1e-13)
+    # the CasADi expression agrees with the NumPy evaluation
+    ts = ca.SX.sym("t")
+    f = ca.Function("u", [ts], [s.expression(ts)])
+    for x in (t[0], t[2], 0.5 * (t[4] + t[5]), t[-1] + 1.0):
+        assert np.allclose(np.array(f(x)).ravel(), s(x))
+
+
+@pytest.mark.parametrize("args, name", [
+    (([0.0, 1.0], [1.0, 2.0]), "values"), (([1.0, 0.0], [1.0]), "times"), (([0.0, 1.0], [np.nan]), "finite"),
+    (([0.0, 1.0], [1.0], "cubic"), "hold"),
+])
+def test_control_schedule_bad_input(args, name):
+    with pytest.raises(ValueError, match=name):
+        ControlSchedule(*args)
