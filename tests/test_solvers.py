@@ -99,3 +99,20 @@ def test_failing_solver_falls_back_to_an_exact_one_and_says_so():
     stop = lcp.simulate(sc, 0.2, h=1e-3, solver="osqp", solver_options=opts, fallback=False)
     assert not stop.success and stop.status == -1
     assert "Step 0 (t = 0)" in stop.message and stop.stats.steps == 0 and stop.t.size == 1
+
+
+def test_acceptance_is_relative_to_tiny_impulses():
+    # a problem whose impulses are ~1e-15: an answer off by 50 % must not pass as solved
+    from lcp.contact_problem import ContactProblem
+    from lcp.solvers import OneStepSolver, StepSolution
+
+    class Wrong(OneStepSolver):
+        name = "wrong"
+
+        def _solve(self, pb):
+            return StepSolution(1.5 * np.array([1e-15, 0.0]))
+
+    pb = ContactProblem(W=np.array([[1.0, 0.0], [0.0, 1.0]]), q=np.array([-1e-15, 0.0]), mu=np.array([0.5]))
+    assert Wrong().solve(pb).status < 0
+    ok = make_solver("enum").solve(pb)
+    assert ok.success and ok.residual <= 1e-30
