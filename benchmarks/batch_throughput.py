@@ -43,7 +43,7 @@ import numpy as np
 from lcp import compiled
 from lcp.batch import jean_pratt_constants, simulate_batch
 
-TARGET = 3e7  # scene-steps per second (issue 7)
+TARGET = 3e7  # scene-steps per second
 
 #: prototype kernel (see the module docstring): state rows q0 q1 v0 v1 cq0 cq1 cv0 cv1 nslide maxgap,
 #: constants rows as lcp.batch.jean_pratt_constants (a, SHt, W, H row-major, gap0, mu, e, h, theta)

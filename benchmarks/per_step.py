@@ -43,7 +43,7 @@ import lcp
 from lcp.contact_problem import PY_OPS, SLIDE_NEG, SLIDE_POS, STICK, OPEN, planar_enum, planar_refine
 from lcp.assembly import StepAssembly
 
-TARGETS = {"compiled": 1.0, "osqp": 60.0}  # microseconds per step (issue 7)
+TARGETS = {"compiled": 1.0, "osqp": 60.0}  # microseconds per step
 
 
 def lean_osqp_loop(scene, T, h, theta=0.5, eps=1e-10):

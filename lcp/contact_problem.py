@@ -12,7 +12,7 @@ contact j is
     |p_T,j| <= mu_j p_N,j,    p_T,j = -mu_j p_N,j sign(u_T,j)  if u_T,j != 0.
 
 In 2D this is exactly a linear complementarity problem (:meth:`ContactProblem.to_lcp`); it is not a
-convex QP, because the friction law is non-associated (physics.md section 3).
+convex QP, because the friction law is non-associated (docs/numerical_methods.md).
 
 Each contact's solution is in one of four modes (:data:`OPEN`, :data:`STICK`, :data:`SLIDE_POS`,
 :data:`SLIDE_NEG`); once the modes are known the problem is linear (:meth:`solve_branch`).

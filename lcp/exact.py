@@ -1,4 +1,4 @@
-"""Exact solution of the Jean-Pratt system in every regime of physics.md section 2.
+"""Exact solution of the Jean-Pratt system in every regime of docs/exact_solutions.md.
 
 In contact (y = 0) the reduced dynamics is A xdd = phi + f, N = (m + M) g - M t xdd, with
 t = tan(alpha), A = m + M t^2 and Coulomb friction |f| <= R N. Each mode has a constant

@@ -1,6 +1,6 @@
 """Ready-made scenes: a system, its initial state, a default horizon and (where known) the exact solution.
 
-- :func:`jean_pratt`: the paper's system (physics.md section 2), reduced (x, y) or in full
+- :func:`jean_pratt`: the paper's system (docs/models.md), reduced (x, y) or in full
   coordinates (x, y, Y) with the slide as a bilateral constraint.
 - :func:`block_chain`: K blocks on a frictional floor joined by springs (K contacts).
 """
@@ -93,7 +93,7 @@ def jean_pratt(m: float = 1.0, M: float = 1.0, alpha: float = math.pi / 4, R: fl
     phi : float
         Net horizontal load on m (0 in the paper, where -M g tan(alpha) cancels M's push).
     coordinates : {"reduced", "full"}
-        ``"reduced"``: q = (x, y), the constant mass matrix of physics.md section 2.
+        ``"reduced"``: q = (x, y), the constant mass matrix of docs/models.md.
         ``"full"``: q = (x, y, Y) with the slide Y = y - x tan(alpha) as a bilateral constraint,
         which exercises the general model's constraint elimination.
     t_end : float, optional

@@ -32,7 +32,7 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
         Step size (> 0). Steps are uniform; the last time is the first multiple of h >= t_end.
     theta : float
         Theta of the Moreau-Jean theta-method, in [1/2, 1]. 1/2 is exact while a block slides
-        under constant forces (physics.md section 3); 1 is the first-order scheme.
+        under constant forces (docs/numerical_methods.md); 1 is the first-order scheme.
     solver : {"auto", "enum", "lemke", "osqp", "nsgs", "newton"}
         One-step contact solver. ``"auto"`` picks the fastest one that meets the tolerance
         (closed-form enumeration for a single contact, NSGS with a semismooth Newton finish for

@@ -11,7 +11,7 @@ solver implements one method, ``_solve``.
 - ``"osqp"``: the Tresca fixed point. For a friction bound s the problem is the convex QP
   min 1/2 p'W p + q'p  s.t.  p_N >= 0, |p_T| <= s, solved by OSQP; its active set names the branch
   (stick, slide+, slide-, open) and the branch's linear system then gives the exact Coulomb
-  fixed point s = mu p_N directly (physics.md section 3: the map is piecewise affine). A single QP
+  fixed point s = mu p_N directly (docs/numerical_methods.md: the map is piecewise affine). A single QP
   would be a convex relaxation, not Coulomb's law.
 """
 from __future__ import annotations
@@ -176,7 +176,7 @@ class OsqpSolver(OneStepSolver):
     -----
     QP(s): min 1/2 p'W p + q'p subject to p_N >= 0, -s <= p_T <= s. Its KKT conditions are Tresca's
     law with bound s; Coulomb's law is the fixed point s = mu p_N(s). While a contact slides the map
-    is affine with slope kappa (physics.md section 3), so plain iteration crawls as kappa -> 1 and
+    is affine with slope kappa (docs/numerical_methods.md), so plain iteration crawls as kappa -> 1 and
     has no fixed point for kappa >= 1. Instead each QP only names the branch; the branch's linear
     system gives the exact fixed point of that branch, which is accepted when it satisfies the
     branch's inequalities. When a sliding branch has no admissible fixed point (the Painleve

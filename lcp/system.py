@@ -2,7 +2,7 @@
 
 Everything is written with CasADi symbols, so that every Jacobian (contact normals and tangents,
 bilateral constraints, force derivatives for the implicit step) comes from automatic
-differentiation. The model follows physics.md section 1:
+differentiation. The model follows docs/models.md:
 
     A(t, q) qdd = F(t, q, v) + G(t, q)' lambda + H_N(q)' N + H_T(q)' f,
     phi(t, q) = 0 (bilateral, frictionless),

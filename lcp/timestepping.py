@@ -1,4 +1,4 @@
-"""Moreau-Jean time stepping (the theta-method with impulses), physics.md section 3.
+"""Moreau-Jean time stepping (the theta-method with impulses), docs/numerical_methods.md.
 
 Per step of size h:
 

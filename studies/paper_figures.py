@@ -269,7 +269,7 @@ def run(out=None, quick: bool = False) -> dict:
 
     err_f = trajectories(scene_f, hs[:2], "forward", outdir)
     err_r = trajectories(scene_r, hs[:2], "reverse", outdir)
-    # a second parameter set: R = 0.5 would hide a spurious lift-off (physics.md section 2)
+    # a second parameter set: R = 0.5 would hide a spurious lift-off (docs/models.md)
     scene_o = lcp.scenes.jean_pratt(m=2.0, M=0.7, alpha=0.9, R=0.35, v0=1.7)
     err_o = trajectories(scene_o, hs[:2], "other_parameters", outdir)
     conv_hs = np.array([1e-2, 1e-3, 1e-4] if quick else [1e-2, 1e-3, 1e-4, 1e-5]) * (1 + 1 / 7)

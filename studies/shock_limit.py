@@ -7,7 +7,7 @@
   event-driven integrator against Moreau-Jean at several h;
 - ``convergence.csv``, ``convergence.png``: the smooth solution tends to the shock as kappa -> 1-;
 - ``iterations.csv``, ``iterations.png``: iterations of each one-step solver against kappa, and of
-  the plain friction-bound (Tresca) fixed point, which contracts by exactly kappa (physics.md §3);
+  the plain friction-bound (Tresca) fixed point, which contracts by exactly kappa (docs/numerical_methods.md);
 - ``series.csv``, ``series.png``: where the printed LEM series (4.1)/(4.2) stops making sense;
 - ``regimes.csv``, ``regimes.png``: regime map over (R, alpha) for a few m/M, with the kappa = 1
   curve, checked against the event-driven integrator on a coarser grid.
@@ -228,7 +228,7 @@ def plot_convergence(conv, path):
 def tresca_qp(W, q, s):
     """Closed-form minimizer of 1/2 p'W p + q'p with p_N >= 0, |p_T| <= s (one contact, W SPD).
 
-    Tresca's law with bound s: the QP of one friction-bound iteration (physics.md §3)."""
+    Tresca's law with bound s: the QP of one friction-bound iteration (docs/numerical_methods.md)."""
     det = W[0, 0] * W[1, 1] - W[0, 1] ** 2
     cands = [np.array([(-q[0] * W[1, 1] + q[1] * W[0, 1]) / det, (-q[1] * W[0, 0] + q[0] * W[0, 1]) / det])]
     for pT in (s, -s):

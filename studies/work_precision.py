@@ -394,7 +394,7 @@ def mujoco_model_xml(scene, h: float, cone: str = "elliptic", solref: str | None
     the slide Y - y + x tan(alpha) = const as a fixed-tendon equality, the block a box on a plane
     with friction R (condim 3). M's weight reaches x through the slide as + M g tan(alpha); a motor
     on x supplies phi - M g tan(alpha) (the paper's applied force when phi = 0), so that the
-    reduced model is that of physics.md section 2. MuJoCo's contact and equality are soft
+    reduced model is that of docs/models.md. MuJoCo's contact and equality are soft
     (default solref/solimp)."""
     p = scene.params
     m, M, R, g = p["m"], p["M"], p["R"], p["g"]

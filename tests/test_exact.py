@@ -10,7 +10,7 @@ from lcp.scenes import jean_pratt
 
 
 def test_reference_numbers():
-    # physics.md section 2, reference parameters
+    # docs/exact_solutions.md, reference parameters
     sc = jean_pratt()
     assert sc.kappa == 0.25
     assert sc.N0 == pytest.approx(26.16, rel=1e-12)

@@ -61,7 +61,7 @@ def test_bounds_hold_for_other_parameters(m, M, alpha, kappa, v0, n, frac, solve
 
 
 def test_default_R_does_not_hide_lift_off():
-    # R = M t / (m + M) = 0.5 makes a lifted block decelerate like a sliding one (physics.md section 2):
+    # R = M t / (m + M) = 0.5 makes a lifted block decelerate like a sliding one (docs/models.md):
     # check y and N on a parameter set where that coincidence does not hold.
     sc = jean_pratt(m=2.0, M=0.7, alpha=0.9, R=0.35, v0=1.7)
     res = lcp.simulate(sc, h=1e-3, solver="osqp")

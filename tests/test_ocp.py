@@ -1,6 +1,6 @@
 """lcp.ocp: optimal control through frictional contact (MPCC, Scholtes homotopy, replay).
 
-Reference values are closed-form (physics.md section 2, forward sliding D a = u - c with
+Reference values are closed-form (docs/models.md, forward sliding D a = u - c with
 c = R (m+M) g and D = A (1 - kappa)):
 - minimum time from rest to rest over d with |u| <= u_max: bang-bang, T* = sqrt(2 d (1/a1 + 1/a2)),
   a1 = (u_max - c)/D, a2 = (u_max + c)/D;

@@ -85,7 +85,7 @@ def test_iterations_and_plain_contraction(study):
 def test_printed_series_breakdown(study):
     res, _ = study
     ser = res["series"]["scaled"]
-    assert math.isclose(ser[1.0]["q_at_tau0_printed"], 169 / 150, rel_tol=1e-12)  # physics.md §5
+    assert math.isclose(ser[1.0]["q_at_tau0_printed"], 169 / 150, rel_tol=1e-12)  # docs/errata.md
     assert 0.05 < ser[1.0]["u_1pct"] < 0.5 and 0.05 < ser[-1.0]["u_1pct"] < 0.5
     assert ser[1.0]["min_speed_printed"] > 0.5  # the printed series never stops
     for r in res["series"]["rows"]:

@@ -74,7 +74,7 @@ def test_printed_series_is_reported_wrong(study):
     res, _ = study
     for r in rows_of(res, family="lem-series"):
         sc, _T = wp.make_scenes()[r["scene"]]
-        # it is wrong from t^3 on (physics.md section 5): on [0, tau0] alone it misses by more than
+        # it is wrong from t^3 on (docs/errata.md): on [0, tau0] alone it misses by more than
         # half the exact stop distance, and by far more than Moreau-Jean does
         assert r["e_max"] > 0.5 * abs(sc.x_stop), r
         assert r["e_max"] > 1e2 * min(s["e_max"] for s in rows_of(res, r["scene"], "moreau-jean"))
