@@ -1,0 +1,51 @@
+"""The README is tested: its Python blocks run as written, and the numbers it states are recomputed."""
+from pathlib import Path
+import os
+import re
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+import lcp
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def python_blocks(text: str) -> list[str]:
+    return re.findall(r"```python\n(.*?)```", text, flags=re.S)
+
+
+def test_readme_python_blocks_run_in_order_in_one_fresh_interpreter(tmp_path):
+    blocks = python_blocks(README.read_text())
+    assert len(blocks) >= 3
+    script = "\n".join(f"# --- README block {i}\n{b}" for i, b in enumerate(blocks, 1))
+    (tmp_path / "readme_blocks.py").write_text(script)
+    env = dict(os.environ, MPLBACKEND="Agg")
+    out = subprocess.run([sys.executable, "readme_blocks.py"], cwd=tmp_path, env=env,
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, textwrap.shorten(out.stderr[-3000:], 3000)
+
+
+def _readme_error_table():
+    """Rows of the README's Moreau-Jean table: h -> (max|x - exact|, B h^2/8)."""
+    rows = {}
+    for line in README.read_text().splitlines():
+        m = re.match(r"\|\s*(1e-\d)\s*\|\s*([0-9.e+-]+)\s*\|\s*([0-9.e+-]+)\s*\|", line)
+        if m:
+            rows[float(m.group(1))] = (float(m.group(2)), float(m.group(3)))
+    return rows
+
+
+@pytest.mark.parametrize("h", [1e-2, 1e-3])
+def test_readme_error_table_is_what_the_package_computes(h):
+    rows = _readme_error_table()
+    assert h in rows, "the README's Moreau-Jean error table lost its row"
+    stated_err, stated_bound = rows[h]
+    scene = lcp.scenes.jean_pratt()
+    res = lcp.simulate(scene, 0.3, h=h)
+    err = float(np.max(np.abs(res.q[:, 0] - scene.exact(res.t)["x"])))
+    assert err == pytest.approx(stated_err, rel=5e-3)  # stated to three digits
+    assert scene.B * h * h / 8 == pytest.approx(stated_bound, rel=5e-3)
