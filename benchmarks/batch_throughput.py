@@ -1,7 +1,7 @@
 """Batch-mode throughput: 1e5 Jean-Pratt scenes with different parameters stepped together.
 
 Run: ``python benchmarks/batch_throughput.py [--quick] [--scenes N] [--steps K]``. Prints a table
-and writes ``benchmarks/results/batch_throughput.csv``.
+and writes ``benchmarks/out/batch_throughput.csv`` (untracked; pass ``--out`` to write elsewhere).
 
 Scenes: m, M uniform in [0.5, 2], alpha in [0.2, 1.2], R such that kappa is uniform in [0.05, 0.95],
 v0 uniform in [-2, 2]; 30 % of them carry a tangential load phi = f R (m+M) g with f uniform in
@@ -217,7 +217,7 @@ def main(argv=None):
     ap.add_argument("--scenes", type=int, default=None)
     ap.add_argument("--steps", type=int, default=None, help="steps of the compiled runs (default 1000)")
     ap.add_argument("--no-prototype", action="store_true", help="skip the SoA prototype kernel")
-    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
+    ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "out")
     args = ap.parse_args(argv)
     n = args.scenes or (10_000 if args.quick else 100_000)
     steps = args.steps or (200 if args.quick else 1000)

@@ -1,7 +1,7 @@
 """Event-driven integration against SciPy's LSODA on a tanh-regularized friction law.
 
 Run: ``python benchmarks/event_vs_lsoda.py [--quick]``. Prints a table and writes
-``benchmarks/results/event_vs_lsoda.csv``.
+``benchmarks/out/event_vs_lsoda.csv`` (untracked; pass ``--out`` to write elsewhere).
 
 Default Jean-Pratt scene (m = M = 1, alpha = pi/4, R = 0.5, v0 = 1, horizon scene.t_end), and for
 context a loaded one (phi = 5, v0 = -1: slide, stop, stick under a tangential load). Errors are
@@ -116,7 +116,7 @@ def timed_pair(fast, slow, rounds, batch):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller tuning grid and fewer repeats")
-    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
+    ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "out")
     args = ap.parse_args(argv)
     load_before = os.getloadavg()
     rows, grid = compare("default (phi = 0)", lcp.scenes.jean_pratt(), args.quick)

@@ -15,7 +15,7 @@
    nnz(W) and peak memory of the solve.
 3. ``--files DIR``: every problem file of DIR through ``studies.fc_benchmark``.
 
-Writes CSV files into ``benchmarks/results/``.
+Writes CSV files into ``benchmarks/out/`` (untracked).
 """
 from __future__ import annotations
 
@@ -40,7 +40,7 @@ from lcp.solvers import make_solver
 from lcp.system import Contact, System
 from studies import fc_benchmark
 
-RESULTS = Path(__file__).resolve().parent / "results"
+RESULTS = Path(__file__).resolve().parent / "out"
 H_STEP, T_END = 1e-3, 1.0
 
 _SICONOS_STEPS = r'''

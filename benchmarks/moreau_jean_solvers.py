@@ -1,7 +1,7 @@
 """Time against error of Moreau-Jean on the Jean-Pratt scene, per one-step solver and step size.
 
 Run: ``python benchmarks/moreau_jean_solvers.py [--quick]``. Prints a table and writes
-``benchmarks/results/moreau_jean_solvers.csv``. Times are medians of repeats in one run, so the
+``benchmarks/out/moreau_jean_solvers.csv`` (untracked; pass ``--out`` to write elsewhere). Times are medians of repeats in one run, so the
 ratios between solvers are meaningful even on a shared machine.
 """
 from __future__ import annotations
@@ -35,7 +35,7 @@ def measure(scene, h, solver, theta=0.5, repeats=3):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
+    ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "out")
     args = ap.parse_args(argv)
     scene = lcp.scenes.jean_pratt()
     hs = [1e-2, 1e-3] if args.quick else [1e-2, 1e-3, 1e-4, 1e-5]

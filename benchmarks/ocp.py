@@ -1,6 +1,6 @@
 """Optimal control through frictional contact (lcp.ocp): solve time at equal accuracy, per transcription.
 
-Run: ``python benchmarks/ocp.py [--quick]``. Prints two tables and writes ``benchmarks/results/ocp.csv``.
+Run: ``python benchmarks/ocp.py [--quick]``. Prints two tables and writes ``benchmarks/out/ocp.csv`` (untracked; pass ``--out`` to write elsewhere).
 The problems are those of ``studies/optimal_control.py`` (Jean-Pratt block): rest to rest in minimum
 time and with minimum effort, and move-and-hold. Each transcription (``studies.optimal_control.METHODS``:
 uniform steps with a linear or a piecewise-constant control, free steps with cross complementarity)
@@ -57,7 +57,7 @@ def measure(name: str, Ns) -> list[dict]:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true", help="fewer N")
-    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
+    ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "out")
     args = ap.parse_args(argv)
     rows = []
     for name in PROBLEMS:

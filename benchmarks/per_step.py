@@ -1,7 +1,7 @@
 """Moreau-Jean per-step cost on the default Jean-Pratt scene, amortized over 1e5 steps, with its error checks.
 
 Run: ``python benchmarks/per_step.py [--quick] [--steps N] [--repeats K] [--no-profile]``. Prints a
-table and writes ``benchmarks/results/per_step.csv``.
+table and writes ``benchmarks/out/per_step.csv`` (untracked; pass ``--out`` to write elsewhere).
 
 The scene is the default one (m = M = 1, alpha = pi/4, R = 0.5, v0 = 1), its default horizon
 T = 2 tau0 = 0.306 s cut into N = 1e5 steps (h = T / N, theta = 1/2), so that half the steps slide
@@ -188,7 +188,7 @@ def main(argv=None):
     ap.add_argument("--steps", type=int, default=None, help="steps per run (default 1e5)")
     ap.add_argument("--repeats", type=int, default=None, help="repeats of the Python-loop paths (default 3)")
     ap.add_argument("--no-profile", action="store_true")
-    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
+    ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "out")
     args = ap.parse_args(argv)
     n_steps = args.steps or (10_000 if args.quick else 100_000)
     rep_py = args.repeats or (1 if args.quick else 3)

@@ -1,7 +1,7 @@
 """Work-precision benchmark: wall time against error for every method on four Jean-Pratt scenes.
 
 Run: ``python benchmarks/work_precision.py [--quick] [--out DIR] [--figures DIR] [--h-min-python H]``.
-Prints one table per scene (markdown) and the summary, and writes into ``benchmarks/results/``:
+Prints one table per scene (markdown) and the summary, and writes into ``benchmarks/out/`` (untracked):
 ``work_precision_<scene>.csv`` (scenes: default, reverse, near_shock, loaded_stick),
 ``work_precision_summary.csv`` and ``work_precision_creep.csv``. ``--figures DIR`` also draws the
 figures of ``python -m studies.work_precision`` (which runs the same measurements) into DIR.
@@ -66,7 +66,7 @@ def summary_table(summary) -> str:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="the study's quick settings (about 30 s)")
-    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
+    ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "out")
     ap.add_argument("--figures", type=Path, default=None, help="also write the figures into this folder")
     ap.add_argument("--h-min-python", type=float, default=None,
                     help="smallest h for the Python-loop solvers (default 1e-5 for theta = 1/2, 1e-4 for theta = 1)")
