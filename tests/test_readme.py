@@ -49,3 +49,16 @@ def test_readme_error_table_is_what_the_package_computes(h):
     err = float(np.max(np.abs(res.q[:, 0] - scene.exact(res.t)["x"])))
     assert err == pytest.approx(stated_err, rel=5e-3)  # stated to three digits
     assert scene.B * h * h / 8 == pytest.approx(stated_bound, rel=5e-3)
+
+
+def test_readme_per_step_timings_are_the_recorded_run():
+    import csv
+    rec = {r["path"]: float(r["us_per_step"]) for r in
+           csv.DictReader(open(README.parent / "benchmarks" / "recorded" / "per_step.csv"))}
+    text = README.read_text()
+    stated = {"compiled (auto, fast=True)": r"compiled exact path costs ([0-9.]+) µs",
+              "osqp (general path)": r"general OSQP path\s+costs ([0-9.]+) µs"}
+    for path, pattern in stated.items():
+        m = re.search(pattern, text)
+        assert m, pattern
+        assert float(m.group(1)) == pytest.approx(rec[path], rel=0.02), path
