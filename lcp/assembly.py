@@ -4,6 +4,7 @@ Shared by the time-stepping loop (:mod:`lcp.timestepping`) and the batch path (:
 """
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
@@ -233,3 +234,37 @@ def kahan_add(s, inc, comp):
     y = inc - comp
     t = s + y
     return t, (t - s) - y
+
+
+def one_step_function(system) -> ca.Function:
+    """The data of one Moreau-Jean step of ``system`` as one CasADi Function.
+
+    ``one_step(t, q, v, h, theta) -> (v_free, S, T, SHt, W, gap, H)``, where the theta-method's
+    velocity update with bilateral constraints eliminated is
+
+        [W_h G'; G 0] [dv; lambda] = [r; c],   W_h = A + h theta C + (h theta)^2 K,
+        r = h ((1 - theta) F(t, q, v) + theta F(t + h, q, v)) - h^2 theta K v,
+        c = -phi_t(t + h, q) - G v,
+
+    so that dv = S r + T c; ``v_free = v + dv`` is the velocity without contact impulses,
+    ``SHt = S H'`` maps contact impulses to velocity, and ``W = H S H'`` is the Delassus operator
+    of the local velocities u = W p + H v_free. :attr:`lcp.system.System.one_step_fn` builds it
+    once per system.
+    """
+    n, nb = system.n, system.n_bilateral
+    t, h, th = ca.MX.sym("t"), ca.MX.sym("h"), ca.MX.sym("theta")
+    q, v = ca.MX.sym("q", n), ca.MX.sym("v", n)
+    A, F, K, C, G, _, gap, H = system.step_data_fn(t, q, v)
+    F1 = system.force_fn(t + h, q, v)
+    _, _, phi_t1 = system.constraints_fn(t + h, q)
+    Wh = A + h * th * C + (h * th) ** 2 * K
+    KKT = ca.blockcat([[Wh, G.T], [G, ca.MX(nb, nb)]]) if nb else Wh
+    X = ca.solve(KKT, ca.MX.eye(n + nb))
+    S, T = X[:n, :n], X[:n, n:]
+    r = h * ((1 - th) * F + th * F1) - h * h * th * ca.mtimes(K, v)
+    dv = ca.mtimes(S, r)
+    if nb:
+        dv = dv + ca.mtimes(T, -phi_t1 - ca.mtimes(G, v))
+    SHt = ca.mtimes(S, H.T)
+    return ca.Function("one_step", [t, q, v, h, th], [v + dv, S, T, SHt, ca.mtimes(H, SHt), gap, H],
+                       ["t", "q", "v", "h", "theta"], ["v_free", "S", "T", "SHt", "W", "gap", "H"])

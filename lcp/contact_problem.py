@@ -324,45 +324,7 @@ class ContactProblem:
         return E, r
 
     def _solve_branch_sparse(self, modes: np.ndarray) -> np.ndarray | None:
-        """solve_branch for a sparse W: the same rows, assembled and factorized sparsely.
-
-        The branch matrix depends on W, mu and the modes only, so its factorization is kept per
-        modes (shared by :meth:`with_q` copies): time stepping refines on the same branch step
-        after step.
-        """
-        from scipy.sparse.linalg import splu
-
-        k, W = self.k, self.W
-        closed = modes != OPEN
-        stick = modes == STICK
-        from_W = np.concatenate([closed, stick])
-        cache = self.__dict__.setdefault("_branch_lus", {})
-        key = modes.astype(np.int8).tobytes()
-        lu = cache.get(key)
-        if lu is None:
-            j = np.arange(k)
-            slide = closed & ~stick
-            # rows taken from W: u_N of closed contacts, u_T of sticking ones; identity rows otherwise
-            eye_rows = np.flatnonzero(~from_W)
-            sj = j[slide]  # p_T + -mu p_N = 0 on sliding contacts: the p_N column of their rows
-            sgn = np.where(modes[slide] == SLIDE_POS, 1.0, -1.0)
-            E = (sp.diags(from_W.astype(float)) @ W
-                 + sp.csr_matrix((np.concatenate([np.ones(eye_rows.size), sgn * self.mu[sj]]),
-                                  (np.concatenate([eye_rows, k + sj]), np.concatenate([eye_rows, sj]))),
-                                 shape=(2 * k, 2 * k))).tocsc()
-            try:
-                lu = splu(E)
-            except RuntimeError:  # exactly singular: the branch's impulses are not unique
-                lu = False
-            if len(cache) > 64:
-                cache.clear()
-            cache[key] = lu
-        if lu is False:
-            return None
-        p = lu.solve(-np.where(from_W, self.q, 0.0))
-        if not np.all(np.isfinite(p)):
-            return None
-        return p
+        return _sparse_branch_solve(self, modes)
 
     def _solve_branch_planar(self, mode: int) -> np.ndarray | None:
         (W00, W01), (W10, W11) = self.W.tolist()
@@ -453,23 +415,74 @@ class ContactProblem:
         p_T = beta+ - beta-; the rows are u_N, u_T + lambda, -u_T + lambda, mu p_N - beta+ - beta-
         (Stewart-Trinkle / Anitescu-Potra form with the two tangent directions +-t).
         """
-        k = self.k
-        W = self.W.toarray() if sp.issparse(self.W) else self.W
-        WN, WT = W[:k], W[k:]  # rows of u_N and u_T in p = (p_N, p_T)
-        I = np.eye(k)
-        M = np.zeros((4 * k, 4 * k))
-        M[:k, :k], M[:k, k:2 * k], M[:k, 2 * k:3 * k] = WN[:, :k], WN[:, k:], -WN[:, k:]
-        M[k:2 * k, :k], M[k:2 * k, k:2 * k], M[k:2 * k, 2 * k:3 * k] = WT[:, :k], WT[:, k:], -WT[:, k:]
-        M[2 * k:3 * k, :3 * k] = -M[k:2 * k, :3 * k]
-        M[k:2 * k, 3 * k:] = I
-        M[2 * k:3 * k, 3 * k:] = I
-        M[3 * k:, :k] = np.diag(self.mu)
-        M[3 * k:, k:2 * k] = -I
-        M[3 * k:, 2 * k:3 * k] = -I
-        b = np.concatenate([self.q[:k], self.q[k:], -self.q[k:], np.zeros(k)])
-        return M, b
+        return _lcp_form(self)
 
     def from_lcp(self, z: np.ndarray) -> np.ndarray:
         """Impulses p from an LCP solution z of :meth:`to_lcp`."""
         k = self.k
         return np.concatenate([z[:k], z[k:2 * k] - z[2 * k:3 * k]])
+
+
+def _sparse_branch_solve(self, modes: np.ndarray) -> np.ndarray | None:
+    """ContactProblem.solve_branch for a sparse W: the same rows, assembled and factorized sparsely.
+
+    The branch matrix depends on W, mu and the modes only, so its factorization is kept per
+    modes (shared by :meth:`with_q` copies): time stepping refines on the same branch step
+    after step.
+    """
+    from scipy.sparse.linalg import splu
+
+    k, W = self.k, self.W
+    closed = modes != OPEN
+    stick = modes == STICK
+    from_W = np.concatenate([closed, stick])
+    cache = self.__dict__.setdefault("_branch_lus", {})
+    key = modes.astype(np.int8).tobytes()
+    lu = cache.get(key)
+    if lu is None:
+        j = np.arange(k)
+        slide = closed & ~stick
+        # rows taken from W: u_N of closed contacts, u_T of sticking ones; identity rows otherwise
+        eye_rows = np.flatnonzero(~from_W)
+        sj = j[slide]  # p_T + -mu p_N = 0 on sliding contacts: the p_N column of their rows
+        sgn = np.where(modes[slide] == SLIDE_POS, 1.0, -1.0)
+        E = (sp.diags(from_W.astype(float)) @ W
+             + sp.csr_matrix((np.concatenate([np.ones(eye_rows.size), sgn * self.mu[sj]]),
+                              (np.concatenate([eye_rows, k + sj]), np.concatenate([eye_rows, sj]))),
+                             shape=(2 * k, 2 * k))).tocsc()
+        try:
+            lu = splu(E)
+        except RuntimeError:  # exactly singular: the branch's impulses are not unique
+            lu = False
+        if len(cache) > 64:
+            cache.clear()
+        cache[key] = lu
+    if lu is False:
+        return None
+    p = lu.solve(-np.where(from_W, self.q, 0.0))
+    if not np.all(np.isfinite(p)):
+        return None
+    return p
+
+
+def _lcp_form(self) -> tuple[np.ndarray, np.ndarray]:
+    """ContactProblem.to_lcp: the equivalent LCP(M, b): 0 <= z perp M z + b >= 0, z = (p_N, beta+, beta-, lambda).
+
+    p_T = beta+ - beta-; the rows are u_N, u_T + lambda, -u_T + lambda, mu p_N - beta+ - beta-
+    (Stewart-Trinkle / Anitescu-Potra form with the two tangent directions +-t).
+    """
+    k = self.k
+    W = self.W.toarray() if sp.issparse(self.W) else self.W
+    WN, WT = W[:k], W[k:]  # rows of u_N and u_T in p = (p_N, p_T)
+    I = np.eye(k)
+    M = np.zeros((4 * k, 4 * k))
+    M[:k, :k], M[:k, k:2 * k], M[:k, 2 * k:3 * k] = WN[:, :k], WN[:, k:], -WN[:, k:]
+    M[k:2 * k, :k], M[k:2 * k, k:2 * k], M[k:2 * k, 2 * k:3 * k] = WT[:, :k], WT[:, k:], -WT[:, k:]
+    M[2 * k:3 * k, :3 * k] = -M[k:2 * k, :3 * k]
+    M[k:2 * k, 3 * k:] = I
+    M[2 * k:3 * k, 3 * k:] = I
+    M[3 * k:, :k] = np.diag(self.mu)
+    M[3 * k:, k:2 * k] = -I
+    M[3 * k:, 2 * k:3 * k] = -I
+    b = np.concatenate([self.q[:k], self.q[k:], -self.q[k:], np.zeros(k)])
+    return M, b

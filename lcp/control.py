@@ -154,3 +154,65 @@ class ControlSchedule:
     def __repr__(self) -> str:
         return (f"ControlSchedule(hold={self.hold!r}, nu={self.nu}, intervals={len(self.times) - 1}, "
                 f"t=[{self.t0:.6g}, {self.t_end:.6g}])")
+
+
+@dataclass(frozen=True)
+class ControlInput:
+    """A system's control input: u (nu x 1 symbols), its bounds, and F = free_force + matrix u."""
+
+    symbol: ca.SX | None
+    nu: int
+    bounds: tuple
+    matrix: ca.SX
+    free_force: ca.SX
+
+
+def split_control(force, mass, control, control_bounds, q, v, t) -> ControlInput:
+    """Split a force F(t, q, v, u) into F0(t, q, v) + B(t, q) u, checking that u enters affinely.
+
+    Raises a ValueError naming ``control`` or ``control_bounds`` when the input is not a column of
+    symbols distinct from t, q and v, when B depends on u or v, when the mass matrix depends on u,
+    or when the bounds are not a pair lo <= hi.
+    """
+    n = force.shape[0]
+    if control is None:
+        if control_bounds is not None:
+            raise ValueError("control_bounds given without a control")
+        return ControlInput(None, 0, (np.zeros(0), np.zeros(0)), ca.SX.zeros(n, 0), force)
+    if not isinstance(control, ca.SX) or not control.is_symbolic() or control.shape[1] != 1:
+        raise ValueError("control must be a column of CasADi SX symbols (casadi.SX.sym('u', nu))")
+    nu = control.shape[0]
+    if ca.depends_on(control, ca.vertcat(q, v, t)):
+        raise ValueError("control symbols must differ from t, q and v")
+    B = ca.jacobian(force, control)
+    if ca.depends_on(B, ca.vertcat(control, v)):
+        raise ValueError("the force must be affine in the control: F = F0(t, q, v) + B(t, q) u with B "
+                         "independent of u and v")
+    if ca.depends_on(mass, control):
+        raise ValueError("mass may not depend on the control")
+    if control_bounds is None:
+        lo, hi = -np.inf, np.inf
+    else:
+        try:
+            lo, hi = control_bounds
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"control_bounds must be a pair (lo, hi), got {control_bounds!r}") from exc
+    lo = np.broadcast_to(np.asarray(lo, dtype=float), (nu,)).copy()
+    hi = np.broadcast_to(np.asarray(hi, dtype=float), (nu,)).copy()
+    if np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(lo > hi):
+        raise ValueError(f"control_bounds must satisfy lo <= hi, got {control_bounds!r}")
+    return ControlInput(control, nu, (lo, hi), B, ca.substitute(force, control, ca.SX.zeros(nu, 1)))
+
+
+def check_schedule(schedule, nu: int, bounds) -> None:
+    """ValueError naming ``control`` unless ``schedule`` fits a control input of nu components within bounds."""
+    if not nu:
+        raise ValueError("with_control needs a system with a control input (System(..., control=u))")
+    if not isinstance(schedule, ControlSchedule):
+        raise ValueError(f"control must be a lcp.control.ControlSchedule, got {type(schedule).__name__}")
+    if schedule.nu != nu:
+        raise ValueError(f"control must have {nu} components, got {schedule.nu}")
+    lo, hi = bounds
+    tol = 1e-9 * np.maximum(1.0, np.abs(schedule.values).max())
+    if np.any(schedule.values < lo - tol) or np.any(schedule.values > hi + tol):
+        raise ValueError(f"control values leave control_bounds [{lo}, {hi}]")

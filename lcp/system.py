@@ -20,6 +20,8 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
+from .control import check_schedule, split_control
+
 __all__ = ["Contact", "System"]
 
 
@@ -232,44 +234,14 @@ class System:
         self.kinetic_fn = ca.Function("kinetic", [self.t_sym, q, v], [0.5 * ca.mtimes([v.T, self.mass_expr, v])])
 
     def _init_control(self, control, control_bounds, q, v, t):
-        """Split F = F0 + B u for a control u, checking that u enters affinely."""
-        self.control_sym = None
-        self.nu = 0
-        self.control_bounds = (np.zeros(0), np.zeros(0))
-        self.control_matrix_expr = ca.SX.zeros(self.n, 0)
-        if control is None:
-            if control_bounds is not None:
-                raise ValueError("control_bounds given without a control")
-            return
-        if not isinstance(control, ca.SX) or not control.is_symbolic() or control.shape[1] != 1:
-            raise ValueError("control must be a column of CasADi SX symbols (casadi.SX.sym('u', nu))")
-        nu = control.shape[0]
-        if ca.depends_on(control, ca.vertcat(q, v, self.t_sym)):
-            raise ValueError("control symbols must differ from t, q and v")
-        F = self.force_expr
-        B = ca.jacobian(F, control)
-        if ca.depends_on(B, ca.vertcat(control, v)):
-            raise ValueError("the force must be affine in the control: F = F0(t, q, v) + B(t, q) u with B "
-                             "independent of u and v")
-        for name, expr in (("mass", self.mass_expr),):
-            if ca.depends_on(expr, control):
-                raise ValueError(f"{name} may not depend on the control")
-        self.controlled_force_expr = F
-        self.force_expr = ca.substitute(F, control, ca.SX.zeros(nu, 1))
-        self.control_sym, self.nu, self.control_matrix_expr = control, nu, B
-        self.control_matrix_fn = ca.Function("control_matrix", [self.t_sym, q], [B])
-        if control_bounds is None:
-            lo, hi = -np.inf, np.inf
-        else:
-            try:
-                lo, hi = control_bounds
-            except (TypeError, ValueError) as exc:
-                raise ValueError(f"control_bounds must be a pair (lo, hi), got {control_bounds!r}") from exc
-        lo = np.broadcast_to(np.asarray(lo, dtype=float), (nu,)).copy()
-        hi = np.broadcast_to(np.asarray(hi, dtype=float), (nu,)).copy()
-        if np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(lo > hi):
-            raise ValueError(f"control_bounds must satisfy lo <= hi, got {control_bounds!r}")
-        self.control_bounds = (lo, hi)
+        """Split F = F0 + B u for a control u (:func:`lcp.control.split_control`)."""
+        split = split_control(self.force_expr, self.mass_expr, control, control_bounds, q, v, self.t_sym)
+        self.control_sym, self.nu, self.control_bounds = split.symbol, split.nu, split.bounds
+        self.control_matrix_expr = split.matrix
+        if split.nu:
+            self.controlled_force_expr = self.force_expr
+            self.force_expr = split.free_force
+            self.control_matrix_fn = ca.Function("control_matrix", [self.t_sym, q], [split.matrix])
 
     @property
     def is_controlled(self) -> bool:
@@ -303,18 +275,7 @@ class System:
         >>> float(r.v[2, 0]), float(r.v[-1, 0]), float(r.q[-1, 0])
         (0.5, 0.0, 0.25)
         """
-        from .control import ControlSchedule
-
-        if not self.is_controlled:
-            raise ValueError("with_control needs a system with a control input (System(..., control=u))")
-        if not isinstance(schedule, ControlSchedule):
-            raise ValueError(f"control must be a lcp.control.ControlSchedule, got {type(schedule).__name__}")
-        if schedule.nu != self.nu:
-            raise ValueError(f"control must have {self.nu} components, got {schedule.nu}")
-        lo, hi = self.control_bounds
-        tol = 1e-9 * np.maximum(1.0, np.abs(schedule.values).max())
-        if np.any(schedule.values < lo - tol) or np.any(schedule.values > hi + tol):
-            raise ValueError(f"control values leave control_bounds [{lo}, {hi}]")
+        check_schedule(schedule, self.nu, self.control_bounds)
         t = self.t_sym
         force = self.force_expr + ca.mtimes(self.control_matrix_expr, schedule.expression(t))
         out = System(self.q_sym, self.v_sym, self.mass_expr, force, contacts=self.contacts,
@@ -341,23 +302,9 @@ class System:
         ``SHt = S H'`` maps contact impulses to velocity, and ``W = H S H'`` is the Delassus
         operator of the local velocities u = W p + H v_free.
         """
-        n, nb = self.n, self.n_bilateral
-        t, h, th = ca.MX.sym("t"), ca.MX.sym("h"), ca.MX.sym("theta")
-        q, v = ca.MX.sym("q", n), ca.MX.sym("v", n)
-        A, F, K, C, G, _, gap, H = self.step_data_fn(t, q, v)
-        F1 = self.force_fn(t + h, q, v)
-        _, _, phi_t1 = self.constraints_fn(t + h, q)
-        Wh = A + h * th * C + (h * th) ** 2 * K
-        KKT = ca.blockcat([[Wh, G.T], [G, ca.MX(nb, nb)]]) if nb else Wh
-        X = ca.solve(KKT, ca.MX.eye(n + nb))
-        S, T = X[:n, :n], X[:n, n:]
-        r = h * ((1 - th) * F + th * F1) - h * h * th * ca.mtimes(K, v)
-        dv = ca.mtimes(S, r)
-        if nb:
-            dv = dv + ca.mtimes(T, -phi_t1 - ca.mtimes(G, v))
-        SHt = ca.mtimes(S, H.T)
-        return ca.Function("one_step", [t, q, v, h, th], [v + dv, S, T, SHt, ca.mtimes(H, SHt), gap, H],
-                           ["t", "q", "v", "h", "theta"], ["v_free", "S", "T", "SHt", "W", "gap", "H"])
+        from .assembly import one_step_function  # the assembly layer builds it; the model caches it
+
+        return one_step_function(self)
 
     # ------------------------------------------------------------------ numeric helpers
     def mass(self, q, t: float = 0.0) -> np.ndarray:
