@@ -19,11 +19,22 @@ true series beside them), :mod:`lem.troesch` (Troesch's problem by shooting over
 :mod:`lem.jean_pratt`. :mod:`lem.truncation` is the engine's former single module, kept as a
 deprecated alias.
 """
-from . import jean_pratt, series, troesch
-from .fields import AnalyticField, PolynomialField
-from .propagation import solve
-from .result import LEMResult, LEMWarning
-from .troesch import solve_troesch
+import importlib
+
+# The engine (and numba behind it) loads on first use: ``lcp`` needs only lem.jean_pratt at import.
+_LAZY = {"AnalyticField": "fields", "PolynomialField": "fields", "solve": "propagation",
+         "LEMResult": "result", "LEMWarning": "result", "solve_troesch": "troesch"}
+_SUBMODULES = {"jean_pratt", "series", "troesch", "truncation", "jets", "fields", "moments", "segment",
+               "propagation", "result", "taylor", "paper_equations", "expmv", "validation"}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    if name in _SUBMODULES:
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module 'lem' has no attribute {name!r}")
+
 
 __all__ = [
            "AnalyticField",
