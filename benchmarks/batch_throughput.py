@@ -179,7 +179,7 @@ def soa_prototype():
     """Compile the prototype kernel into a temporary folder; a ctypes function or None."""
     import ctypes
 
-    cc = compiled._compiler()
+    cc = compiled.c_compiler()
     if cc is None:
         return None
     tmp = tempfile.mkdtemp(prefix="lcp_soa_")

@@ -169,14 +169,14 @@ def cache_dir() -> Path:
     return (Path(xdg) if xdg else Path.home() / ".cache") / "lcp-lem"
 
 
-def _compiler():
+def c_compiler():
     return shutil.which(os.environ.get("CC", "gcc")) or shutil.which("cc")
 
 
 @functools.lru_cache(maxsize=None)
 def openmp_available() -> bool:
     """Whether the C compiler builds and links OpenMP code (checked once per process)."""
-    cc = _compiler()
+    cc = c_compiler()
     if cc is None:
         return False
     with tempfile.TemporaryDirectory() as tmp:
@@ -203,7 +203,7 @@ def generate_c(fn: ca.Function) -> bytes:
 def build_library(name: str, code: bytes, openmp: bool = False) -> Path | None:
     """Compile C source to a shared library, cached per machine by a hash of source, flags and
     versions. None when no working compiler is found."""
-    cc = _compiler()
+    cc = c_compiler()
     if cc is None:
         return None
     flags = ["-O3", "-fPIC", "-shared"] + (["-fopenmp"] if openmp else [])
