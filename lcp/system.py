@@ -289,18 +289,10 @@ class System:
 
     @functools.cached_property
     def one_step_fn(self) -> ca.Function:
-        """The data of one Moreau-Jean step as one CasADi Function (built on first use, then reused).
+        """The data of one Moreau-Jean step as one CasADi Function, built on first use, then reused.
 
-        ``one_step(t, q, v, h, theta) -> (v_free, S, T, SHt, W, gap, H)``, where the theta-method's
-        velocity update with bilateral constraints eliminated is
-
-            [W_h G'; G 0] [dv; lambda] = [r; c],   W_h = A + h theta C + (h theta)^2 K,
-            r = h ((1 - theta) F(t, q, v) + theta F(t + h, q, v)) - h^2 theta K v,
-            c = -phi_t(t + h, q) - G v,
-
-        so that dv = S r + T c; ``v_free = v + dv`` is the velocity without contact impulses,
-        ``SHt = S H'`` maps contact impulses to velocity, and ``W = H S H'`` is the Delassus
-        operator of the local velocities u = W p + H v_free.
+        ``one_step(t, q, v, h, theta) -> (v_free, S, T, SHt, W, gap, H)``: see
+        :func:`lcp.assembly.one_step_function` for the equations.
         """
         from .assembly import one_step_function  # the assembly layer builds it; the model caches it
 
