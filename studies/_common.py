@@ -50,3 +50,60 @@ def save(fig, path: os.PathLike | str, dpi: int = 130) -> Path:
     fig.savefig(path, dpi=dpi, bbox_inches="tight")
     plt.close(fig)
     return path
+
+
+# ----------------------------------------------------------------------------- figure hygiene
+def legend(ax, ncol: int = 1, fontsize: float = 7.5, **kw):
+    """A legend beside the axes (right), so that it never covers data, listing only entries a reader can see.
+
+    An entry is dropped when its line has data but none of it is finite inside the axes' limits (an
+    off-scale or all-NaN series); a line with no data at all is a deliberate proxy (a marker style
+    explained once) and is kept. The figure's layout engine is set to "constrained", which makes
+    room for a legend outside the axes.
+    """
+    from matplotlib.lines import Line2D
+    import numpy as np
+
+    ax.figure.set_layout_engine("constrained")
+    (x0, x1), (y0, y1) = sorted(ax.get_xlim()), sorted(ax.get_ylim())
+    keep = []
+    for h, lab in zip(*ax.get_legend_handles_labels()):
+        if isinstance(h, Line2D) and len(h.get_xdata()):
+            x = np.asarray(h.get_xdata(), dtype=float)
+            y = np.asarray(h.get_ydata(), dtype=float)
+            inside = np.isfinite(x) & np.isfinite(y) & (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
+            if not inside.any():
+                continue
+        keep.append((h, lab))
+    if not keep:
+        return None
+    return ax.legend(*zip(*keep), loc="upper left", bbox_to_anchor=(1.01, 1.0), ncol=ncol,
+                     fontsize=fontsize, frameon=False, **kw)
+
+
+def floored(ax, x, y, floor: float, fmt: str = "o-", label: str | None = None, **kw):
+    """Plot y >= 0 on a log axis with a floor: values below it are marked, never hidden or mislabelled.
+
+    Values >= floor are drawn as usual. Non-zero values below the floor are drawn at the floor as
+    downward triangles ("below <floor>"), exact zeros at the floor as crosses ("exactly 0"), without
+    a line through them, and a note says so once per axes.
+    """
+    import numpy as np
+
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    above = np.where(y >= floor, y, np.nan)
+    (line,) = ax.plot(x, above, fmt, label=label, **kw)
+    color = line.get_color()
+    tiny = (y > 0) & (y < floor)
+    zero = y == 0
+    if tiny.any():
+        ax.plot(x[tiny], np.full(tiny.sum(), floor), "v", color=color, mfc="none", ms=7,
+                label=f"{label}: below {floor:g}" if label else None)
+    if zero.any():
+        ax.plot(x[zero], np.full(zero.sum(), floor), "x", color=color, ms=7,
+                label=f"{label}: exactly 0" if label else None)
+    if (tiny.any() or zero.any()) and not getattr(ax, "_floor_noted", False):
+        ax.text(0.01, 0.02, f"markers at {floor:g}: ▽ below {floor:g}, × exactly 0", fontsize=7,
+                color="0.35", transform=ax.transAxes)
+        ax._floor_noted = True
+    return line

@@ -32,7 +32,7 @@ import numpy as np
 import lcp
 from lcp.exact import JeanPrattExact
 from lem import series
-from studies._common import out_dir, parse_args, save, write_csv
+from studies._common import floored, legend, out_dir, parse_args, save, write_csv
 
 import matplotlib.pyplot as plt  # noqa: E402  (studies._common selects the Agg backend first)
 
@@ -96,11 +96,21 @@ def sweep(quick: bool) -> list:
     return rows, hs
 
 
+def _log_only_over_a_decade(ax):
+    """A log y axis only where the plotted data span more than a decade (else linear)."""
+    if ax.get_yscale() != "log":
+        return
+    ys = np.concatenate([np.asarray(ln.get_ydata(), dtype=float) for ln in ax.get_lines()] or [np.zeros(0)])
+    ys = ys[np.isfinite(ys) & (ys > 0)]
+    if ys.size and ys.max() < 10 * ys.min():
+        ax.set_yscale("linear")
+
+
 def plot_sweep(rows, hs, v0, path):
     sel = [r for r in rows if r["v0"] == v0]
     x = np.arange(len(sel))
     labels = [r["label"] for r in sel]
-    fig, ax = plt.subplots(2, 2, figsize=(13, 8.5), sharex=True)
+    fig, ax = plt.subplots(2, 2, figsize=(17, 9), sharex=True)
     colors = plt.cm.viridis(np.linspace(0.15, 0.8, len(hs)))
     shock = np.array([r["shock"] for r in sel])
     floor = 1e-17
@@ -112,13 +122,14 @@ def plot_sweep(rows, hs, v0, path):
     a = ax[0, 0]
     a.semilogy(x, pos([r["tau0_exact"] for r in sel]), "k-", lw=2, label="exact $\\tau_0$")
     a.semilogy(x, pos([r["tau0_event"] for r in sel]), "o", mfc="none", ms=9, color="C3", label="event-driven")
-    a.semilogy(x, pos([r["x_stop_exact"] for r in sel]), "k--", lw=1.5, label="exact stop distance $x^*$ (m)")
-    a.semilogy(x, pos([r["x_stop_event"] for r in sel]), "s", mfc="none", ms=7, color="C3")
+    a.semilogy(x, pos(np.abs([r["x_stop_exact"] for r in sel])), "k--", lw=1.5, label="exact stop distance $|x^*|$ (m)")
+    a.semilogy(x, pos(np.abs([r["x_stop_event"] for r in sel])), "s", mfc="none", ms=7, color="C3")
     if shock.any():
         a.plot(x[shock], np.full(shock.sum(), 3e-16), "kv", ms=9, label="shock at t = 0: $\\tau_0 = x^* = 0$")
     a.set_ylabel("stop time $\\tau_0$ (s), stop distance $x^*$ (m)")
     a.set_title("(a) stop time and stop distance")
-    a.legend(fontsize=8)
+    _log_only_over_a_decade(a)
+    legend(a)
 
     a = ax[0, 1]
     a.semilogy(x, pos([r["N0_exact"] if np.isfinite(r["N0_exact"]) else np.nan for r in sel]), "k-", lw=2,
@@ -130,19 +141,20 @@ def plot_sweep(rows, hs, v0, path):
                    label=f"Moreau-Jean, mean over first step, h = {h:g}")
     a.set_ylabel("normal force at t = 0+ (N)")
     a.set_title("(b) normal force while sliding ($N_0 = \\infty$ at the shock)")
-    a.legend(fontsize=8)
+    _log_only_over_a_decade(a)
+    legend(a)
 
     a = ax[1, 0]
-    a.semilogy(x, np.maximum([r["event_x_error"] for r in sel], floor), "o-", color="C3",
-               label="event-driven: max$_t$ |x(t) - exact| (1000 times)")
+    a.set_yscale("log")
+    floored(a, x, [r["event_x_error"] for r in sel], floor, "o-", color="C3",
+            label="event-driven: max$_t$ |x(t) - exact| (1000 times)")
     for h, c in zip(hs, colors):
-        a.semilogy(x, np.maximum(np.abs([r[f"x_stop_mj_{h:g}"] - r["x_stop_exact"] for r in sel]), floor),
-                   "x-", color=c, label=f"Moreau-Jean |x(T) - x*|, h = {h:g}")
-    a.axhline(floor, color="0.6", lw=0.8, ls=":")
-    a.text(0.02, floor * 2, "zero (plotted at 1e-17)", fontsize=7, color="0.4", transform=a.get_yaxis_transform())
+        floored(a, x, np.abs([r[f"x_stop_mj_{h:g}"] - r["x_stop_exact"] for r in sel]), floor, "x-", color=c,
+                label=f"Moreau-Jean |x(T) - x*|, h = {h:g}")
     a.set_ylabel("position error (m)")
     a.set_title("(c) error of the stop position")
-    a.legend(fontsize=8)
+    _log_only_over_a_decade(a)
+    legend(a)
 
     a = ax[1, 1]
     a.plot(x, [r["excess_PN_exact"] for r in sel], "k-", lw=2, label="exact $\\int (N - (m+M)g)\\,dt$ + shock")
@@ -157,7 +169,8 @@ def plot_sweep(rows, hs, v0, path):
     a.set_ylabel("impulse (N s)")
     a.set_title(f"(d) stop impulses: normal $M\\tan\\alpha\\, v_0$ = {M_ * TAN * v0:g}, "
                 f"tangential $-A v_0$ = {-A_ * v0:g}, for every $\\kappa$")
-    a.legend(fontsize=8)
+    _log_only_over_a_decade(a)
+    legend(a)
     for a in ax[1]:
         a.set_xticks(x)
         a.set_xticklabels(labels, rotation=45)
@@ -165,7 +178,6 @@ def plot_sweep(rows, hs, v0, path):
     fig.suptitle(f"Jean-Pratt, m = M = 1, $\\alpha = \\pi/4$, $v_0$ = {v0:g}: "
                  "approaching the shock limit $\\kappa \\to 1$" + ("" if v0 > 0 else
                                                                   " (no shock for $v_0 < 0$: $N_0 = (m+M)g/(1+\\kappa)$)"))
-    fig.tight_layout()
     return save(fig, path)
 
 
@@ -201,7 +213,7 @@ def plot_convergence(conv, path):
     ax[0].set_xlabel("t (s)")
     ax[0].set_ylabel("x(t) (m)")
     ax[0].set_title("(a) x(t) = $v_0 t - B t^2/2$ up to $\\tau_0$, then stick; the shock is x = 0")
-    ax[0].legend(fontsize=8)
+    legend(ax[0])
     r = conv["rows"]
     omk = np.array([x["one_minus_kappa"] for x in r])
     ax[1].loglog(omk, [x["tau0"] for x in r], "o-", label="$\\tau_0$ (s)")
@@ -209,18 +221,15 @@ def plot_convergence(conv, path):
     ax[1].loglog(omk, omk * r[0]["tau0"] / omk[0], "k:", lw=1, label="slope 1")
     dpn = np.abs([x["slide_PN_minus_shock"] for x in r])
     dpt = np.abs([x["slide_PT_minus_shock"] for x in r])
-    ax[1].loglog(omk, np.maximum(dpn, 1e-17), "^-", label="|$\\int_0^{\\tau_0}(N-(m+M)g)dt - M\\tan\\alpha\\,v_0$| (N s)")
-    ax[1].loglog(omk, np.maximum(dpt, 1e-17), "v-", label="|$\\int_0^{\\tau_0} f\\,dt + A v_0$| (N s)")
-    ax[1].axhline(1e-17, color="0.6", lw=0.8, ls=":")
-    ax[1].text(0.02, 2e-17, "zero (plotted at 1e-17)", fontsize=7, color="0.4", transform=ax[1].get_yaxis_transform())
+    floored(ax[1], omk, dpn, 1e-17, "^-", label="|$\\int_0^{\\tau_0}(N-(m+M)g)dt - M\\tan\\alpha\\,v_0$| (N s)")
+    floored(ax[1], omk, dpt, 1e-17, "v-", label="|$\\int_0^{\\tau_0} f\\,dt + A v_0$| (N s)")
     ax[1].invert_xaxis()
     ax[1].set_xlabel("$1 - \\kappa$ (the shock limit is to the right)")
     ax[1].set_title("(b) distance to the shock: time and distance vanish like $1-\\kappa$,\n"
                     "the impulses equal the shock's (to rounding) for every $\\kappa < 1$")
-    ax[1].legend(fontsize=8)
+    legend(ax[1])
     fig.suptitle("Convergence of the smooth solution to the tangential shock as $\\kappa \\to 1^-$ "
                  "(m = M = 1, $\\alpha = \\pi/4$, $v_0 = 1$)")
-    fig.tight_layout()
     return save(fig, path)
 
 
@@ -296,14 +305,16 @@ def plot_iterations(rows, path):
     x = np.arange(len(rows))
     fig, ax = plt.subplots(1, 2, figsize=(13, 5))
     a = ax[0]
-    for solver, mk in (("enum", "o"), ("lemke", "s"), ("osqp", "^")):
-        a.semilogy(x, [max(r[f"{solver}_max_iterations"], 0.8) for r in rows], mk + "-",
+    # hollow markers of decreasing size: solvers that need the same count stay visible on top of each other
+    for solver, mk, ms in (("enum", "o", 11), ("lemke", "s", 7), ("osqp", "^", 5)):
+        a.semilogy(x, [max(r[f"{solver}_max_iterations"], 0.8) for r in rows], mk + "-", mfc="none", ms=ms,
                    label=f"'{solver}': most iterations in one step")
     a.semilogy(x, [r["osqp_qp_solves"] for r in rows], "^:", color="C2", alpha=0.6,
                label="'osqp': QP solves in total")
     conv = np.array([r["plain_converged"] for r in rows])
     it = np.array([r["plain_iterations"] for r in rows], dtype=float)
-    a.semilogy(x[conv], it[conv], "kD-", label="plain Tresca fixed point $s \\leftarrow \\mu p_N(s)$ to 1e-14")
+    # no line across the points where the iteration stopped at its cap: NaN breaks the line there
+    a.semilogy(x, np.where(conv, it, np.nan), "kD-", label="plain Tresca fixed point $s \\leftarrow \\mu p_N(s)$ to 1e-14")
     if (~conv).any():
         a.semilogy(x[~conv], it[~conv], "kD", mfc="none", ms=9, label="plain fixed point: stopped at the cap")
     pred = np.array([r["plain_predicted"] for r in rows])
@@ -311,21 +322,22 @@ def plot_iterations(rows, path):
     a.set_xticks(x)
     a.set_xticklabels([r["label"] for r in rows], rotation=45)
     a.set_xlabel("$\\kappa$")
-    a.set_ylabel("iterations")
+    a.set_ylabel("iterations (count)")
     a.set_title("(a) one-step solvers (Moreau-Jean, h = 1e-3) and the plain fixed point")
-    a.legend(fontsize=8)
+    legend(a)
     a = ax[1]
     below = [r for r in rows if r["kappa"] < 1]
     omk = np.array([1 - r["kappa"] for r in below])
-    a.loglog(omk, np.abs([r["plain_contraction"] - r["kappa"] for r in below]) + 1e-17, "o-",
-             label="|observed contraction factor - $\\kappa$|")
+    a.set_xscale("log")
+    a.set_yscale("log")
+    floored(a, omk, np.abs([r["plain_contraction"] - r["kappa"] for r in below]), 1e-17, "o-",
+            label="|observed contraction factor - $\\kappa$|")
     a.loglog(omk, omk, "k:", label="$1 - \\kappa$ (for scale)")
     a.invert_xaxis()
     a.set_xlabel("$1 - \\kappa$")
     a.set_title("(b) the plain fixed point contracts by exactly $\\kappa$ per iteration")
-    a.legend(fontsize=8)
+    legend(a)
     fig.suptitle("Iterations of the one-step contact solvers against the shock number")
-    fig.tight_layout()
     return save(fig, path)
 
 
@@ -379,11 +391,13 @@ def plot_series(ser, path):
     a.text(1.01, 0.1, "$t = \\tau_0$", transform=a.get_xaxis_transform())
     a.plot([], [], "ko", mfc="none", label="printed speed stops decreasing (friction would push)")
     a.plot([], [], "k:", label="printed error reaches 1% of the stop distance")
-    a.set_xlabel("$u = B t / |v_0| = t / \\tau_0$")
-    a.set_ylabel("$q B / v_0^2$")
+    a.set_xlabel("$u = B t / |v_0| = t / \\tau_0$ (dimensionless)")
+    a.set_ylabel("$q B / v_0^2$ (dimensionless)")
     a.set_ylim(-2.5, 2.5)
+    a.text(0.99, 0.98, "clipped at |q B / v0²| = 2.5: the printed curves leave the window", ha="right", va="top",
+           fontsize=7, color="0.35", transform=a.transAxes)
     a.set_title("(a) printed series vs exact, scaled: the same for every $\\kappa < 1$")
-    a.legend(fontsize=8, loc="upper left")
+    legend(a)
     a = ax[1]
     for v0, mk in ((1.0, "o"), (-1.0, "s")):
         rr = [r for r in ser["rows"] if r["v0"] == v0 and r["printed_defined"]]
@@ -396,9 +410,8 @@ def plot_series(ser, path):
     a.set_ylabel("time (s)")
     a.set_title("(b) the window where (4.1) makes sense closes as $\\kappa \\to 1^-$;\n"
                 "for $\\kappa \\geq 1$, $v_0 > 0$ it is undefined ($N_0 \\leq 0$ or $\\infty$)")
-    a.legend(fontsize=7)
+    legend(a)
     fig.suptitle("The paper's printed LEM series (4.1)/(4.2) against the exact Coulomb motion")
-    fig.tight_layout()
     return save(fig, path)
 
 
@@ -476,19 +489,25 @@ def plot_regimes(reg, path):
     ratios = reg["ratios"]
     fig, ax = plt.subplots(len(ratios), len(CASES), figsize=(15, 4.2 * len(ratios)), sharex=True, sharey=True)
     Rs, alphas = reg["Rs"], reg["alphas"]
+    dR, da = Rs[1] - Rs[0], alphas[1] - alphas[0]
+    R_lo, R_hi, a_lo, a_hi = Rs[0] - dR / 2, Rs[-1] + dR / 2, alphas[0] - da / 2, alphas[-1] + da / 2
+    any_bad = False
     for i, ratio in enumerate(ratios):
         for ci, (title, v0, load) in enumerate(CASES):
             a = ax[i, ci]
             a.pcolormesh(Rs, alphas, reg["maps"][(ratio, ci)], cmap=cmap, vmin=-0.5, vmax=len(REGIMES) - 0.5,
                          shading="nearest")
-            t = np.tan(alphas)
+            # the kappa = 1 curve on a fine grid over the whole shaded extent (cells are centred on the grid)
+            af = np.linspace(a_lo, a_hi, 400)
+            t = np.tan(af)
             Rk = t + ratio / t  # kappa = 1: R = tan(alpha) + m / (M tan(alpha))
-            a.plot(np.where(Rk <= Rs[-1], Rk, np.nan), alphas, "k-", lw=2)
-            a.set_xlim(Rs[0], Rs[-1])
-            ok = Rk < Rs[-1]
+            a.plot(np.where((Rk >= R_lo) & (Rk <= R_hi), Rk, np.nan), af, "k-", lw=2)
+            a.set_xlim(R_lo, R_hi)
+            a.set_ylim(a_lo, a_hi)
+            ok = Rk < R_hi
             if ok.any():
                 j = np.flatnonzero(ok)[len(np.flatnonzero(ok)) // 2]
-                a.text(Rk[j] + 0.05, alphas[j], "$\\kappa = 1$", fontsize=9)
+                a.text(Rk[j] + 0.05, af[j], "$\\kappa = 1$", fontsize=9)
             if load:
                 a.axvline(load, color="k", ls="--", lw=1)
                 a.text(load + 0.03, 1.38, "$|\\varphi| = R(m+M)g$", fontsize=8)
@@ -497,15 +516,19 @@ def plot_regimes(reg, path):
             a.plot([r["R"] for r in agree], [r["alpha"] for r in agree], "k.", ms=2.5)
             bad = [r for r in sub if r["exact"] != r["event"]]
             if bad:
+                any_bad = True
                 a.plot([r["R"] for r in bad], [r["alpha"] for r in bad], "rx", ms=6)
             a.set_title(f"m/M = {ratio:g}, {title}", fontsize=10)
             if i == len(ratios) - 1:
-                a.set_xlabel("friction coefficient R")
+                a.set_xlabel("friction coefficient R (dimensionless)")
             if ci == 0:
                 a.set_ylabel("slide angle $\\alpha$ (rad)")
-    handles = [Patch(color=c, label=lab) for c, lab in zip(REGIME_COLORS, REGIMES)]
+    # the legend lists only the outcomes that occur somewhere in the maps
+    seen = np.unique(np.concatenate([np.ravel(m) for m in reg["maps"].values()]))
+    handles = [Patch(color=c, label=lab) for i, (c, lab) in enumerate(zip(REGIME_COLORS, REGIMES)) if i in seen]
     handles.append(plt.Line2D([], [], color="k", marker=".", ls="", label="event-driven agrees with exact"))
-    handles.append(plt.Line2D([], [], color="r", marker="x", ls="", label="event-driven differs (see CSV)"))
+    if any_bad:
+        handles.append(plt.Line2D([], [], color="r", marker="x", ls="", label="event-driven differs (see CSV)"))
     fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=9, bbox_to_anchor=(0.5, -0.01))
     fig.suptitle("Regimes of the Jean-Pratt block (exact solution), M = 1, g = 9.81; "
                  "shock = tangential impact at t = 0")
