@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["STATUS_MESSAGES", "SolverStats", "StepImpulses", "SimulationResult"]
+__all__ = ["STATUS_MESSAGES", "SolverStats", "StepImpulses", "Impact", "SimulationResult"]
 
 #: status code -> meaning; success is ``status >= 0``.
 STATUS_MESSAGES = {
@@ -14,6 +14,7 @@ STATUS_MESSAGES = {
     -2: "The state became non-finite.",
     -3: "No consistent contact mode exists (Painleve inconsistency).",
     -4: "Too many events (Zeno behaviour or chattering between contact modes).",
+    -5: "The position projection did not converge.",
 }
 
 
@@ -43,6 +44,11 @@ class SolverStats:
         Steps where the one-step problem had more than one solution.
     fallbacks : int
         Steps solved by a fallback solver after the chosen one failed.
+    projections : int
+        Steps whose positions were projected onto the constraints (Moreau-Jean with position
+        projection, :mod:`lcp.projection`).
+    projection_iterations : int
+        Newton iterations of those projections in total.
     """
 
     steps: int = 0
@@ -55,6 +61,8 @@ class SolverStats:
     mode_counts: dict = field(default_factory=lambda: {"open": 0, "stick": 0, "slide+": 0, "slide-": 0})
     ambiguous_steps: int = 0
     fallbacks: int = 0
+    projections: int = 0
+    projection_iterations: int = 0
 
 
 class StepImpulses:
@@ -73,6 +81,18 @@ class StepImpulses:
     def f(self) -> np.ndarray:
         """Mean tangential (friction) force over each step, p_T / h, shape (steps, m)."""
         return self.p_T / self.h
+
+
+@dataclass(frozen=True)
+class Impact:
+    """One impact: a contact closing with approach velocity at time ``t`` (index ``contact``,
+    ``name`` its name), with normal impulse ``p_N`` and tangential impulse ``p_T``."""
+
+    t: float
+    contact: int
+    name: str
+    p_N: float
+    p_T: float
 
 
 @dataclass
@@ -102,6 +122,15 @@ class SimulationResult(StepImpulses):
     h, theta : float
     t_events : list
         Event times (empty for time stepping).
+    impacts : list of Impact, or None
+        Moreau-Jean: the steps in which a contact that carried no load in the previous step closes
+        with an approach velocity larger than the free motion's velocity change over the step
+        (a velocity jump, not a smooth landing); ``t`` is the estimated closing time inside the
+        step. None where the steps were not all recorded (the compiled path with save_every > 1).
+    max_constraint_violation : float
+        Worst violation of the run, in the constraints' own units: max |phi_i(t, q)| over the
+        bilateral constraints and max(0, -g_j(q)) over the contacts. With position projection it
+        is taken after every step; otherwise over the saved states, computed on first access.
     """
 
     t: np.ndarray
@@ -118,6 +147,15 @@ class SimulationResult(StepImpulses):
     h: float = float("nan")
     theta: float = float("nan")
     t_events: list = field(default_factory=list)
+    impacts: list | None = field(default_factory=list)
+    #: the worst violation, or a callable computing it on first access (see max_constraint_violation)
+    violation: object = field(default=float("nan"), repr=False, compare=False)
+
+    @property
+    def max_constraint_violation(self) -> float:
+        if callable(self.violation):
+            self.violation = float(self.violation())
+        return float(self.violation)
 
     def __repr__(self) -> str:
         return (f"SimulationResult(method={self.method!r}, solver={self.solver!r}, h={self.h:g}, "
