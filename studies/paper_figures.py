@@ -27,7 +27,7 @@ from scipy.integrate import solve_ivp
 import lcp
 from lem import series
 
-from ._common import out_dir, parse_args, plt, save, write_csv
+from ._common import legend, out_dir, parse_args, plt, save, write_csv
 
 NAME = "paper_figures"
 
@@ -142,23 +142,24 @@ def trajectories(scene, hs, label: str, outdir: Path, theta: float = 0.5):
         axs[0, 1].plot(res.t[::every], res.v[::every, 0], **kw)
         axs[1, 0].plot(tm[::every], res.N[::every, 0], **kw)
         axs[1, 1].plot(tm[::every], res.f[::every, 0], **kw)
-        if i == 0:
-            rows = [(h, float(t), float(q), float(v), float(exg["x"][j]), float(exg["xdot"][j]))
-                    for j, (t, q, v) in enumerate(zip(res.t, res.q[:, 0], res.v[:, 0]))]
+        # every run the figure plots, at full resolution, with the mean forces of each step
+        Nm = np.append(res.N[:, 0], np.nan)
+        fm = np.append(res.f[:, 0], np.nan)
+        rows += [(h, float(t), float(q), float(v), float(exg["x"][j]), float(exg["xdot"][j]), float(Nm[j]),
+                  float(fm[j])) for j, (t, q, v) in enumerate(zip(res.t, res.q[:, 0], res.v[:, 0]))]
     for ax in axs[1]:
         ax.set_xlabel("t (s)")
     for ax in axs.flat:
         ax.axvline(scene.tau0, color="0.5", ls=":", lw=1)
     axs[0, 0].text(scene.tau0, axs[0, 0].get_ylim()[0], r" $\tau_0$", color="0.4", va="bottom")
-    axs[0, 0].legend(fontsize=8, loc="best")
+    legend(axs[0, 1])  # the same series in every panel: one legend, beside the right column
     p = scene.params
     fig.suptitle(f"Jean-Pratt, v0 = {p['v0']:g}: m = {p['m']:g}, M = {p['M']:g}, alpha = {p['alpha']:.4g}, "
                  f"R = {p['R']:g} (kappa = {scene.kappa:.3g}); N0 = {scene.N0:.5g} N, B = {scene.B:.5g} m/s², "
                  f"tau0 = {scene.tau0:.6g} s", fontsize=10)
-    fig.tight_layout()
     save(fig, outdir / f"trajectories_{label}.png")
     write_csv(outdir / f"trajectories_{label}.csv", ["h", "t", "x_moreau_jean", "xdot_moreau_jean", "x_exact",
-                                                     "xdot_exact"], rows)
+                                                     "xdot_exact", "N_mean_step_from_t", "f_mean_step_from_t"], rows)
     ex_rows = [(float(a), float(b), float(c), float(d), float(e_)) for a, b, c, d, e_ in
                zip(tt, ex["x"], ex["xdot"], ex["N"], ex["f"])]
     write_csv(outdir / f"exact_{label}.csv", ["t", "x", "xdot", "N", "f"], ex_rows)
@@ -188,7 +189,7 @@ def convergence(scene, hs, outdir: Path):
     ax.set_title(f"Moreau-Jean error against the exact solution\n(m = {p['m']:g}, M = {p['M']:g}, "
                  f"alpha = {p['alpha']:g}, R = {p['R']:g}, v0 = {p['v0']:g}; grid over [0, 1.2 tau0])", fontsize=9)
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
+    legend(ax)
     save(fig, outdir / "error_vs_h.png")
     write_csv(outdir / "convergence.csv", ["theta", "h", "max_x_error", "bound_B_h2_over_8", "max_abs_y",
                                            "max_residual"], rows)
