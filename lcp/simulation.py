@@ -20,7 +20,7 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
              solver: str = "auto", method: str = "moreau-jean", q0=None, v0=None,
              solver_options: dict | None = None, fallback: bool = True, save_every: int = 1,
              fast: bool = True, allow_large_step: bool = False, control=None,
-             **method_options) -> SimulationResult:
+             projection="auto", projection_tol: float = 1e-12, **method_options) -> SimulationResult:
     """Simulate a scene (or a bare :class:`~lcp.system.System` with ``q0`` and ``v0``).
 
     Parameters
@@ -52,6 +52,11 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
     fast : bool
         Use the compiled path when it applies (constant system, one contact, ``"auto"`` or
         ``"enum"``); the results are the same.
+    projection : {"auto", True, False}
+        Moreau-Jean only: project the positions onto the constraints after each step
+        (:mod:`lcp.projection`); ``"auto"`` does it where a constraint is nonlinear in q.
+    projection_tol : float
+        Relative tolerance of that projection.
     allow_large_step : bool
         Moreau-Jean only: accept a step h larger than the horizon (one step then overshoots
         ``t_end``). Without it such an h is taken for a mistake and raises.
@@ -99,7 +104,8 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
     # options a method ignores are still validated: a typo must not pass silently
     opts = MoreauJeanOptions(h=h, theta=theta, solver=solver, solver_options=solver_options,
-                             fallback=fallback, save_every=save_every, fast=fast)
+                             fallback=fallback, save_every=save_every, fast=fast, projection=projection,
+                             projection_tol=projection_tol)
     if method == "moreau-jean":
         if h > t_end and not allow_large_step:
             raise ValueError(f"h = {h!r} is larger than the horizon t_end = {t_end!r}; pass "

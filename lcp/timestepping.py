@@ -8,6 +8,40 @@ Per step of size h:
 with the iteration matrix W_h = A + h theta C + h^2 theta^2 K (K = -dF/dq, C = -dF/dv, so forces
 that depend on the state are treated implicitly), and p the contact impulses of the active
 contacts, which solve the discrete Coulomb problem :class:`~lcp.contact_problem.ContactProblem`.
+
+Which contacts take part in a step (the activation rule)
+--------------------------------------------------------
+A contact j is active in a step when the free motion closes its gap within the step, judged on the
+predicted gap
+
+    g_pred = g_j(q) + h ((1 - theta) u_N- + theta u_N,free),
+
+with a tolerance at the rounding level of that sum and a hysteresis for loaded contacts:
+
+- closing: active when g_pred <= CLOSE_ULPS eps s_j, where s_j = |g_j| + |H_N,j| |q| + |g_0,j|
+  + h (|(1 - theta) u_N-| + |theta u_N,free|) is the size of the terms whose rounding g_pred carries
+  (|H_N,j| |q| and |g_0,j| = |g_j(0)|: a gap y2 - y1 - d between stacked blocks rounds to +3e-17,
+  not to 0, and the plain test g_pred <= 0 would drop that contact for a step and leave the upper
+  block sunk by g h^2 for ever);
+- staying: a contact that carried a normal impulse (p_N > 0) in the previous step stays active
+  unless g_pred exceeds the larger threshold OPEN_ULPS eps s_j.
+
+Keeping a contact active costs nothing in accuracy: if its free motion separates, the contact
+problem gives it p = 0 (mode OPEN), and it leaves the active set in the next step. A genuine
+lift-off is thus delayed by at most one step, a rounding residue never drops a loaded contact.
+
+Position projection
+-------------------
+Where a constraint is nonlinear in q (or rheonomic), the velocity-level scheme drifts off it by
+O(h) over a fixed time; ``projection="auto"`` (the default) then corrects the positions after each
+step (:mod:`lcp.projection`). Constant systems never pay for it.
+
+Impacts
+-------
+A step counts as an impact on contact j (``result.impacts``) when j carried no load in the previous
+step, receives p_N > 0, and approached with u_N- < 0 faster than the free motion's velocity change
+over the step, |u_N-| > |u_N,free - u_N-| (a velocity jump rather than a smooth landing; for
+h -> 0 the two separate). Its time is the estimated closing time t_k + min(h, g_j / |u_N-|).
 """
 from __future__ import annotations
 
@@ -18,11 +52,18 @@ import numpy as np
 
 from . import compiled
 from .assembly import StepAssembly, kahan_add
-from .contact_problem import MODE_NAMES, ContactProblem
-from .result import STATUS_MESSAGES, SimulationResult, SolverStats
+from .contact_problem import MODE_NAMES, ContactProblem, ModeArray
+from .projection import PositionProjection, needs_projection, violation_function
+from .result import STATUS_MESSAGES, Impact, SimulationResult, SolverStats
 from .solvers import SOLVERS, OneStepSolver, make_solver
 
-__all__ = ["MoreauJeanOptions", "moreau_jean"]
+__all__ = ["MoreauJeanOptions", "moreau_jean", "CLOSE_ULPS", "OPEN_ULPS"]
+
+#: closing tolerance of the activation rule, in units of eps times the size of the gap's terms
+CLOSE_ULPS = 16.0
+#: opening threshold for a contact loaded in the previous step (hysteresis), same units
+OPEN_ULPS = 16384.0
+_EPS = float(np.finfo(float).eps)
 
 
 @dataclass(frozen=True)
@@ -50,6 +91,13 @@ class MoreauJeanOptions:
         Use the compiled path (:mod:`lcp.compiled`) when it applies: a constant system with one
         contact and the closed-form solver (``"auto"`` or ``"enum"``). Same results, no Python
         per step.
+    projection : {"auto", True, False}
+        Project the positions onto the constraints after each step (:mod:`lcp.projection`).
+        ``"auto"``: only where a constraint is nonlinear in q or time-dependent (where the
+        velocity-level scheme drifts); True: always (if there are constraints or contacts);
+        False: never.
+    projection_tol : float
+        Relative tolerance of the projection, in [1e-15, 1) (see :mod:`lcp.projection`).
     """
 
     h: float
@@ -59,6 +107,8 @@ class MoreauJeanOptions:
     fallback: bool = True
     save_every: int = 1
     fast: bool = True
+    projection: bool | str = "auto"
+    projection_tol: float = 1e-12
 
     def __post_init__(self):
         h = self.h
@@ -75,6 +125,11 @@ class MoreauJeanOptions:
             raise ValueError(f"solver must be a solver name or a OneStepSolver, got {self.solver!r}")
         if self.solver_options is not None and not isinstance(self.solver_options, dict):
             raise ValueError(f"solver_options must be a dict, got {self.solver_options!r}")
+        if not (self.projection is True or self.projection is False or self.projection == "auto"):
+            raise ValueError(f"projection must be True, False or 'auto', got {self.projection!r}")
+        tol = self.projection_tol
+        if not isinstance(tol, (int, float, np.floating)) or not 1e-15 <= tol < 1:
+            raise ValueError(f"projection_tol must lie in [1e-15, 1), got {tol!r}")
 
 
 def _fallback_for(solver, k: int):
@@ -82,6 +137,40 @@ def _fallback_for(solver, k: int):
     name = {"auto": "osqp", "enum": "lemke", "lemke": "enum" if k == 1 else "osqp",
             "osqp": "enum" if k == 1 else "lemke"}.get(solver.name, "lemke")
     return make_solver(name)
+
+
+def _projector(system, options):
+    """The position projection of this run, or None (see MoreauJeanOptions.projection)."""
+    if options.projection is False or system.n_bilateral + system.n_contacts == 0:
+        return None
+    if options.projection == "auto" and not needs_projection(system):
+        return None
+    return PositionProjection(system, options.projection_tol)
+
+
+class _Activation:
+    """The activation rule with its hysteresis (module docstring): which contacts enter a step."""
+
+    def __init__(self, asm, m):
+        self.m = m
+        self.loaded = np.zeros(m, dtype=bool)
+        # rounding size of g(q) = g0 + H_N q: constant |H_N| and |g0| when the kinematics are
+        self.absHN = abs(asm.H[:m]) if asm.matrices_constant else None
+        self.absg0 = np.abs(asm.gap0) if asm.matrices_constant else None
+
+    def __call__(self, q, gap, H, uN_minus, uN_free, h, th):
+        a = (h * (1 - th)) * uN_minus
+        b = (h * th) * uN_free
+        pred = gap + a + b
+        if self.absHN is not None:
+            size = self.absHN @ np.abs(q) + self.absg0
+        else:
+            size = np.abs(H[: self.m]) @ np.abs(q)
+        size = size + np.abs(gap) + np.abs(a) + np.abs(b)
+        closing = pred <= (CLOSE_ULPS * _EPS) * size
+        if self.loaded.any():
+            closing |= self.loaded & (pred <= (OPEN_ULPS * _EPS) * size)
+        return np.flatnonzero(closing)
 
 
 def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> SimulationResult:
@@ -99,12 +188,14 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
         asm = StepAssembly(system, h, th)
     except FloatingPointError as exc:
         raise ValueError(str(exc)) from exc
-    if options.fast and solver.name in ("auto", "enum") and compiled.applicable(system):
+    proj = _projector(system, options)
+    if options.fast and proj is None and solver.name in ("auto", "enum") and compiled.applicable(system):
         return _moreau_jean_compiled(asm, q0, v0, n_steps, every, solver.name)
     if n_steps // every > 50_000_000:
         raise ValueError(f"{n_steps // every} saved states would not fit in memory: raise save_every")
     m, n = system.n_contacts, system.n
     mu, e = system.mu, system.e
+    names = [c.name for c in system.contacts]
 
     n_saved = n_steps // every
     Q = np.empty((n_saved + 1, n))
@@ -121,6 +212,9 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     cache = {}
     fallbacks = {}
     first_fallback = None
+    activation = _Activation(asm, m)
+    impacts = []
+    worst = violation_function(system)(q0[None, :], np.zeros(1)) if proj is not None else 0.0
     k_done = 0
     for k in range(n_steps):
         tk = k * h
@@ -133,16 +227,16 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             break
         if m:
             uN_minus = H[:m] @ v
-            # Active when the free motion closes the gap within this step. Unlike "gap <= 0", a
-            # rounding residue (y = +1e-21 after a stop) cannot drop a loaded contact.
-            gap_pred = gap + h * ((1 - th) * uN_minus + th * (H[:m] @ vfree))
-            active = np.flatnonzero(gap_pred <= 0.0)
+            uN_free = H[:m] @ vfree
+            active = activation(q, gap, H, uN_minus, uN_free, h, th)
         else:
             active = np.zeros(0, dtype=int)
         row = (k + 1) // every - 1 if (k + 1) % every == 0 else -1
         if active.size == 0:
             dv = dvf
             stats.free_steps += 1
+            if m:
+                activation.loaded[:] = False
         else:
             key = active.tobytes()
             local = cache.get(key) if keyed else None
@@ -197,8 +291,13 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             if dp is not None and math.isfinite(float(dp.sum())):
                 p = p + dp
                 dv = dv + SHta @ dp
+            pa = p[: active.size]
+            _record_impacts(impacts, tk, h, active, pa, p[active.size:], activation.loaded, gap,
+                            uN_minus, uN_free, names)
+            activation.loaded[:] = False
+            activation.loaded[active] = pa > 0
             if row >= 0:
-                PN[row, active] = p[: active.size]
+                PN[row, active] = pa
                 PT[row, active] = p[active.size:]
                 modes[row, active] = md
             for code in md:
@@ -211,6 +310,17 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             status = -2
             message = f"{STATUS_MESSAGES[-2]} Step {k} (t = {tk:.10g})."
             break
+        if proj is not None:
+            q_proj, ok, iters, viol = proj.project(tk + h, q)
+            stats.projections += 1
+            stats.projection_iterations += iters
+            if not ok or not math.isfinite(viol):
+                status = -5
+                message = (f"{STATUS_MESSAGES[-5]} Step {k} (t = {tk + h:.10g}): constraint violation "
+                           f"{viol:.3g} after {iters} Newton iterations (tolerance {proj.tol:g} relative).")
+                break
+            q, cq = q_proj, np.zeros(n)  # the projection is accurate to its tolerance: no compensation left
+            worst = max(worst, viol)
         if row >= 0:
             Q[row + 1], V[row + 1] = q, v
         k_done = k + 1
@@ -222,9 +332,39 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     # never return a trajectory past an unreported failure: cut at the last good state
     last = k_done // every
     t = every * h * np.arange(last + 1)
-    return SimulationResult(t=t, q=Q[:last + 1], v=V[:last + 1], p_N=PN[:last], p_T=PT[:last],
-                            modes=modes[:last], status=status, message=message, stats=stats,
-                            method="moreau-jean", solver=solver.name, h=h, theta=th)
+    Qc = Q[:last + 1]
+    violation = worst if proj is not None else (lambda f=violation_function(system): f(Qc, t))
+    return SimulationResult(t=t, q=Qc, v=V[:last + 1], p_N=PN[:last], p_T=PT[:last],
+                            modes=ModeArray.of(modes[:last]), status=status, message=message, stats=stats,
+                            method="moreau-jean", solver=solver.name, h=h, theta=th, impacts=impacts,
+                            violation=violation)
+
+
+def _record_impacts(impacts, tk, h, active, pN, pT, loaded, gap, uN_minus, uN_free, names):
+    """Append the impacts of this step (module docstring: Impacts) to ``impacts``."""
+    um = uN_minus[active]
+    hit = (pN > 0) & ~loaded[active] & (um < 0) & (-um > np.abs(uN_free[active] - um))
+    for i in np.flatnonzero(hit):
+        j = int(active[i])
+        dt = min(h, max(0.0, float(gap[j]) / -float(um[i])))
+        impacts.append(Impact(tk + dt, j, names[j], float(pN[i]), float(pT[i])))
+
+
+def _impacts_compiled(asm, Q, V, PN, PT, h, name):
+    """The impacts of a compiled single-contact run with every step saved (same rule as the loop)."""
+    HN = asm.H[0]
+    uN = V @ HN
+    pN = PN[:, 0]
+    prev = np.concatenate([[0.0], pN[:-1]])
+    cand = np.flatnonzero((pN > 0) & (prev <= 0) & (uN[:-1] < 0))
+    out = []
+    for k in cand:
+        dvf = asm.at(k * h, Q[k], V[k])[0]
+        um = float(uN[k])
+        if -um > abs(float(HN @ dvf)):
+            gap = float(asm.gap0[0] + HN @ Q[k])
+            out.append(Impact(k * h + min(h, max(0.0, gap / -um)), 0, name, float(pN[k]), float(PT[k, 0])))
+    return out
 
 
 def _moreau_jean_compiled(asm, q0, v0, n_steps, every, solver_name) -> SimulationResult:
@@ -248,6 +388,9 @@ def _moreau_jean_compiled(asm, q0, v0, n_steps, every, solver_name) -> Simulatio
                    "(compiled): no case of the contact problem is admissible")
     md = np.where(md == -2, -1, md).astype(np.int8)
     t = every * h * np.arange(Q.shape[0])
-    return SimulationResult(t=t, q=Q, v=V, p_N=PN[:, None], p_T=PT[:, None], modes=md[:, None],
+    PN, PT = PN[:, None], PT[:, None]
+    impacts = _impacts_compiled(asm, Q, V, PN, PT, h, asm.sys.contacts[0].name) if every == 1 else None
+    return SimulationResult(t=t, q=Q, v=V, p_N=PN, p_T=PT, modes=ModeArray.of(md[:, None]),
                             status=status, message=message, stats=stats, method="moreau-jean",
-                            solver=f"{solver_name} (compiled)", h=h, theta=asm.theta)
+                            solver=f"{solver_name} (compiled)", h=h, theta=asm.theta, impacts=impacts,
+                            violation=lambda f=violation_function(asm.sys): f(Q, t))
