@@ -176,7 +176,8 @@ class System:
         if constraints is None:
             self.constraints_expr = ca.SX.zeros(0, 1)
         else:
-            c = ca.SX(constraints)
+            # a list of scalar expressions is accepted as well as a column
+            c = ca.vertcat(*constraints) if isinstance(constraints, (list, tuple)) else ca.SX(constraints)
             self.constraints_expr = ca.reshape(c, c.numel(), 1)
             if ca.depends_on(self.constraints_expr, v):
                 raise ValueError("constraints must depend on t and q only")
