@@ -663,6 +663,7 @@ def _series_key(r):
 
 def figure(rows, summary, metric, path, ylabel):
     fig, axes = plt.subplots(2, 2, figsize=(14, 10.5))
+    marked = set()
     for ax, key in zip(axes.ravel(), SCENE_LABELS):
         rs = [r for r in rows if r["scene"] == key and np.isfinite(_num(r["time_s"])) and r["time_s"] != ""]
         groups = {}
@@ -670,7 +671,7 @@ def figure(rows, summary, metric, path, ylabel):
             e = _num(r[metric])
             if not np.isfinite(e):
                 continue
-            groups.setdefault(_series_key(r), []).append((_num(r["time_s"]), max(e, FLOOR), r))
+            groups.setdefault(_series_key(r), []).append((_num(r["time_s"]), e, r))
         for name, pts in groups.items():
             r0 = pts[0][2]
             st = _style(r0)
@@ -681,14 +682,26 @@ def figure(rows, summary, metric, path, ylabel):
                     st = dict(st, alpha=0.45, mfc="none")
             elif r0["family"] == "moreau-jean":
                 pts = sorted(pts, key=lambda p: -p[2]["h"])
-            ax.loglog([p[0] for p in pts], [p[1] for p in pts], label=name, **st)
+            tt, ee = np.array([p[0] for p in pts]), np.array([p[1] for p in pts])
+            (ln,) = ax.loglog(tt, np.where(ee >= FLOOR, ee, np.nan), label=name, **st)
+            # below the floor: marked at the floor, never on a line and never called zero unless it is
+            for sel, mk in ((ee == 0, "x"), ((ee > 0) & (ee < FLOOR), "v")):
+                if sel.any():
+                    ax.plot(tt[sel], np.full(sel.sum(), FLOOR), mk, color=ln.get_color(), mfc="none", ms=7)
+                    marked.add(mk)
         if metric == "e_max":
             pk, bl = summary[key]["package_front"], summary[key]["baseline_front"]
+            # a frontier holds for every longer time: extend it to the panel's slowest run, so that a
+            # frontier of one point (one method fastest and most accurate) is still drawn
+            t_max = max((_num(r["time_s"]) for r in rs), default=None)
+            if t_max is not None:
+                pk = list(pk) + [(t_max, pk[-1][1])] if pk else pk
+                bl = list(bl) + [(t_max, bl[-1][1])] if bl else bl
             if pk:
-                ax.step(*zip(*[(t, max(e, FLOOR)) for t, e in pk]), where="post", color="k", lw=5, alpha=0.12,
-                        label="package: best (frontier)")
+                ax.step(*zip(*[(t, max(e, FLOOR)) for t, e in pk]), where="post", color="k", lw=6, alpha=0.3,
+                        zorder=0, label="package: best (frontier; at the floor where below it)")
             if bl:
-                ax.step(*zip(*bl), where="post", color="tab:red", lw=5, alpha=0.25,
+                ax.step(*zip(*bl), where="post", color="tab:red", lw=6, alpha=0.3, zorder=0,
                         label="tanh baseline: best (frontier)")
         ax.axhline(TARGET, color="gray", lw=0.8, ls="-.")
         never = [r for r in rs if r["success"] is True and not np.isfinite(_num(r[metric]))]
@@ -704,10 +717,16 @@ def figure(rows, summary, metric, path, ylabel):
     for ax in axes.ravel():
         for hnd, lab in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(lab, hnd)
+    from matplotlib.lines import Line2D
+
+    if "v" in marked:
+        handles[f"error below {FLOOR:g} (marked at {FLOOR:g})"] = Line2D([], [], ls="", marker="v", mfc="none", color="k")
+    if "x" in marked:
+        handles[f"error exactly 0 (marked at {FLOOR:g})"] = Line2D([], [], ls="", marker="x", color="k")
     fig.legend(list(handles.values()), list(handles.keys()), loc="lower center", ncol=4, fontsize=8.5,
                frameon=False, bbox_to_anchor=(0.5, -0.005))
     fig.suptitle(f"Work-precision, Jean-Pratt scenes: {ylabel} against wall time "
-                 f"(errors of 0 drawn at {FLOOR:g}; dash-dot line: {TARGET:g})", fontsize=12)
+                 f"(dash-dot line: {TARGET:g})", fontsize=12)
     fig.tight_layout(rect=(0, 0.1, 1, 0.97))
     return save(fig, path)
 
