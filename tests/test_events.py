@@ -170,6 +170,9 @@ def test_random_jean_pratt_against_exact(m, M, alpha, kappa, v0, sign, load):
     RN = R * (m + M) * g
     cond = max([1.0] + [(abs(phi) + RN) / abs(phi - math.copysign(RN, sg.v0 if sg.v0 else phi))
                         for sg in sol.segments if sg.mode != "stick" and sg.a != 0])
+    # a light block under a heavy, steep slide has an ill-conditioned mass matrix (cond ~ 250 for
+    # m = 0.1, M = 4, alpha = 1.16); the accelerations solved from it lose digits in proportion
+    cond = max(cond, float(np.linalg.cond(sc.system.mass(np.zeros(2)))))
     assert np.max(np.abs(res.q[:, 0] - ex["x"])) <= 1e-12 * scale * max(1.0, cond / 10)
     assert np.max(np.abs(res.q[:, 1])) <= 1e-12 * scale
     # the stop time divides by the deceleration, ~kappa times the accelerations it comes from
