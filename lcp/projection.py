@@ -13,11 +13,13 @@ It is solved by Newton's method on the constraints linearized at the current ite
 
     dq = A^-1 J' mu,   (J A^-1 J') mu = -r,   J = [G; H_N,W],   r = [phi(t, q); g_W(q)],
 
-where W is a working set of contacts held at g_j = 0: a contact enters W when its gap is negative
-beyond the tolerance, and leaves it when its multiplier mu_j would pull (mu_j < 0), so that the
-result is the solution of the inequality-constrained problem (the convex QP's optimality
-conditions), and an open or separating contact is never pulled shut. W is carried from one step to
-the next, so that a resting contact costs no extra evaluation.
+where W is a working set of contacts held at g_j = 0. The contacts closed in the step (a normal
+impulse p_N > 0 and no bounce: the position-level form of 0 <= g_j perp p_N,j >= 0) are held at
+g_j = 0 as equalities, so that a loaded pivot or a curved resting contact neither sinks nor drifts
+open. Any other contact enters W when its gap is negative beyond the tolerance, and leaves it when
+its multiplier mu_j would pull (mu_j < 0): for those the result solves the inequality-constrained
+problem (the convex QP's optimality conditions), and an open or separating contact is never pulled
+shut. W is carried from one step to the next, so that a resting contact costs no extra evaluation.
 
 Converged when |phi_i| <= tol s_i and g_j >= -tol s_j (contacts in W: |g_j| <= tol s_j), with
 s_i = sum_k |J_ik q_k| the size of the terms of the linearized constraint (for x^2 + y^2 - L^2,
@@ -147,8 +149,8 @@ class PositionProjection:
             self._buf.set_res(i, memoryview(a))
         self.working = np.zeros(self.m, dtype=bool)  # carried from step to step
 
-    def project(self, t: float, q: np.ndarray):
-        """Project q at time t.
+    def project(self, t: float, q: np.ndarray, closed=None):
+        """Project q at time t; ``closed`` (bool mask over the contacts, optional) are held at g = 0.
 
         Returns
         -------
@@ -163,7 +165,8 @@ class PositionProjection:
         nb, tol = self.nb, self.tol
         self._t[0] = t
         self._q[:] = q
-        w = self.working
+        hold = np.zeros(self.m, dtype=bool) if closed is None else np.asarray(closed, dtype=bool)
+        w = self.working | hold
         ok = False
         evals = 0
         while evals < self.max_evals:
@@ -174,7 +177,7 @@ class PositionProjection:
             bil_ok = nb == 0 or bool(np.all(np.abs(r[:nb]) <= lim[:nb]))
             if self.m:
                 g, lg = r[nb:], lim[nb:]
-                pull = w & (self._mu[nb:] < -lg)  # the row would pull the gap shut by more than tol
+                pull = w & ~hold & (self._mu[nb:] < -lg)  # would pull the gap shut by more than tol
                 pen = ~w & (g < -lg)
                 closed_ok = bool(np.all(np.abs(g[w]) <= lg[w])) if w.any() else True
                 changed = bool(pull.any() or pen.any())
@@ -186,7 +189,7 @@ class PositionProjection:
             if bil_ok and closed_ok and not changed:
                 ok = True
                 break
-        self.working = w
+        self.working = w & ~hold
         violation = float(np.max(np.abs(self._r[:nb]))) if nb else 0.0
         if self.m:
             violation = max(violation, float(-np.min(self._r[nb:])), 0.0)
