@@ -216,6 +216,7 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     cache = {}
     fallbacks = {}
     first_fallback = None
+    first_ambiguous = None
     activation = _Activation(asm, m)
     closed = np.zeros(m, dtype=bool)  # contacts closed in the step, held at g = 0 by the projection
     impacts = []
@@ -283,6 +284,8 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
                 break
             if sol.message.startswith("fallback"):
                 stats.fallbacks += 1
+            if sol.ambiguous and first_ambiguous is None:
+                first_ambiguous = (k, tk)
             stats.ambiguous_steps += int(sol.ambiguous)
             stats.max_residual = max(stats.max_residual, sol.residual)
             p = sol.p
@@ -338,6 +341,8 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
         k, tk, why, name = first_fallback
         message += (f" {stats.fallbacks} step(s) were solved by the fallback solver '{name}', the first at "
                     f"step {k} (t = {tk:.10g}) after: {why}")
+    if status == 0:
+        message += _ambiguity_note(stats.ambiguous_steps, first_ambiguous)
     # never return a trajectory past an unreported failure: cut at the last good state
     last = k_done // every
     t = every * h * np.arange(last + 1)
@@ -347,6 +352,15 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
                             modes=ModeArray.of(modes[:last]), status=status, message=message, stats=stats,
                             method="moreau-jean", solver=solver.name, h=h, theta=th, impacts=impacts,
                             violation=violation)
+
+
+def _ambiguity_note(n, first) -> str:
+    """The sentence of ``message`` on steps whose contact problem had several solutions."""
+    if not n:
+        return ""
+    where = f", the first at step {first[0]} (t = {first[1]:.10g})" if first is not None else ""
+    return (f" {n} step(s) had several solutions of the contact problem{where}; the solver's choice was "
+            "taken (stats.ambiguous_steps).")
 
 
 def _record_impacts(impacts, tk, h, active, pN, pT, loaded, gap, uN_minus, uN_free, names):
@@ -372,7 +386,7 @@ def _impacts_compiled(asm, Q, V, PN, PT, h, name):
         um = float(uN[k])
         if -um > abs(float(HN @ dvf)):
             gap = float(asm.gap0[0] + HN @ Q[k])
-            out.append(Impact(k * h + min(h, max(0.0, gap / -um)), 0, name, float(pN[k]), float(PT[k, 0])))
+            out.append(Impact(float(k * h + min(h, max(0.0, gap / -um))), 0, name, float(pN[k]), float(PT[k, 0])))
     return out
 
 
@@ -390,7 +404,7 @@ def _moreau_jean_compiled(asm, q0, v0, n_steps, every, solver_name) -> Simulatio
     stats.ambiguous_steps = n_amb
     h = asm.h
     if fail is None:
-        status, message = 0, STATUS_MESSAGES[0]
+        status, message = 0, STATUS_MESSAGES[0] + _ambiguity_note(n_amb, None)
     else:
         status = -1
         message = (f"{STATUS_MESSAGES[-1]} Step {fail} (t = {fail * h:.10g}), solver '{solver_name}' "
