@@ -4,12 +4,13 @@ Moreau-Jean imposes the bilateral constraints and the closed contacts at the vel
 (G(q_k) v_{k+1} + phi_t = 0, u_N >= 0). A constraint that is affine in q is then kept exactly, but
 one that is nonlinear drifts by O(h) over a fixed time: a pendulum written as x^2 + y^2 = L^2
 lengthens, a ball rolling in a bowl sinks. The projected Moreau-Jean schemes (Acary 2013, the
-"direct projection" of Siconos) correct the positions after each velocity step, by the smallest
-correction in the kinetic (mass) metric:
+"direct projection" of Siconos) correct the positions after each velocity step, by a small
+correction in the kinetic (mass) metric, an approximation of
 
-    minimize 1/2 dq' A dq   subject to  phi(t, q + dq) = 0,   g_j(q + dq) >= 0 (every contact j).
+    minimize 1/2 dq' A dq   subject to  phi(t, q + dq) = 0,   g_j(q + dq) >= 0 (every contact j)
 
-It is solved by Newton's method on the constraints linearized at the current iterate,
+exact to first order in the violation: Newton's method whose steps are the least-norm
+corrections of the constraints linearized at the current iterate,
 
     dq = A^-1 J' mu,   (J A^-1 J') mu = -r,   J = [G; H_N,W],   r = [phi(t, q); g_W(q)],
 
