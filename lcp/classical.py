@@ -286,14 +286,16 @@ class PainleveRod:
         sol = np.linalg.solve(K, rhs)
         return np.array([xd, yd, thd, *sol[:3]]), sol[3]
 
-    def reference(self, t):
-        """q(t) of the consistent sliding motion (``solve_ivp``, DOP853, rtol 1e-12), valid for
-        t <= :attr:`t_valid` (lift-off, stop or the rod lying flat end it)."""
+    @property
+    def t_valid(self) -> float:
+        """End of the sliding reference: lift-off (N = 0), stop (u_T = 0) or the rod lying flat."""
+        return float(self._sliding().t[-1])
+
+    def _sliding(self):
         from scipy.integrate import solve_ivp
 
         if self.regime != "sliding":
             raise ValueError(f"no sliding reference in the {self.regime} regime")
-        t = np.atleast_1d(np.asarray(t, dtype=float))
         if self._ref is None:
             l, th = self.l, self.theta0
             s, c = math.sin(th), math.cos(th)
@@ -312,10 +314,16 @@ class PainleveRod:
                 ev.terminal = True
             self._ref = solve_ivp(lambda tt, z: self._rhs(tt, z)[0], (0.0, 10.0), z0, method="DOP853",
                                   rtol=1e-12, atol=1e-14, dense_output=True, events=(lift, stop, flat))
-            self.t_valid = float(self._ref.t[-1])
+        return self._ref
+
+    def reference(self, t):
+        """q(t) of the consistent sliding motion (``solve_ivp``, DOP853, rtol 1e-12), valid for
+        t <= :attr:`t_valid`."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        sol = self._sliding()
         if np.any(t > self.t_valid + 1e-15):
             raise ValueError(f"the sliding reference ends at t = {self.t_valid:.6g}")
-        return self._ref.sol(t)[:3].T
+        return sol.sol(t)[:3].T
 
     def __call__(self, t) -> dict:
         return {"q": self.reference(t)}
