@@ -33,9 +33,21 @@ from .forces import point_force
 from .scenes import Scene
 from .system import Contact, System
 
-__all__ = ["incline", "bouncing_ball", "painleve_rod", "pendulum", "stacked_blocks", "box_on_corners",
-           "rocking_block", "PiecewiseQuadratic", "BouncingBallExact", "PainleveRod", "PendulumExact",
-           "BoxReference", "RockingReference"]
+__all__ = [
+    "BouncingBallExact",
+    "BoxReference",
+    "PainleveRod",
+    "PendulumExact",
+    "PiecewiseQuadratic",
+    "RockingReference",
+    "bouncing_ball",
+    "box_on_corners",
+    "incline",
+    "painleve_rod",
+    "pendulum",
+    "rocking_block",
+    "stacked_blocks",
+]
 
 
 def _positive(**kw):
@@ -269,7 +281,7 @@ class PainleveRod:
         return p, Minv @ H.T @ p
 
     def _rhs(self, _, z):
-        x, y, th, xd, yd, thd = z
+        _, _, th, xd, yd, thd = z
         m, l, g, mu = self.m, self.l, self.g, self.mu
         s, c = math.sin(th), math.cos(th)
         I = m * l * l / 3

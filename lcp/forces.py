@@ -27,13 +27,13 @@ from __future__ import annotations
 
 import casadi as ca
 
-__all__ = ["point_force", "point_velocity", "torque", "applied_forces"]
+__all__ = ["applied_forces", "point_force", "point_velocity", "torque"]
 
 
 def _column(x, name: str) -> ca.SX:
     try:
         x = x if isinstance(x, ca.SX) else ca.SX(x) if not isinstance(x, (list, tuple)) else ca.vertcat(*x)
-    except Exception as exc:  # noqa: BLE001 - CasADi raises various errors for bad input
+    except Exception as exc:
         raise ValueError(f"{name} must be a CasADi SX expression or a list of them") from exc
     if x.shape[1] != 1:
         if x.shape[0] == 1:

@@ -48,7 +48,7 @@ import math
 import casadi as ca
 import numpy as np
 
-__all__ = ["PositionProjection", "needs_projection", "NEWTON_PER_EVAL"]
+__all__ = ["NEWTON_PER_EVAL", "PositionProjection", "needs_projection"]
 
 #: Newton iterations unrolled in one evaluation (two bring an O(h^2) step drift to rounding)
 NEWTON_PER_EVAL = 2
@@ -68,9 +68,7 @@ def needs_projection(system) -> bool:
         phi_t = ca.jacobian(system.constraints_expr, t)
         if ca.depends_on(ca.vertcat(ca.vec(G), ca.vec(phi_t)), tq):
             return True
-    if m and ca.depends_on(ca.vec(system.H_expr[:m, :]), q):
-        return True
-    return False
+    return bool(m) and bool(ca.depends_on(ca.vec(system.H_expr[:m, :]), q))
 
 
 def _update_function(system, iterations: int) -> ca.Function:

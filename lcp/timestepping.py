@@ -49,8 +49,8 @@ h -> 0 the two separate). Its time is the estimated closing time t_k + min(h, g_
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -61,7 +61,7 @@ from .projection import PositionProjection, needs_projection, violation_function
 from .result import STATUS_MESSAGES, Impact, SimulationResult, SolverStats
 from .solvers import SOLVERS, OneStepSolver, make_solver
 
-__all__ = ["MoreauJeanOptions", "moreau_jean", "CLOSE_ULPS", "OPEN_ULPS"]
+__all__ = ["CLOSE_ULPS", "OPEN_ULPS", "MoreauJeanOptions", "moreau_jean"]
 
 #: closing tolerance of the activation rule, in units of eps times the size of the gap's terms
 CLOSE_ULPS = 16.0
@@ -347,11 +347,17 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     last = k_done // every
     t = every * h * np.arange(last + 1)
     Qc = Q[:last + 1]
-    violation = worst if proj is not None else (lambda f=violation_function(system): f(Qc, t))
+    violation = worst if proj is not None else _lazy_violation(system, Qc, t)
     return SimulationResult(t=t, q=Qc, v=V[:last + 1], p_N=PN[:last], p_T=PT[:last],
                             modes=ModeArray.of(modes[:last]), status=status, message=message, stats=stats,
                             method="moreau-jean", solver=solver.name, h=h, theta=th, impacts=impacts,
                             violation=violation)
+
+
+def _lazy_violation(system, Q, t):
+    """The worst constraint violation over the saved states, computed when first asked for."""
+    f = violation_function(system)
+    return lambda: f(Q, t)
 
 
 def _ambiguity_note(n, first) -> str:
@@ -416,4 +422,4 @@ def _moreau_jean_compiled(asm, q0, v0, n_steps, every, solver_name) -> Simulatio
     return SimulationResult(t=t, q=Q, v=V, p_N=PN, p_T=PT, modes=ModeArray.of(md[:, None]),
                             status=status, message=message, stats=stats, method="moreau-jean",
                             solver=f"{solver_name} (compiled)", h=h, theta=asm.theta, impacts=impacts,
-                            violation=lambda f=violation_function(asm.sys): f(Q, t))
+                            violation=_lazy_violation(asm.sys, Q, t))

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import math
 import time
 import tracemalloc
+from types import SimpleNamespace
 from typing import Callable
 
 import casadi as ca
@@ -69,6 +70,8 @@ class Case:
     quick: bool = True
     sim_kw: dict = field(default_factory=dict)  # extra keyword arguments of lcp.simulate
     gap_check: bool = True  # False where the contact legitimately opens
+    #: (scene, res, h, method) -> (ok, reason, measured): a case's own check instead of the ones below
+    check: Callable | None = None
 
 
 @dataclass
@@ -200,7 +203,116 @@ def cases(quick: bool) -> list[Case]:
                     sim_kw=dict(solver_options=dict(osqp_max_iter=1, max_iter=1), fallback=False)))
     out.append(Case("must be reported", "enum forced on 3 contacts",
                     lambda: (block_chain(3), 0.1, 1e-3, 1), methods=("MJ enum (Python)",), reference=None))
+    out.extend(classical_cases(quick))
     return [c for c in out if c.quick or not quick]
+
+
+# ----------------------------------------------------------------------------- classical systems
+def _classical_check(quantity, exact_tol, mj_tol=None):
+    """A check of a classical system (lcp.classical): ``quantity(scene, res)`` returns (computed,
+    reference) arrays; the event method must agree to ``exact_tol``; Moreau-Jean to ``mj_tol(scene,
+    h)`` when given, else to its own first-order error estimate, 2.5 |q_h - q_{h/2}| (a run at h/2
+    on the same grid), so that a result off its order is caught without a hand-set tolerance."""
+    def check(scene, res, h, method):
+        m = dict(residual=float(res.stats.max_residual), bilateral_drift=float(res.max_constraint_violation))
+        if not (np.all(np.isfinite(res.q)) and np.all(np.isfinite(res.v))):
+            m["nan_inf"] = True
+            return False, "non-finite state", m
+        got, ref = quantity(scene, res)
+        err = float(np.max(np.abs(got - ref)))
+        if method == "event":
+            tol = exact_tol
+        elif mj_tol is not None:
+            tol = mj_tol(scene, h)
+        else:
+            half = lcp.simulate(scene, res.t[-1], **dict(METHODS[method], h=h / 2, save_every=2))
+            if not half.success:
+                return False, f"the h/2 run failed: {half.message}", m
+            n = min(len(half.t), len(res.t))
+            got_half, _ = quantity(scene, SimpleNamespace(t=half.t[:n], q=half.q[:n], v=half.v[:n]))
+            tol = 2.5 * float(np.max(np.abs(got[:n] - got_half))) + 1e-12
+        m["x_error"], m["x_tol"] = err, tol
+        if not err <= tol:
+            return False, f"error {err:.2e} > {tol:.2e}", m
+        return True, "", m
+    return check
+
+
+def classical_cases(quick: bool) -> list:
+    """The classical systems of lcp.classical, each with its exact solution or reference."""
+    from lcp import classical as cl
+
+    def q_of(sc, res):
+        return res.q, sc.exact(res.t)["q"]
+
+    one = ("MJ compiled", "MJ enum (Python)", "MJ lemke", "MJ osqp", "event")
+    many = ("MJ compiled", "MJ lemke", "MJ osqp", "event")
+
+    def incline_tol(sc, h):
+        segs, T = sc.solution.segments, sc.t_end
+        a1, a2 = segs[0].a, segs[1].a
+        rev = segs[1].mode != "stick"
+        return 1e-12 + abs(a1) * h * h / 8 + (abs(a1 - a2) * h * (T - segs[1].t0 + h) + abs(a2) * h * h if rev else 0.0)
+
+    def rod_impulse(sc, res):
+        return np.array([res.p_N[0, 0], res.p_T[0, 0]]), sc.solution.tangential_impact()[0]
+
+    def rod_event_impulse(sc, res):
+        if res.method != "event":
+            return rod_impulse(sc, res)
+        imp = [i for i in res.impulses if i.kind == "tangential impact"]
+        return (np.array([imp[0].P_N, imp[0].P_T]) if imp else np.zeros(2)), sc.solution.tangential_impact()[0]
+
+    def stack_rest(sc, res):
+        dropped = float(np.sum(res.modes == -1)) if res.method != "event" else 0.0
+        return np.concatenate([res.q.ravel(), [dropped]]), np.concatenate([np.tile(sc.q0, len(res.t)), [0.0]])
+
+    group = "classical systems"
+    out = [
+        Case(group, "incline: launch up, stop, slide back", lambda: (cl.incline(0.5, 0.2, 2.0), 1.0, 1e-3, 1),
+             methods=one, check=_classical_check(q_of, 1e-10, incline_tol), energy=False),
+        Case(group, "incline: launch up, stop, stick", lambda: (cl.incline(0.3, 0.5, 2.0), 1.0, 1e-3, 1),
+             methods=one, check=_classical_check(q_of, 1e-10, incline_tol), energy=False),
+        Case(group, "bouncing ball e = 0.5 (Zeno, rest)", lambda: (cl.bouncing_ball(0.5), 2.0, 1e-3, 1),
+             methods=one, check=_classical_check(lambda sc, r: (r.q[:, 1], sc.exact(r.t)["y"]), 1e-9,
+                                                 lambda sc, h: 3 * sc.solution.approach_speeds[0] * h), energy=False),
+        Case(group, "pendulum via x^2 + y^2 = L^2, 90 deg, 1.5 periods",
+             lambda: (cl.pendulum(periods=1.5), cl.pendulum().solution.period * 1.5, 1e-3, 1),
+             methods=("MJ compiled", "event"), check=_classical_check(q_of, 1e-8), energy=False),
+        Case(group, "Painleve rod, consistent sliding", lambda: (cl.painleve_rod(mu=0.3, t_end=0.2), 0.2, 1e-3, 1),
+             methods=one, check=_classical_check(lambda sc, r: (r.q, sc.solution.reference(r.t)), 1e-8), energy=False),
+        Case(group, "Painleve rod, inconsistent: tangential impact",
+             lambda: (cl.painleve_rod(mu=3.0, t_end=0.05), 0.05, 1e-3, 1), methods=one, energy=False,
+             check=_classical_check(rod_event_impulse, 1e-10,
+                                    lambda sc, h: 10 * h * np.max(np.abs(sc.solution.tangential_impact()[0])))),
+        Case(group, "Painleve rod, indeterminate", lambda: (cl.painleve_rod(mu=3.0, omega0=8.0, t_end=0.05), 0.05, 1e-3, 1),
+             methods=one[:-1], energy=False, notes="Moreau-Jean takes the impulsive solution",
+             check=_classical_check(rod_impulse, 1e-10,
+                                    lambda sc, h: 10 * h * np.max(np.abs(sc.solution.tangential_impact()[0])))),
+        Case(group, "5 stacked blocks at rest, 1e3 steps of 1e-4",
+             lambda: (cl.stacked_blocks(5, height=0.1), 0.1, 1e-4, 1), methods=many, energy=False,
+             check=_classical_check(stack_rest, 1e-12, lambda sc, h: 8 * np.finfo(float).eps)),
+        Case(group, "10 stacked blocks at rest, 1e5 steps of 1e-6",
+             lambda: (cl.stacked_blocks(10, height=0.1), 0.1, 1e-6, 100), methods=many, energy=False, quick=False,
+             check=_classical_check(stack_rest, 1e-12, lambda sc, h: 8 * np.finfo(float).eps)),
+        Case(group, "2 blocks pushed: top slips", lambda: (cl.stacked_blocks(2, mu=[0.5, 0.3], push=20.0), 0.5, 1e-3, 1),
+             methods=many, energy=False, check=_classical_check(q_of, 1e-10, lambda sc, h: 1e-12)),
+        Case(group, "box on two corners: slides", lambda: (cl.box_on_corners(mu=0.3), 1.6, 1e-3, 1), methods=many,
+             energy=False, check=_classical_check(
+                 lambda sc, r: (r.q[:, 0], sc.solution(r.t)["x"]), 1e-9,
+                 lambda sc, h: sc.params["ramp"] * h * h / (2 * sc.params["m"]) * 1.6 + 1e-12)),
+        Case(group, "box on two corners: tips", lambda: (cl.box_on_corners(mu=1.2, push_height=0.45, t_end=2.6), 2.6, 2e-3, 1),
+             methods=many, energy=False, quick=False,
+             check=_classical_check(lambda sc, r: (r.q[:, 2], sc.solution.tip_angle(r.t)), 1e-8)),
+        # impacts fall anywhere in their step, so the error is O(h) but not smooth in h: bounded by
+        # the angular speed times a step per impact (and one for the pivots' drift), times 4
+        Case(group, "rocking block (Housner)", lambda: (cl.rocking_block(t_end=0.75), 0.75, 5e-4, 1), methods=many,
+             energy=False, check=_classical_check(
+                 lambda sc, r: (r.q[:, 2], sc.solution(r.t)["theta"]), 1e-9,
+                 lambda sc, h: 4 * (sum(t <= sc.t_end for t in sc.solution.impact_times) + 1) * h
+                 * max(float(np.max(np.abs(p.y[1]))) for p in sc.solution.pieces))),
+    ]
+    return out
 
 
 # ----------------------------------------------------------------------------- LEM cases
@@ -334,6 +446,8 @@ def _energy_rise(scene, res, theta):
 
 def _check(case: Case, scene, res, h, method, ref_cache) -> tuple[bool, str, dict]:
     """Checks of a successful run: returns (ok, reason, measured numbers)."""
+    if case.check is not None:
+        return case.check(scene, res, h, method)
     m = dict()
     finite = bool(np.all(np.isfinite(res.q)) and np.all(np.isfinite(res.v)))
     m["nan_inf"] = not finite

@@ -8,7 +8,15 @@ import pytest
 
 import lcp
 from lcp.classical import bouncing_ball
-from lcp.contact_problem import (MODE_NAMES, OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactMode, ModeArray)
+from lcp.contact_problem import (
+    MODE_NAMES,
+    OPEN,
+    SLIDE_NEG,
+    SLIDE_POS,
+    STICK,
+    ContactMode,
+    ModeArray,
+)
 from lcp.forces import applied_forces, point_force, point_velocity, torque
 from lcp.scenes import jean_pratt
 from lcp.system import Contact, System
