@@ -158,14 +158,20 @@ class _Activation:
     def __init__(self, asm, m):
         self.m = m
         self.loaded = np.zeros(m, dtype=bool)
+        self.all_loaded = False  # every contact loaded in the previous step: no impact possible
+        self.all = np.arange(m)
         # rounding size of g(q) = g0 + H_N q: constant |H_N| and |g0| when the kinematics are
         self.absHN = abs(asm.H[:m]) if asm.matrices_constant else None
         self.absg0 = np.abs(asm.gap0) if asm.matrices_constant else None
 
     def __call__(self, q, gap, H, uN_minus, uN_free, h, th):
         a = (h * (1 - th)) * uN_minus
+        pred = gap + a + (h * th) * uN_free
+        # every gap closes: no tolerance needed (the common case in contact); a list's max is faster
+        # than NumPy's reduction for the few contacts of a Python-loop system
+        if (max(pred.tolist()) if self.m <= 16 else pred.max()) <= 0.0:
+            return self.all
         b = (h * th) * uN_free
-        pred = gap + a + b
         if self.absHN is not None:
             size = self.absHN @ np.abs(q) + self.absg0
         else:
@@ -243,6 +249,7 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             stats.free_steps += 1
             if m:
                 activation.loaded[:] = False
+                activation.all_loaded = False
                 closed[:] = False
         else:
             key = active.tobytes()
@@ -301,10 +308,14 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
                 p = p + dp
                 dv = dv + SHta @ dp
             pa = p[: active.size]
-            _record_impacts(impacts, tk, h, active, pa, p[active.size:], activation.loaded, gap,
-                            uN_minus, uN_free, names)
-            activation.loaded[:] = False
-            activation.loaded[active] = pa > 0
+            loaded = activation.loaded
+            now = pa > 0
+            if not activation.all_loaded:  # a contact that carried no load: perhaps an impact
+                _record_impacts(impacts, tk, h, active, pa, p[active.size:], loaded, gap, uN_minus, uN_free, names)
+            if active.size < m:
+                loaded[:] = False
+            loaded[active] = now
+            activation.all_loaded = active.size == m and all(now.tolist())
             if proj is not None:  # closed in this step: loaded, and not bounced off (restitution)
                 closed[:] = False
                 closed[active] = (pa > 0) & ((e[active] == 0) | (uN_minus[active] >= 0))
