@@ -44,6 +44,7 @@ unilateral contact and Coulomb's friction, Comput. Methods Appl. Mech. Engrg. 25
 from __future__ import annotations
 
 import math
+import weakref
 
 import casadi as ca
 import numpy as np
@@ -57,9 +58,20 @@ NEWTON_PER_EVAL = 2
 _SX_MAX_SIZE = 30
 
 
+#: needs_projection per System (decided once: a symbolic Jacobian costs ~0.1 ms)
+_NEEDS = weakref.WeakKeyDictionary()
+
+
 def needs_projection(system) -> bool:
     """Whether a constraint of ``system`` is nonlinear in q (or time-dependent beyond an affine
     phi(t, q) = G q + c): then Moreau-Jean drifts off it and the projection is worth its cost."""
+    known = _NEEDS.get(system)
+    if known is None:
+        known = _NEEDS[system] = _needs_projection(system)
+    return known
+
+
+def _needs_projection(system) -> bool:
     q, t = system.q_sym, system.t_sym
     tq = ca.vertcat(t, q)
     nb, m = system.n_bilateral, system.n_contacts
