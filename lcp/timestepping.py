@@ -367,8 +367,7 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
 
 def _lazy_violation(system, Q, t):
     """The worst constraint violation over the saved states, computed when first asked for."""
-    f = violation_function(system)
-    return lambda: f(Q, t)
+    return lambda: violation_function(system)(Q, t)
 
 
 def _ambiguity_note(n, first) -> str:
