@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 import lcp
 from lcp.classical import painleve_rod, pendulum
@@ -103,3 +104,28 @@ def test_painleve_rod_event_method():
     ind = painleve_rod(mu=3.0, omega0=8.0, t_end=0.05)
     res = lcp.simulate(ind, method="event")
     assert res.success and "non-unique" in res.message
+
+
+@settings(deadline=None)  # examples: the profile's (conftest)
+@given(theta0=st.floats(0.2, 1.3), mu=st.floats(0.0, 4.0), u0=st.floats(0.5, 2.0), sign=st.sampled_from([1.0, -1.0]))
+def test_painleve_rod_random_parameters(theta0, mu, u0, sign):
+    # omega0 = 0: b_N = -g < 0, so the rod slides consistently or the configuration is inconsistent
+    sc = painleve_rod(mu=mu, theta0=theta0, u0=sign * u0, t_end=0.05)
+    rod = sc.solution
+    h = 1e-3
+    res = lcp.simulate(sc, h=h)
+    assert res.success, res.message
+    if rod.paradoxical:
+        p_star, _ = rod.tangential_impact()
+        assert res.modes[0, 0] == lcp.contact_problem.STICK
+        assert np.max(np.abs([res.p_N[0, 0] - p_star[0], res.p_T[0, 0] - p_star[1]])) <= 10 * h * max(1.0, np.max(np.abs(p_star)))
+        return
+    T = min(0.05, rod.t_valid)
+    n = int(np.sum(res.t <= T))
+    err = np.max(np.abs(res.q[:n] - rod.reference(res.t[:n])))
+    if T < 20 * h:  # A stops (or lifts off) within a few steps: an O(h) error, not yet asymptotic
+        assert err <= abs(u0) * h
+        return
+    half = lcp.simulate(sc, h=h / 2, save_every=2)
+    estimate = np.max(np.abs(res.q[:n] - half.q[:n]))  # first order: the error is about twice this
+    assert err <= 2.5 * estimate + 1e-12

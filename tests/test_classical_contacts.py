@@ -67,7 +67,7 @@ def test_incline_regimes(alpha, mu, v0, regime):
     assert np.max(np.abs(res.q - sc.exact(res.t)["q"])) <= 1e-10
 
 
-@settings(max_examples=15, deadline=None)
+@settings(deadline=None)  # examples: the profile's (conftest)
 @given(alpha=st.floats(0.02, 1.3), mu=st.floats(0.0, 1.5), v0=st.floats(-3.0, 3.0))
 def test_incline_random_parameters(alpha, mu, v0):
     T = 0.8
@@ -119,7 +119,7 @@ def test_bouncing_ball_impacts_and_rest(e):
         np.testing.assert_allclose([i.t for i in res.impacts[:5]], ex.impact_times[:5], rtol=1e-12)
 
 
-@settings(max_examples=10, deadline=None)
+@settings(deadline=None)  # examples: the profile's (conftest)
 @given(e=st.floats(0.0, 0.9), height=st.floats(0.05, 3.0))
 def test_bouncing_ball_random_parameters(e, height):
     sc = bouncing_ball(e=e, height=height)
@@ -147,7 +147,7 @@ def test_pushed_stack_regimes(push, regime):
         assert tuple(res.modes[-1]) == expect
 
 
-@settings(max_examples=15, deadline=None)
+@settings(deadline=None)  # examples: the profile's (conftest)
 @given(push=st.floats(0.5, 60.0), m0=st.floats(0.2, 5.0), m1=st.floats(0.2, 5.0), mu0=st.floats(0.05, 1.0),
        mu1=st.floats(0.05, 1.0))
 def test_pushed_stack_random_parameters(push, m0, m1, mu0, mu1):
