@@ -78,6 +78,14 @@ def _row_dot(indptr, indices, data, x, i):
 
 
 @njit(cache=True)
+def _contact_residual(pN, pT, uN, uT, mu, rhoN, rhoT):
+    """The natural map of one planar contact, max(|min(p_N, rho_N u_N)|, |p_T - proj(p_T - rho_T u_T)|)."""
+    s = mu * max(pN, 0.0)
+    z = min(max(pT - rhoT * uT, -s), s)
+    return max(abs(min(pN, rhoN * uN)), abs(pT - z))
+
+
+@njit(cache=True)
 def residual_interleaved(indptr, indices, data, q, mu, rho, r):
     """max over contacts of the natural-map residual (ContactProblem.residual's measure)."""
     k = mu.size
@@ -87,11 +95,7 @@ def residual_interleaved(indptr, indices, data, q, mu, rho, r):
         iT = iN + 1
         uN = q[iN] + _row_dot(indptr, indices, data, r, iN)
         uT = q[iT] + _row_dot(indptr, indices, data, r, iT)
-        rN = min(r[iN], rho[iN] * uN)
-        s = mu[j] * max(r[iN], 0.0)
-        z = r[iT] - rho[iT] * uT
-        z = min(max(z, -s), s)
-        res = max(res, abs(rN), abs(r[iT] - z))
+        res = max(res, _contact_residual(r[iN], r[iT], uN, uT, mu[j], rho[iN], rho[iT]))
     return res
 
 
@@ -202,10 +206,7 @@ def residual_blocked_dense(W, q, mu, rho, p):
         for i in range(n):
             uN += W[j, i] * p[i]
             uT += W[k + j, i] * p[i]
-        rN = min(p[j], rho[j] * uN)
-        s = mu[j] * max(p[j], 0.0)
-        z = min(max(p[k + j] - rho[k + j] * uT, -s), s)
-        res = max(res, abs(rN), abs(p[k + j] - z))
+        res = max(res, _contact_residual(p[j], p[k + j], uN, uT, mu[j], rho[j], rho[k + j]))
     return res
 
 
@@ -217,8 +218,5 @@ def residual_blocked_csr(indptr, indices, data, q, mu, rho, p):
     for j in range(k):
         uN = q[j] + _row_dot(indptr, indices, data, p, j)
         uT = q[k + j] + _row_dot(indptr, indices, data, p, k + j)
-        rN = min(p[j], rho[j] * uN)
-        s = mu[j] * max(p[j], 0.0)
-        z = min(max(p[k + j] - rho[k + j] * uT, -s), s)
-        res = max(res, abs(rN), abs(p[k + j] - z))
+        res = max(res, _contact_residual(p[j], p[k + j], uN, uT, mu[j], rho[j], rho[k + j]))
     return res

@@ -86,7 +86,11 @@ class StepImpulses:
 @dataclass(frozen=True)
 class Impact:
     """One impact: a contact closing with approach velocity at time ``t`` (index ``contact``,
-    ``name`` its name), with normal impulse ``p_N`` and tangential impulse ``p_T``."""
+    ``name`` its name), with normal impulse ``p_N`` and tangential impulse ``p_T``.
+
+    Both methods list them in ``result.impacts``: Moreau-Jean the step in which an open contact
+    closes with a normal impulse, the event method each impact it resolves (Newton restitution and
+    Coulomb friction at the velocity level)."""
 
     t: float
     contact: int

@@ -5,7 +5,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from ..result import SimulationResult
+from ..result import Impact, SimulationResult  # one Impact for both methods
 
 __all__ = ["Event", "Impulse", "Impact", "Accumulation", "Phase", "EventResult", "make_record"]
 
@@ -62,19 +62,6 @@ class Phase:
     #: False when the contact forces of the phase's modes are not unique (redundant contacts);
     #: the reported forces are then the least-norm admissible ones
     forces_unique: bool = True
-
-
-@dataclass(frozen=True)
-class Impact:
-    """One impact: a gap closing with approach velocity, resolved at time ``t`` on ``contact``
-    (index; ``name`` is the contact's name), with normal impulse ``p_N`` and tangential impulse
-    ``p_T`` (the velocity-level impact law: Newton restitution and Coulomb friction)."""
-
-    t: float
-    contact: int
-    name: str
-    p_N: float
-    p_T: float
 
 
 @dataclass(frozen=True)
