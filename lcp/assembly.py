@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-import scipy.sparse as sp
+from ._imports import issparse
+from ._imports import sparse as sp
 
 __all__ = ["StepAssembly", "kahan_add", "SPARSE_MIN_CONTACT_ROWS", "SPARSE_DROP_TOL"]
 
@@ -209,19 +210,29 @@ class StepAssembly:
         return S @ (B @ self.schedule.impulse(t, t + h) - seen)
 
 
-class _LeadingRows(sp.csr_matrix):
+_LEADING_ROWS = []
+
+
+def _LeadingRows(A, m):
     """A CSR matrix that keeps its leading row block ``[:m]`` (the normal rows of the contact
-    Jacobian, which the stepping loop takes every step) instead of slicing it each time."""
+    Jacobian, which the stepping loop takes every step) instead of slicing it each time. The class
+    derives from scipy.sparse.csr_matrix, so it is defined on first use (SciPy stays unimported
+    until a large system needs it)."""
+    if not _LEADING_ROWS:
+        class LeadingRows(sp.csr_matrix):
+            def __init__(self, A, m):
+                super().__init__(A)
+                self._m = m
+                self._lead = sp.csr_matrix(A[:m])
 
-    def __init__(self, A, m):
-        super().__init__(A)
-        self._m = m
-        self._lead = sp.csr_matrix(A[:m])
+            def __getitem__(self, key):
+                if (isinstance(key, slice) and key.start in (None, 0) and key.step in (None, 1)
+                        and key.stop == self._m):
+                    return self._lead
+                return sp.csr_matrix(self).__getitem__(key)
 
-    def __getitem__(self, key):
-        if isinstance(key, slice) and key.start in (None, 0) and key.step in (None, 1) and key.stop == self._m:
-            return self._lead
-        return sp.csr_matrix(self).__getitem__(key)
+        _LEADING_ROWS.append(LeadingRows)
+    return _LEADING_ROWS[0](A, m)
 
 
 def kahan_add(s, inc, comp):

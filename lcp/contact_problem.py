@@ -23,7 +23,8 @@ from dataclasses import dataclass
 import enum
 
 import numpy as np
-import scipy.sparse as sp
+from ._imports import issparse
+from ._imports import sparse as sp
 
 __all__ = ["ContactMode", "ModeArray", "OPEN", "STICK", "SLIDE_POS", "SLIDE_NEG", "MODE_NAMES", "ContactProblem",
            "planar_enum",
@@ -250,11 +251,11 @@ class ContactProblem:
     key: object = None
 
     def __post_init__(self, rho=None):
-        if sp.issparse(self.W):
+        if issparse(self.W):
             # sparse operators stay sparse (memory grows with nnz); tiny ones are cheaper dense
             self.W = (self.W.toarray().astype(float) if self.W.shape[0] <= SPARSE_MIN_SIZE
                       else sp.csr_matrix(self.W, dtype=float))
-            if sp.issparse(self.W):
+            if issparse(self.W):
                 self._branch_lus = {}  # modes -> SuperLU of the branch matrix (it depends on W only)
         else:
             self.W = np.asarray(self.W, dtype=float)
@@ -265,7 +266,7 @@ class ContactProblem:
             raise ValueError(f"W must be ({2 * k}, {2 * k}) and q ({2 * k},) for {k} contacts, "
                              f"got {self.W.shape} and {self.q.shape}")
         if rho is None:
-            d = self.W.diagonal() if sp.issparse(self.W) else np.diag(self.W)
+            d = self.W.diagonal() if issparse(self.W) else np.diag(self.W)
             # natural-map weights rho = 1/W_ii make the residual an impulse; guard zero diagonals
             rho = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 1.0)
         self.rho = rho
@@ -314,7 +315,7 @@ class ContactProblem:
         fast = _compiled_residual()
         if fast is not None and p.dtype == np.float64 and np.all(np.isfinite(p)):
             # the same natural map, compiled: NumPy's per-call overhead dominates at small k
-            if sp.issparse(self.W):
+            if issparse(self.W):
                 W = self.W
                 return float(fast[1](W.indptr, W.indices, W.data, self.q, self.mu, self.rho, p))
             return float(fast[0](self.W, self.q, self.mu, self.rho, p))
@@ -353,7 +354,7 @@ class ContactProblem:
         k = self.k
         if k == 1:  # one contact: the closed form, without assembling a 2 x 2 system
             return self._solve_branch_planar(int(modes[0]))
-        if sp.issparse(self.W):
+        if issparse(self.W):
             return self._solve_branch_sparse(np.asarray(modes))
         E, r = self.branch_system(modes)
         try:
@@ -534,7 +535,7 @@ def _lcp_form(self) -> tuple[np.ndarray, np.ndarray]:
     (Stewart-Trinkle / Anitescu-Potra form with the two tangent directions +-t).
     """
     k = self.k
-    W = self.W.toarray() if sp.issparse(self.W) else self.W
+    W = self.W.toarray() if issparse(self.W) else self.W
     WN, WT = W[:k], W[k:]  # rows of u_N and u_T in p = (p_N, p_T)
     I = np.eye(k)
     M = np.zeros((4 * k, 4 * k))

@@ -18,7 +18,8 @@ numbers compare directly with that library's.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
+from ._imports import issparse
+from ._imports import sparse as sp
 
 __all__ = ["ProblemCheck", "blocked", "check_problem", "interleave", "natural_map_error"]
 
@@ -159,7 +160,7 @@ def check_problem(W, q, mu, name: str = "problem", sym_tol: float = 1e-5, psd_to
         out.errors.append(f"{name}: friction coefficients must be finite")
     elif k and mu.min() < 0:
         out.errors.append(f"{name}: friction coefficients must be >= 0 (min {mu.min():.3g})")
-    data = W.data if sp.issparse(W) else np.asarray(W)
+    data = W.data if issparse(W) else np.asarray(W)
     if not np.all(np.isfinite(data)):
         out.errors.append(f"{name}: W has non-finite entries")
     if not np.all(np.isfinite(q)):
@@ -171,14 +172,14 @@ def check_problem(W, q, mu, name: str = "problem", sym_tol: float = 1e-5, psd_to
         out.warnings.append(f"{name}: W is zero")
         return out
     asym = W - W.T
-    out.symmetry = float(abs(asym).max()) / Wabs if (asym.nnz if sp.issparse(asym) else True) else 0.0
+    out.symmetry = float(abs(asym).max()) / Wabs if (asym.nnz if issparse(asym) else True) else 0.0
     if out.symmetry > sym_tol:
         out.warnings.append(f"{name}: W is not symmetric (max |W - W'| / max |W| = {out.symmetry:.3g})")
-    diag = W.diagonal() if sp.issparse(W) else np.diag(W)
+    diag = W.diagonal() if issparse(W) else np.diag(W)
     if np.any(diag < -psd_tol * Wabs):
         out.warnings.append(f"{name}: W has negative diagonal entries: not positive semi-definite")
     if 2 * k <= dense_limit:
-        Wd = W.toarray() if sp.issparse(W) else np.asarray(W, dtype=float)
+        Wd = W.toarray() if issparse(W) else np.asarray(W, dtype=float)
         lam = float(np.linalg.eigvalsh(0.5 * (Wd + Wd.T))[0]) / Wabs
         out.min_eigenvalue = lam
         if lam < -psd_tol:

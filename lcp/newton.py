@@ -16,7 +16,8 @@ and a stall is reported, never hidden.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
+from ._imports import issparse
+from ._imports import sparse as sp
 
 __all__ = ["alart_curnier", "newton_solve"]
 
@@ -77,7 +78,7 @@ def newton_solve(W, q, mu, rho, p0, tol: float, max_iter: int = 50, residual=Non
     """
     from scipy.sparse.linalg import splu
 
-    W = sp.csr_matrix(W) if not sp.issparse(W) else W
+    W = sp.csr_matrix(W) if not issparse(W) else W
     p = np.array(p0, dtype=float)
     resid = residual or (lambda x: float(np.max(np.abs(alart_curnier(W, q, mu, rho, x)[0]))))
     res = resid(p)

@@ -20,7 +20,8 @@ from dataclasses import dataclass
 import functools
 
 import numpy as np
-import scipy.sparse as sp
+from ._imports import issparse
+from ._imports import sparse as sp
 
 from .contact_problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem, planar_enum
 from .lemke import lemke
@@ -210,7 +211,7 @@ class OsqpSolver(OneStepSolver):
         import osqp
 
         n = 2 * pb.k
-        if sp.issparse(pb.W):
+        if issparse(pb.W):
             return self._sparse_workspace(pb)
         key = pb.key if pb.key is not None else ("size", n)
         solver = self._cache.get(key)
