@@ -22,6 +22,7 @@ lost mid-sweep costs nothing: Dask runs its chunks again elsewhere.
 """
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import numbers
@@ -31,7 +32,7 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["BUILD_FAILED", "default_summary", "parameter_sets", "sweep"]
+__all__ = ["BUILD_FAILED", "default_summary", "map_sets", "parameter_sets", "sweep"]
 
 #: ``status`` of a row whose build or simulate call raised (its message names the exception)
 BUILD_FAILED = -10
@@ -134,8 +135,8 @@ def _run_one(build, p, summary, options) -> dict:
     return row
 
 
-def _run_chunk(build, chunk, summary, options) -> list[dict]:
-    return [_run_one(build, p, summary, options) for p in chunk]
+def _run_chunk(fn, chunk) -> list:
+    return [fn(p) for p in chunk]
 
 
 def _chunks(sets, size):
@@ -175,6 +176,70 @@ def _progress_bar(total, enabled):
     except ImportError:
         return None
     return tqdm(total=total, unit="set", desc="sweep", file=sys.stderr)
+
+
+def map_sets(fn: Callable, sets: Sequence, *, workers: int | None = None, client=None,
+             chunk_size: int | None = None, progress: bool | None = None) -> tuple[list, dict]:
+    """``[fn(p) for p in sets]``, in this process or on Dask, in chunks; the engine of :func:`sweep`.
+
+    Studies whose unit of work is not a ``simulate`` call (a LEM solve, a work-precision point) use
+    it directly. ``fn`` must not raise for a set that should become a row (catch inside it), and on
+    a cluster it must be picklable (a module-level function, or ``functools.partial`` of one).
+
+    Returns
+    -------
+    results : list
+        ``fn(p)`` for each p, in order.
+    info : dict
+        ``workers`` (1 in this process) and ``chunk_size``.
+
+    Examples
+    --------
+    >>> from lcp.parameter_sweep import map_sets
+    >>> map_sets(abs, [-1, 2, -3])[0]
+    [1, 2, 3]
+    """
+    if not callable(fn):
+        raise ValueError(f"fn must be callable, got {type(fn).__name__}")
+    if workers is not None and (not isinstance(workers, numbers.Integral) or isinstance(workers, bool)
+                                or workers < 1):
+        raise ValueError(f"workers must be a positive integer, got {workers!r}")
+    if workers is not None and client is not None:
+        raise ValueError("give workers (a new LocalCluster) or client (an existing cluster), not both")
+    if chunk_size is not None and (not isinstance(chunk_size, numbers.Integral) or chunk_size < 1):
+        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    if progress is not None and not isinstance(progress, bool):
+        raise ValueError(f"progress must be True, False or None, got {progress!r}")
+    sets = list(sets)
+    n = len(sets)
+    show = progress if progress is not None else n >= PROGRESS_MIN_SETS
+    out: list = []
+    if workers is None and client is None:
+        bar = _progress_bar(n, show)
+        for p in sets:
+            out.append(fn(p))
+            if bar is not None:
+                bar.update(1)
+        if bar is not None:
+            bar.close()
+        return out, {"workers": 1, "chunk_size": n}
+    c, cluster, own = _connect(client, workers)
+    try:
+        n_workers = max(1, len(c.scheduler_info().get("workers", {})) or (workers or 1))
+        size = chunk_size or min(5000, max(1, math.ceil(n / (4 * n_workers))))
+        futures = [c.submit(_run_chunk, fn, ch, pure=False) for ch in _chunks(sets, size)]
+        if show:
+            from dask.distributed import progress as dask_progress
+
+            dask_progress(futures)
+        for part in c.gather(futures):
+            out.extend(part)
+    finally:
+        if own is not None:
+            own.close()
+        if cluster is not None:
+            cluster.close()
+    return out, {"workers": n_workers, "chunk_size": size}
 
 
 def sweep(build: Callable, params, *, summary: Callable | None = None, workers: int | None = None,
@@ -237,56 +302,17 @@ def sweep(build: Callable, params, *, summary: Callable | None = None, workers: 
         raise ValueError(f"build must be callable (e.g. lcp.scenes.jean_pratt), got {type(build).__name__}")
     if summary is not None and not callable(summary):
         raise ValueError(f"summary must be callable or None, got {type(summary).__name__}")
-    if workers is not None and (not isinstance(workers, numbers.Integral) or isinstance(workers, bool)
-                                or workers < 1):
-        raise ValueError(f"workers must be a positive integer, got {workers!r}")
-    if workers is not None and client is not None:
-        raise ValueError("give workers (a new LocalCluster) or client (an existing cluster), not both")
-    if chunk_size is not None and (not isinstance(chunk_size, numbers.Integral) or chunk_size < 1):
-        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
-    if progress is not None and not isinstance(progress, bool):
-        raise ValueError(f"progress must be True, False or None, got {progress!r}")
     sets = parameter_sets(params)
-    n = len(sets)
-    show = progress if progress is not None else n >= PROGRESS_MIN_SETS
-    t0 = time.perf_counter()
-    rows: list[dict] = []
-    n_workers = 1
-    if n:
+    if sets:
         _check_options(build, sets[0], simulate_options)
-    if workers is None and client is None:
-        size = chunk_size or n or 1
-        bar = _progress_bar(n, show)
-        for p in sets:
-            rows.append(_run_one(build, p, summary, simulate_options))
-            if bar is not None:
-                bar.update(1)
-        if bar is not None:
-            bar.close()
-    else:
-        c, cluster, own = _connect(client, workers)
-        try:
-            n_workers = max(1, len(c.scheduler_info().get("workers", {})) or (workers or 1))
-            size = chunk_size or min(5000, max(1, math.ceil(n / (4 * n_workers))))
-            chunks = _chunks(sets, size)
-            futures = [c.submit(_run_chunk, build, ch, summary, simulate_options, pure=False)
-                       for ch in chunks]
-            if show:
-                from dask.distributed import progress as dask_progress
-
-                dask_progress(futures)
-            for part in c.gather(futures):
-                rows.extend(part)
-        finally:
-            if own is not None:
-                own.close()
-            if cluster is not None:
-                cluster.close()
+    t0 = time.perf_counter()
+    rows, info = map_sets(functools.partial(_run_one, build, summary=summary, options=simulate_options),
+                          sets, workers=workers, client=client, chunk_size=chunk_size, progress=progress)
     columns = list(dict.fromkeys(k for p in sets for k in p)) + ["success", "status", "message"]
     df = pd.DataFrame(rows)
     rest = [c for c in df.columns if c not in columns]
     df = df.reindex(columns=columns + rest)
-    df.attrs.update(wall_time=time.perf_counter() - t0, workers=n_workers, chunk_size=size if n else 0)
+    df.attrs.update(wall_time=time.perf_counter() - t0, **info)
     return df
 
 
