@@ -100,7 +100,16 @@ class JeanPrattExact:
         stops = [sg.t1 for sg in self.segments if sg.mode != "stick"]
         self.tau0 = 0.0 if (self.shocks and self.shocks[0][0] == 0.0) else (stops[0] if stops else
                                                                                (0.0 if self.v0 == 0 else math.inf))
-        self.x_stop = float(self.evaluate(self.tau0)["x"]) if np.isfinite(self.tau0) else math.nan
+        self.x_stop = self._x_at(self.tau0) if math.isfinite(self.tau0) else math.nan
+
+    def _x_at(self, t: float) -> float:
+        """x at one time, in floats: the same operations as :meth:`evaluate`, without its arrays."""
+        x = math.nan
+        for sg in self.segments:
+            if t >= sg.t0 and (t < sg.t1 or not math.isfinite(sg.t1)):
+                dt = t - sg.t0
+                x = sg.x0 + sg.v0 * dt + 0.5 * sg.a * dt * dt
+        return float(x)
 
     # ------------------------------------------------------------------ construction
     def _slide(self, s: float):

@@ -6,7 +6,7 @@
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import functools
 import math
 from typing import Callable
 
@@ -15,19 +15,21 @@ import numpy as np
 
 from lem.jean_pratt import check_parameters, tan_alpha
 
+from .constant_model import ConstantModel
 from .exact import JeanPrattExact
 from .system import Contact, System
 
 __all__ = ["Scene", "jean_pratt", "block_chain"]
 
 
-@dataclass
 class Scene:
     """A system with its initial state.
 
     Attributes
     ----------
     system : System
+        The CasADi model. A scene may build it on first access (``build_system``): the paths that
+        run from the scene's :class:`~lcp.constant_model.ConstantModel` never need it.
     q0, v0 : ndarray, shape (n,)
     t_end : float
         Default horizon.
@@ -36,16 +38,37 @@ class Scene:
         The parameters the scene was built from.
     solution : JeanPrattExact or None
         Exact solution, if known (:meth:`exact` evaluates it).
+    model : ConstantModel or None
+        The numbers of a constant system, where the builder knows them in closed form.
     """
 
-    system: System
-    q0: np.ndarray
-    v0: np.ndarray
-    t_end: float
-    name: str
-    params: dict = field(default_factory=dict)
-    solution: JeanPrattExact | None = None
-    no_exact_reason: str = ""
+    def __init__(self, system: System | None, q0, v0, t_end: float, name: str, params: dict | None = None,
+                 solution: JeanPrattExact | None = None, no_exact_reason: str = "", model=None,
+                 build_system: Callable[[], System] | None = None):
+        if system is None and build_system is None:
+            raise ValueError("a Scene needs a system or a build_system callable")
+        self._system, self._build_system = system, build_system
+        self.q0, self.v0, self.t_end, self.name = q0, v0, t_end, name
+        self.params = {} if params is None else params
+        self.solution, self.no_exact_reason, self.model = solution, no_exact_reason, model
+
+    @property
+    def system(self) -> System:
+        if self._system is None:
+            self._system = self._build_system()
+        return self._system
+
+    @system.setter
+    def system(self, value: System):
+        self._system = value
+
+    @property
+    def system_built(self) -> bool:
+        """Whether the CasADi System exists already (it is built on first access otherwise)."""
+        return self._system is not None
+
+    def __repr__(self):
+        return f"Scene(name={self.name!r}, params={self.params!r}, t_end={self.t_end!r})"
 
     def exact(self, t) -> dict:
         """Exact x, xdot, N, f (and y = 0) at times t; see :class:`lcp.exact.JeanPrattExact`."""
@@ -123,11 +146,48 @@ def jean_pratt(m: float = 1.0, M: float = 1.0, alpha: float = math.pi / 4, R: fl
         raise ValueError(f"coordinates must be 'reduced' or 'full', got {coordinates!r}")
     t = tan_alpha(alpha)
     params = dict(m=m, M=M, alpha=alpha, R=R, v0=v0, g=g, phi=phi, coordinates=coordinates, load=load)
+    if load is not None and not callable(load):
+        raise ValueError("load must be a callable of the CasADi time symbol")
+    if M == 0 and coordinates == "full":
+        raise ValueError("M must be > 0 with coordinates='full' (the guided body's mass matrix is singular)")
+    build = functools.partial(_jean_pratt_system, m, M, t, R, g, phi, coordinates, load)
+    model = None
+    if coordinates == "reduced":
+        q0, v0v = np.zeros(2), np.array([v0, 0.0])
+        if load is None:
+            # the numbers of the model in closed form: the fast paths need no CasADi work
+            model = ConstantModel(A=np.array([[m + M * t * t, -M * t], [-M * t, m + M]]),
+                                  F0=np.array([phi, -(m + M) * g]), H=_JP_H, gap0=_ZERO1, mu=np.array([float(R)]),
+                                  e=_ZERO1, names=("x", "y"), contact_names=("P",))
+    else:
+        q0, v0v = np.zeros(3), np.array([v0, 0.0, -v0 * t])
+    # a user's load expression is checked now, not at the first simulation
+    system = build() if load is not None else None
+    sol, why = None, "a time-dependent load"
+    if load is None:
+        try:
+            sol = JeanPrattExact(m=m, M=M, alpha=alpha, R=R, v0=v0, g=g, phi=phi)
+        except ValueError as exc:  # lift-off: the scene is fine to simulate, only exact() is missing
+            why = str(exc)
+    if t_end is None:
+        # (a stop beyond the largest float, R ~ 1e-310, gives the 0.3 s default too)
+        t_end = max(0.3, 2 * sol.tau0) if sol is not None and math.isfinite(2 * sol.tau0) else 0.3
+    _check_params(t_end=t_end)
+    if t_end <= 0:
+        raise ValueError(f"t_end must be > 0, got {t_end!r}")
+    return Scene(system, q0, v0v, float(t_end), "jean_pratt", params, sol, no_exact_reason=why, model=model,
+                 build_system=build)
+
+
+_JP_H = np.array([[0.0, 1.0], [1.0, 0.0]])  # rows: normal (gap y), tangent (x)
+_ZERO1 = np.zeros(1)
+
+
+def _jean_pratt_system(m, M, t, R, g, phi, coordinates, load) -> System:
+    """The CasADi System of the Jean-Pratt scene (built when a path needs it)."""
     time_sym = ca.SX.sym("t")
     horizontal = phi
     if load is not None:
-        if not callable(load):
-            raise ValueError("load must be a callable of the CasADi time symbol")
         try:
             horizontal = phi + ca.SX(load(time_sym))
         except Exception as exc:  # noqa: BLE001 - report any failure of the user's expression
@@ -138,32 +198,15 @@ def jean_pratt(m: float = 1.0, M: float = 1.0, alpha: float = math.pi / 4, R: fl
         q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
         mass = ca.SX(np.array([[m + M * t * t, -M * t], [-M * t, m + M]]))
         force = ca.vertcat(horizontal, -(m + M) * g)
-        system = System(q, v, mass, force, contacts=[Contact(gap=q[1], tangent=q[0], mu=R, name="P")],
-                        names=("x", "y"), t=time_sym)
-        q0, v0v = np.zeros(2), np.array([v0, 0.0])
-    else:
-        q, v = ca.SX.sym("q", 3), ca.SX.sym("v", 3)
-        mass = ca.SX(np.diag([m, m, M]))
-        # the applied -M g tan(alpha) + phi on m cancels M's push through the slide when phi = 0
-        force = ca.vertcat(-M * g * t + horizontal, -m * g, -M * g)
-        slide = q[2] - q[1] + q[0] * t
-        system = System(q, v, mass, force, contacts=[Contact(gap=q[1], tangent=q[0], mu=R, name="P")],
-                        constraints=slide, names=("x", "y", "Y"), t=time_sym)
-        q0, v0v = np.zeros(3), np.array([v0, 0.0, -v0 * t])
-    if M == 0 and coordinates == "full":
-        raise ValueError("M must be > 0 with coordinates='full' (the guided body's mass matrix is singular)")
-    sol, why = None, "a time-dependent load"
-    if load is None:
-        try:
-            sol = JeanPrattExact(m=m, M=M, alpha=alpha, R=R, v0=v0, g=g, phi=phi)
-        except ValueError as exc:  # lift-off: the scene is fine to simulate, only exact() is missing
-            why = str(exc)
-    if t_end is None:
-        t_end = max(0.3, 2 * sol.tau0) if sol is not None and np.isfinite(sol.tau0) else 0.3
-    _check_params(t_end=t_end)
-    if t_end <= 0:
-        raise ValueError(f"t_end must be > 0, got {t_end!r}")
-    return Scene(system, q0, v0v, float(t_end), "jean_pratt", params, sol, no_exact_reason=why)
+        return System(q, v, mass, force, contacts=[Contact(gap=q[1], tangent=q[0], mu=R, name="P")],
+                      names=("x", "y"), t=time_sym)
+    q, v = ca.SX.sym("q", 3), ca.SX.sym("v", 3)
+    mass = ca.SX(np.diag([m, m, M]))
+    # the applied -M g tan(alpha) + phi on m cancels M's push through the slide when phi = 0
+    force = ca.vertcat(-M * g * t + horizontal, -m * g, -M * g)
+    slide = q[2] - q[1] + q[0] * t
+    return System(q, v, mass, force, contacts=[Contact(gap=q[1], tangent=q[0], mu=R, name="P")],
+                  constraints=slide, names=("x", "y", "Y"), t=time_sym)
 
 
 def block_chain(K: int = 3, m=1.0, k_spring: float = 50.0, mu=0.3, g: float = 9.81, v0=None,

@@ -80,17 +80,29 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
     >>> res.success, round(res.q[-1, 0], 6), round(scene.x_stop, 6)
     (True, 0.076453, 0.076453)
     """
+    model = None
     if isinstance(scene, Scene):
-        system = scene.system
         q0 = scene.q0 if q0 is None else q0
         v0 = scene.v0 if v0 is None else v0
         t_end = scene.t_end if t_end is None else t_end
+        # a scene that knows its numbers takes the paths that need nothing else, whether or not its
+        # System was built (so that a result never depends on what was accessed before)
+        model = scene.model if control is None else None
+        if model is None:
+            system = scene.system
     elif isinstance(scene, System):
         system = scene
         if q0 is None or v0 is None or t_end is None:
             raise ValueError("simulating a bare System needs q0, v0 and t_end")
     else:
         raise ValueError(f"scene must be a Scene or a System, got {type(scene).__name__}")
+    if model is not None:
+        result = _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, solver_options,
+                                      fallback, save_every, fast, allow_large_step, projection,
+                                      projection_tol, method_options)
+        if result is not None:
+            return result
+        system = scene.system  # a path the numbers alone do not serve: the CasADi model
     if control is not None:
         if not system.is_controlled:
             raise ValueError("control given for a system without a control input")
@@ -115,3 +127,46 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
         return moreau_jean(system, q0, v0, float(t_end), opts)
     return METHODS[method](system, q0, v0, float(t_end), scene=scene if isinstance(scene, Scene) else None,
                            **method_options)
+
+
+def _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, solver_options, fallback,
+                         save_every, fast, allow_large_step, projection, projection_tol, method_options):
+    """The paths that run from a scene's :class:`~lcp.constant_model.ConstantModel` alone (no CasADi
+    work): the compiled single-contact Moreau-Jean step and the closed-form single-contact event
+    path. None when neither applies (the caller then builds the System and takes the general path),
+    after the same validation of the options as the general path."""
+    if not isinstance(method, str) or method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; known methods: {sorted(METHODS)}")
+    if not isinstance(t_end, (int, float, np.floating)) or not np.isfinite(t_end) or t_end <= 0:
+        raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
+    opts = MoreauJeanOptions(h=h, theta=theta, solver=solver, solver_options=solver_options,
+                             fallback=fallback, save_every=save_every, fast=fast, projection=projection,
+                             projection_tol=projection_tol)
+    q0, v0 = _check_state(model, q0, v0)
+    if method == "event":
+        from .events.options import EventOptions
+        from .events.single_contact import single_contact_run
+
+        return single_contact_run(model, q0, v0, float(t_end), EventOptions.from_kwargs(**method_options))
+    if method_options:
+        raise ValueError(f"unknown options for method 'moreau-jean': {sorted(method_options)}")
+    if h > t_end and not allow_large_step:
+        raise ValueError(f"h = {h!r} is larger than the horizon t_end = {t_end!r}; pass "
+                         "allow_large_step=True if one step beyond t_end is what you want")
+    if not (fast and opts.solver in ("auto", "enum") and not solver_options and model.m == 1 and not model.nb
+            and opts.projection in ("auto", False)):
+        return None
+    from .timestepping import moreau_jean_from_model
+
+    return moreau_jean_from_model(model, q0, v0, float(t_end), opts)
+
+
+def _check_state(model, q0, v0):
+    q0 = np.asarray(q0, dtype=float)
+    v0 = np.asarray(v0, dtype=float)
+    for name, x in (("q0", q0), ("v0", v0)):
+        if x.shape != (model.n,):
+            raise ValueError(f"{name} must have shape ({model.n},), got {x.shape}")
+        if not np.all(np.isfinite(x)):
+            raise ValueError(f"{name} must be finite, got {x}")
+    return q0, v0

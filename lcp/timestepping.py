@@ -61,7 +61,7 @@ from .projection import PositionProjection, needs_projection, violation_function
 from .result import STATUS_MESSAGES, Impact, SimulationResult, SolverStats
 from .solvers import SOLVERS, OneStepSolver, make_solver
 
-__all__ = ["CLOSE_ULPS", "OPEN_ULPS", "MoreauJeanOptions", "moreau_jean"]
+__all__ = ["CLOSE_ULPS", "OPEN_ULPS", "MoreauJeanOptions", "moreau_jean", "moreau_jean_from_model"]
 
 #: closing tolerance of the activation rule, in units of eps times the size of the gap's terms
 CLOSE_ULPS = 16.0
@@ -406,7 +406,23 @@ def _impacts_compiled(asm, Q, V, PN, PT, h, name):
     return out
 
 
-def _moreau_jean_compiled(asm, q0, v0, n_steps, every, solver_name) -> SimulationResult:
+def moreau_jean_from_model(model, q0, v0, t_end: float, options: MoreauJeanOptions) -> SimulationResult:
+    """The compiled single-contact step run from a :class:`~lcp.constant_model.ConstantModel`: the
+    numbers go straight into the compiled kernel (keyed by the number of coordinates only), so a
+    new parameter set costs no CasADi work. Same result as :func:`moreau_jean` on the System."""
+    from .constant_model import NumericAssembly
+
+    h, th = float(options.h), float(options.theta)
+    n_steps = int(np.ceil(t_end / h * (1 - 1e-12)))
+    if n_steps > 2_000_000_000:
+        raise ValueError(f"h = {h!r} needs {n_steps} steps to reach t_end = {t_end!r}: too many")
+    solver = options.solver if isinstance(options.solver, str) else options.solver.name
+    return _moreau_jean_compiled(NumericAssembly(model, h, th), q0, v0, n_steps, int(options.save_every), solver,
+                                 contact_name=model.contact_names[0], violation=lambda Q, t: model.violation(Q))
+
+
+def _moreau_jean_compiled(asm, q0, v0, n_steps, every, solver_name, contact_name=None,
+                          violation=None) -> SimulationResult:
     """The compiled fast path; same result contract as the Python loop."""
     Q, V, PN, PT, md, counts, max_res, n_amb, done, fail = compiled.simulate_compiled(asm, q0, v0, n_steps, every)
     stats = SolverStats()
@@ -428,8 +444,11 @@ def _moreau_jean_compiled(asm, q0, v0, n_steps, every, solver_name) -> Simulatio
     md = np.where(md == -2, -1, md).astype(np.int8)
     t = every * h * np.arange(Q.shape[0])
     PN, PT = PN[:, None], PT[:, None]
-    impacts = _impacts_compiled(asm, Q, V, PN, PT, h, asm.sys.contacts[0].name) if every == 1 else None
+    if contact_name is None:
+        contact_name = asm.sys.contacts[0].name
+    impacts = _impacts_compiled(asm, Q, V, PN, PT, h, contact_name) if every == 1 else None
     return SimulationResult(t=t, q=Q, v=V, p_N=PN, p_T=PT, modes=ModeArray.of(md[:, None]),
                             status=status, message=message, stats=stats, method="moreau-jean",
                             solver=f"{solver_name} (compiled)", h=h, theta=asm.theta, impacts=impacts,
-                            violation=_lazy_violation(asm.sys, Q, t))
+                            violation=(_lazy_violation(asm.sys, Q, t) if violation is None
+                                       else (lambda: violation(Q, t))))

@@ -50,6 +50,13 @@ def check_parameters(m, M, alpha, R, g=9.81):
 
     Scalars or arrays (a batch of scenes): every entry must be in range.
     """
+    vals = (m, M, alpha, R, g)
+    if all(type(x) in (int, float) for x in vals):  # one scene: plain float checks, no NumPy calls
+        for name, val in zip(("m", "M", "alpha", "R", "g"), vals):
+            if not math.isfinite(val):
+                raise ValueError(f"{name} must be a finite number, got {val!r}")
+        if m > 0 and M >= 0 and R >= 0 and g >= 0 and abs(alpha) < math.pi / 2:
+            return
     for name, val in (("m", m), ("M", M), ("alpha", alpha), ("R", R), ("g", g)):
         if np.ndim(val) == 0 and not isinstance(val, (int, float, np.floating, np.integer)):
             raise ValueError(f"{name} must be a finite number, got {val!r}")

@@ -1,0 +1,139 @@
+"""Cold start: what a parameter study pays per new parameter set, and what `import lcp` costs.
+
+Run: ``python benchmarks/cold_start.py [--quick] [--out DIR]``. Prints a table and writes
+``cold_start.csv`` into ``--out`` (default ``benchmarks/out/``, untracked).
+
+Per parameter set a study builds a new scene and runs it once, so the cost that matters is the
+cold one: scene construction plus a run on that new scene. Measured here, on the Jean-Pratt scene
+with a new friction coefficient every call (R = 0.5 + 1e-6 i, so nothing can be reused from an
+earlier set):
+
+- ``import lcp`` in a fresh interpreter (median of several subprocesses; the interpreter's own
+  start-up is measured alone and subtracted);
+- a new scene, alone;
+- a new scene plus an event-driven run of 0.3 s (1000 output times), with its error against the
+  exact solution;
+- the tanh-regularized LSODA run of the same scene (eps = 1e-12, rtol = 1e-13, atol = 1e-16: the
+  setting ``event_vs_lsoda.py`` found to reach LSODA's best error) with its error;
+- a new scene plus a Moreau-Jean run of 0.3 s at h = 1e-3;
+- the same runs on a scene reused (warm), for reference.
+
+The timed calls alternate in rounds, one block of ``BLOCK`` consecutive calls of each kind per round
+(a sweep runs the same code back to back, so each kind is timed with its code and data in the
+caches, as it would be there), and each figure is the median over the rounds of the time per call,
+so a change of load on the shared machine hits all of them alike; ratios are within one run.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import lcp
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from event_vs_lsoda import lsoda_tanh  # noqa: E402  (the same baseline as the event benchmark)
+
+T = 0.3
+EPS, RTOL = 1e-12, 1e-13
+#: consecutive calls of one kind per timed block (a sweep runs the same code back to back)
+BLOCK = 10
+
+
+def import_time(repeats: int) -> tuple[float, float]:
+    """(median seconds of `import lcp` beyond the bare interpreter, median bare start-up)."""
+    code = "import time; t = time.perf_counter(); import lcp; print(time.perf_counter() - t)"
+    inner = []
+    for _ in range(repeats):
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+        inner.append(float(out.stdout))
+    bare = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-c", "pass"], check=True)
+        bare.append(time.perf_counter() - t0)
+    return statistics.median(inner), statistics.median(bare)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="fewer rounds")
+    ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "out"))
+    args = ap.parse_args(argv)
+    rounds = 10 if args.quick else 60
+    t_eval = np.linspace(0.0, T, 1000)
+    load = os.getloadavg()[0]
+
+    times = {k: [] for k in ("scene", "scene+event", "lsoda", "scene+mj", "warm event", "warm mj")}
+    err = {}
+    warm = lcp.scenes.jean_pratt()
+    lcp.simulate(warm, T, method="event", t_eval=t_eval)
+    lcp.simulate(warm, T, h=1e-3)
+    count = [0]
+
+    def next_R():  # a new friction coefficient for every scene ever built here
+        count[0] += 1
+        return 0.5 + 1e-7 * count[0]
+
+    def block(name, call):
+        """BLOCK consecutive calls, timed together: the time per call of this block."""
+        t0 = time.perf_counter()
+        for _ in range(BLOCK):
+            out = call()
+        times[name].append((time.perf_counter() - t0) / BLOCK)
+        return out
+
+    def event_run():
+        sc = lcp.scenes.jean_pratt(R=next_R())
+        return sc, lcp.simulate(sc, T, method="event", t_eval=t_eval)
+
+    def mj_run():
+        sc = lcp.scenes.jean_pratt(R=next_R())
+        return sc, lcp.simulate(sc, T, h=1e-3)
+
+    for _ in range(rounds):
+        block("scene", lambda: lcp.scenes.jean_pratt(R=next_R()))
+        sc, res = block("scene+event", event_run)
+        exact = sc.exact(t_eval)["x"]
+        err["scene+event"] = max(err.get("scene+event", 0.0), float(np.max(np.abs(res.q[:, 0] - exact))))
+        ls = block("lsoda", lambda sc=sc: lsoda_tanh(sc, t_eval, EPS, RTOL))
+        err["lsoda"] = max(err.get("lsoda", 0.0), float(np.max(np.abs(ls.y[0] - exact))))
+        sc2, mj = block("scene+mj", mj_run)
+        err["scene+mj"] = max(err.get("scene+mj", 0.0), float(np.max(np.abs(mj.q[:, 0] - sc2.exact(mj.t)["x"]))))
+        block("warm event", lambda: lcp.simulate(warm, T, method="event", t_eval=t_eval))
+        block("warm mj", lambda: lcp.simulate(warm, T, h=1e-3))
+
+    imp, bare = import_time(5 if args.quick else 15)
+    med = {k: statistics.median(v) for k, v in times.items()}
+    rows = [("import lcp (fresh interpreter)", imp, None, f"bare interpreter start-up {bare * 1e3:.1f} ms")]
+    rows += [("new scene", med["scene"], None, "")]
+    rows += [("new scene + event run 0.3 s", med["scene+event"], err["scene+event"],
+              f"{med['lsoda'] / med['scene+event']:.1f}x faster than LSODA (target >= 10x)")]
+    rows += [("tanh + LSODA, same scene", med["lsoda"], err["lsoda"], f"eps = {EPS:g}, rtol = {RTOL:g}")]
+    rows += [("new scene + Moreau-Jean 0.3 s, h = 1e-3", med["scene+mj"], err["scene+mj"], "target <= 3 ms")]
+    rows += [("warm event run (scene reused)", med["warm event"], None, "")]
+    rows += [("warm Moreau-Jean run (scene reused)", med["warm mj"], None, "")]
+    print(f"cold start, Jean-Pratt scene, {rounds} rounds, load {load:.2f}")
+    print(f"{'what':44s} {'time':>11s} {'max |x err|':>12s}  note")
+    for what, t, e, note in rows:
+        es = f"{e:.1e}" if e is not None else "-"
+        print(f"{what:44s} {t * 1e3:8.3f} ms {es:>12s}  {note}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / "cold_start.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["what", "seconds", "max_abs_x_error", "note", "load", "rounds"])
+        for what, t, e, note in rows:
+            w.writerow([what, f"{t:.6e}", "" if e is None else f"{e:.3e}", note, f"{load:.2f}", rounds])
+    print(f"wrote {out / 'cold_start.csv'}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,248 @@
+"""The event method in closed form for one persistent contact of a constant system.
+
+When a system has constant mass, contact kinematics and forces, no bilateral constraints and a
+single contact that starts closed (g = 0, u_N = 0), every smooth phase has constant accelerations
+and the whole motion is a short sequence of quadratic pieces: slide, stop, then stick for ever or
+slide back. Each piece follows from the acceleration-level contact problem of that one contact,
+
+    a = W lambda + b,   W = H A^-1 H',   b = H A^-1 F0,
+
+in closed form (stick where its forces lie in the friction cone, the sliding branch p_T = -+mu p_N otherwise), and each event is a linear root (the stop, u_T = 0). Nothing
+here calls CasADi or a solver, so a new parameter set costs microseconds: this is the event path
+of the Jean-Pratt scene and of any block on a flat support under constant loads.
+
+:func:`single_contact_run` returns None whenever the general integrator is needed (the contact
+opens or starts open, an impact, a Painleve case with no or several consistent modes, non-default
+integrator options); the caller then runs :func:`lcp.events.event_driven`, whose answer this path
+reproduces to rounding (tests compare the two on random parameters).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..contact_problem import MODE_NAMES, SLIDE_NEG, SLIDE_POS, STICK
+from ..result import STATUS_MESSAGES, SolverStats
+from .event_location import first_stop
+from .options import EventOptions
+from .records import Event, EventResult, Phase
+
+__all__ = ["applicable", "single_contact_run"]
+
+_DEFAULT = EventOptions()
+_EPS = float(np.finfo(float).eps)
+
+
+def applicable(model, opts: EventOptions) -> bool:
+    """Whether the structure allows this path (the initial state is checked by the run)."""
+    if model.m != 1 or model.nb or not model.constant_forces:
+        return False
+    return (opts.smooth == _DEFAULT.smooth and opts.mode_solver == _DEFAULT.mode_solver
+            and opts.impact_solver == _DEFAULT.impact_solver)
+
+
+def _at_rest(W00, W01, W10, W11, bN, bT, mu):
+    """(N, f, mode) of a closed contact at rest, a = W (N, f) + b, or None (the general path decides).
+
+    Every case of the contact law is tried: open (the free motion separates), stick (forces in
+    the friction cone up to the rounding of their own terms, not up to a tolerance relative to the
+    normal force: a tangential load 1e-11 of the weight, without friction, does set the block in
+    motion), and the two sliding directions (tangential acceleration of the sign of the slide).
+    The one admissible case is returned; None where the contact opens, or where no case or several
+    are admissible (Painleve: the general integrator reports it and picks a motion).
+    """
+    found = []
+    if bN >= 0.0:
+        found.append(None)  # open: a flight phase, which this path does not integrate
+    det = W00 * W11 - W01 * W10
+    if det > 0.0:
+        N = (-bN * W11 + bT * W01) / det
+        f = (-bT * W00 + bN * W10) / det
+        rN = 8 * _EPS * (abs(bN * W11) + abs(bT * W01)) / det
+        # (+ 1e-300 N: a residue in the subnormal range is rounding too, where eps times it underflows)
+        rf = 8 * _EPS * (abs(bT * W00) + abs(bN * W10)) / det + 1e-300 * abs(N)
+        if N > rN and abs(f) <= mu * (N + rN) + rf:
+            found.append((N, f, STICK))
+    for s, mode in ((1.0, SLIDE_POS), (-1.0, SLIDE_NEG)):
+        a_coef = W00 - s * mu * W01
+        if not a_coef > 0.0:
+            continue
+        N = -bN / a_coef
+        aT = bT + (W10 - s * mu * W11) * N
+        if N > 0.0 and s * aT > 8 * _EPS * (abs(bT) + abs((W10 - s * mu * W11) * N)) + 1e-300 * abs(bN):
+            found.append((N, -s * mu * N, mode))
+    return found[0] if len(found) == 1 else None
+
+
+def _dot(a, b) -> float:
+    s = 0.0
+    for x, y in zip(a, b):
+        s += x * y
+    return s
+
+
+def _coordinate(row) -> int:
+    """The index of the only nonzero entry of a Jacobian row, or -1."""
+    nz = [i for i, x in enumerate(row) if x != 0.0]
+    return nz[0] if len(nz) == 1 else -1
+
+
+class _Piece:
+    """One closed-form phase, with the attributes :func:`lcp.events.phases.closed_form_output` reads."""
+
+    __slots__ = ("t0", "t1", "q0", "v0", "P0", "qdd", "NF", "N", "f", "mode")
+
+    def __init__(self, t0, q0, v0, P0, qdd, N, f, mode):
+        self.t0, self.q0, self.v0, self.P0, self.qdd = t0, q0, v0, P0, qdd
+        self.N, self.f, self.mode = N, f, mode
+        self.NF = np.array([N, f])
+        self.t1 = math.inf
+
+
+def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> EventResult | None:
+    """The event-driven motion of a single-contact constant system, or None (general path needed).
+
+    Parameters
+    ----------
+    model : lcp.constant_model.ConstantModel
+        With one contact, no bilateral constraints, constant forces (:func:`applicable`).
+    q0, v0 : ndarray (n,)
+        Initial state, finite (checked by the caller).
+    t_end : float
+    opts : EventOptions
+
+    Returns
+    -------
+    EventResult or None
+    """
+    if not applicable(model, opts):
+        return None
+    n = model.n
+    A, H, mu = model.A, model.H, float(model.mu[0])
+    # plain floats: a handful of coordinates, where each NumPy call would cost more than its work
+    HN, HT = H[0].tolist(), H[1].tolist()
+    q, v = q0.tolist(), v0.tolist()
+    gap = float(model.gap0[0]) + _dot(HN, q)
+    # the contact must start closed and at rest normally; anything else (flight, impact) is general
+    if gap != 0.0 or _dot(HN, v) != 0.0:
+        return None
+    X = np.linalg.solve(A, np.column_stack((H.T, model.F0)))  # A^-1 [H' F0], one factorization
+    (W00, W01, bN), (W10, W11, bT) = (H @ X).tolist()  # W = H A^-1 H', b = H A^-1 F0
+    cN, cT, qdd_free = X.T.tolist()
+    cN_np, qdd_free_np = X[:, 0], X[:, 2]
+    bN_np = float(H[0] @ qdd_free_np)
+    free_size = max(map(abs, qdd_free))
+    # a row that fixes one coordinate lets its condition be imposed exactly on that coordinate
+    coord_N = _coordinate(HN)
+    coord_T = _coordinate(HT)
+    pieces: list[_Piece] = []
+    events: list[Event] = []
+    t = 0.0
+    PN = PT = 0.0
+    iterations = 0
+    for _ in range(4):  # slide, stop, stick or slide back: at most three pieces under constant data
+        uT = _dot(HT, v)
+        s = 1.0 if uT > 0 else -1.0
+        if uT != 0.0:
+            # the general integrator's arithmetic (lcp.events.modes.AccelProblem): the sliding
+            # friction folded into the normal direction d = H_N - s mu H_T, so that the two paths
+            # agree to the last bit on the event times they compute
+            iterations += 1
+            d = H[0] - (mu * s) * H[1]
+            SDc = np.linalg.solve(A, d)
+            a_coef = float(H[0] @ SDc)
+            if not a_coef > 0.0:
+                return None  # Painleve: no or several consistent sliding modes, general path decides
+            N = -bN_np / a_coef
+            if not N > 0.0:
+                return None  # the contact would open: a flight phase
+            f = -s * mu * N
+            mode = SLIDE_POS if s > 0 else SLIDE_NEG
+            qdd = qdd_free_np + SDc * N
+            acc_size = free_size + abs(N) * float(np.abs(SDc).max())
+            qdd = (qdd - cN_np * (float(H[0] @ qdd) / W00)).tolist()  # normal acceleration: zero
+        else:
+            decided = _at_rest(W00, W01, W10, W11, bN, bT, mu)
+            iterations += 3
+            if decided is None:
+                return None
+            N, f, mode = decided
+            qdd = [a + N * x + f * y for a, x, y in zip(qdd_free, cN, cT)]
+            acc_size = free_size + max(abs(N * x) + abs(f * y) for x, y in zip(cN, cT))
+            if mode == STICK:  # remove the rounding residues of H qdd = 0 in the mass metric
+                aN, aT = _dot(HN, qdd), _dot(HT, qdd)
+                det = W00 * W11 - W01 * W10
+                dN, dT = (aN * W11 - aT * W01) / det, (aT * W00 - aN * W10) / det
+                qdd = [a - dN * x - dT * y for a, x, y in zip(qdd, cN, cT)]
+                if coord_T >= 0:
+                    qdd[coord_T] = 0.0
+            else:
+                r = _dot(HN, qdd) / W00
+                qdd = [a - r * x for a, x in zip(qdd, cN)]
+        if coord_N >= 0:
+            qdd[coord_N] = 0.0
+        piece = _Piece(t, np.array(q), np.array(v), np.array([PN, PT]), np.array(qdd), float(N), float(f), int(mode))
+        pieces.append(piece)
+        aT = _dot(HT, qdd)
+        if abs(aT) <= 16 * _EPS * acc_size:
+            aT = 0.0  # a deceleration at the rounding level of its terms (no friction, balanced loads)
+        # signs compared, not the product (which underflows for tiny speeds and decelerations)
+        t_stop = t + first_stop(uT, aT, 1.0 if mode == SLIDE_POS else -1.0) if mode != STICK else math.inf
+        if not t_stop < t_end:
+            piece.t1 = t_end
+            break
+        piece.t1 = t_stop
+        dt = t_stop - t
+        hdt2 = 0.5 * dt * dt
+        q = [x + dt * y + hdt2 * z for x, y, z in zip(q, v, qdd)]
+        v = [y + dt * z for y, z in zip(v, qdd)]
+        # at the stop both contact velocities are zero: remove their rounding residues in the mass
+        # metric, exactly on coordinate rows
+        uN, uT = _dot(HN, v), _dot(HT, v)
+        det = W00 * W11 - W01 * W10
+        dN, dT = (uN * W11 - uT * W01) / det, (uT * W00 - uN * W10) / det
+        v = [y - dN * x - dT * z for y, x, z in zip(v, cN, cT)]
+        for i in (coord_N, coord_T):
+            if i >= 0:
+                v[i] = 0.0
+        PN, PT = PN + dt * N, PT + dt * f
+        events.append(Event(t_stop, "stop", 0))
+        t = t_stop
+    else:  # pragma: no cover - constant data allow no fourth piece
+        return None
+    t_out = opts.output_times(t_end)
+    N_out = t_out.size
+    Q = np.empty((N_out, n))
+    V = np.empty((N_out, n))
+    PC = np.empty((N_out, 2))  # cumulative impulses
+    FN = np.empty((N_out, 1))
+    FT = np.empty((N_out, 1))
+    MD = np.empty((N_out, 1), dtype=np.int8)
+    k = len(pieces)
+    bounds = np.searchsorted(t_out, [p.t0 for p in pieces] + [p.t1 for p in pieces]).tolist()
+    if bounds[-1] < N_out and t_out[bounds[-1]] == pieces[-1].t1:
+        bounds[-1] += 1
+    for p, lo, hi in zip(pieces, bounds[:k], bounds[k:]):
+        if hi <= lo:
+            continue
+        dt = (t_out[lo:hi] - p.t0)[:, None]
+        # q0 + dt v0 + dt^2/2 qdd, in the order of the general integrator's closed-form output
+        hdt2 = 0.5 * dt
+        hdt2 *= dt
+        Q[lo:hi] = p.q0 + dt * p.v0 + hdt2 * p.qdd
+        V[lo:hi] = p.v0 + dt * p.qdd
+        PC[lo:hi] = p.P0 + dt * p.NF
+        FN[lo:hi], FT[lo:hi], MD[lo:hi] = p.N, p.f, p.mode
+    dP = PC[1:] - PC[:-1]
+    stats = SolverStats()
+    stats.steps = stats.solver_calls = k
+    stats.iterations, stats.max_iterations = iterations, 4
+    for p in pieces:
+        stats.mode_counts[MODE_NAMES[p.mode]] += 1
+    phases = [Phase(p.t0, p.t1, (MODE_NAMES[p.mode],), "closed-form") for p in pieces]
+    return EventResult(t=t_out, q=Q, v=V, p_N=dP[:, :1], p_T=dP[:, 1:], modes=MD[:-1],
+                       status=0, message=STATUS_MESSAGES[0], stats=stats, method="event",
+                       solver="enumerate", t_events=[ev.t for ev in events], force_N=FN, force_T=FT,
+                       events=events, impulses=[], phases=phases, impacts=[], accumulations=[],
+                       nonunique_forces=0)
