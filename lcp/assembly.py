@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-from ._imports import issparse
 from ._imports import sparse as sp
 
 __all__ = ["StepAssembly", "kahan_add", "SPARSE_MIN_CONTACT_ROWS", "SPARSE_DROP_TOL"]
