@@ -156,9 +156,10 @@ def jean_pratt(m: float = 1.0, M: float = 1.0, alpha: float = math.pi / 4, R: fl
         q0, v0v = np.zeros(2), np.array([v0, 0.0])
         if load is None:
             # the numbers of the model in closed form: the fast paths need no CasADi work
-            model = ConstantModel(A=np.array([[m + M * t * t, -M * t], [-M * t, m + M]]),
-                                  F0=np.array([phi, -(m + M) * g]), H=_JP_H, gap0=_ZERO1, mu=np.array([float(R)]),
-                                  e=_ZERO1, names=("x", "y"), contact_names=("P",))
+            # (valid by construction: m > 0 and M >= 0 make A positive definite, all checked above)
+            model = ConstantModel.trusted(A=np.array([[m + M * t * t, -M * t], [-M * t, m + M]]),
+                                          F0=np.array([phi, -(m + M) * g], dtype=float), H=_JP_H, gap0=_ZERO1,
+                                          mu=np.array([float(R)]), e=_ZERO1, names=("x", "y"), contact_names=("P",))
     else:
         q0, v0v = np.zeros(3), np.array([v0, 0.0, -v0 * t])
     # a user's load expression is checked now, not at the first simulation

@@ -213,9 +213,9 @@ def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> Event
         return None
     t_out = opts.output_times(t_end)
     N_out = t_out.size
-    Q = np.empty((N_out, n))
-    V = np.empty((N_out, n))
-    PC = np.empty((N_out, 2))  # cumulative impulses
+    # rows (q, v, cumulative impulses) over the output times: c0 + dt c1 + dt^2/2 c2 per piece,
+    # whole rows at once (the general integrator's closed-form output, same operations)
+    Y = np.empty((2 * n + 2, N_out))
     FN = np.empty((N_out, 1))
     FT = np.empty((N_out, 1))
     MD = np.empty((N_out, 1), dtype=np.int8)
@@ -223,18 +223,21 @@ def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> Event
     bounds = np.searchsorted(t_out, [p.t0 for p in pieces] + [p.t1 for p in pieces]).tolist()
     if bounds[-1] < N_out and t_out[bounds[-1]] == pieces[-1].t1:
         bounds[-1] += 1
+    zeros = [0.0] * (n + 2)
     for p, lo, hi in zip(pieces, bounds[:k], bounds[k:]):
         if hi <= lo:
             continue
-        dt = (t_out[lo:hi] - p.t0)[:, None]
-        # q0 + dt v0 + dt^2/2 qdd, in the order of the general integrator's closed-form output
+        dt = t_out[lo:hi] - p.t0
         hdt2 = 0.5 * dt
         hdt2 *= dt
-        Q[lo:hi] = p.q0 + dt * p.v0 + hdt2 * p.qdd
-        V[lo:hi] = p.v0 + dt * p.qdd
-        PC[lo:hi] = p.P0 + dt * p.NF
+        c0 = np.array(p.q0.tolist() + p.v0.tolist() + p.P0.tolist())[:, None]
+        c1 = np.array(p.v0.tolist() + p.qdd.tolist() + [p.N, p.f])[:, None]
+        c2 = np.array(p.qdd.tolist() + zeros)[:, None]
+        Y[:, lo:hi] = c0 + c1 * dt + c2 * hdt2
         FN[lo:hi], FT[lo:hi], MD[lo:hi] = p.N, p.f, p.mode
-    dP = PC[1:] - PC[:-1]
+    Q, V = np.ascontiguousarray(Y[:n].T), np.ascontiguousarray(Y[n:2 * n].T)
+    PC = Y[2 * n:]
+    dP = (PC[:, 1:] - PC[:, :-1]).T
     stats = SolverStats()
     stats.steps = stats.solver_calls = k
     stats.iterations, stats.max_iterations = iterations, 4
