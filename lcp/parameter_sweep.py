@@ -117,9 +117,12 @@ def _run_one(build, p, summary, options) -> dict:
         scene = build(**p)
         result = simulate(scene, **options)
         if getattr(result, "names", None) is None:
-            system = getattr(scene, "system", scene)
+            # the coordinate names, from the scene's numbers when it has them (its System may not
+            # have been built, and building it just for names would cost more than the run)
+            model = getattr(scene, "model", None)
+            source = model if model is not None else getattr(scene, "system", scene)
             try:
-                result.names = list(system.names)
+                result.names = list(source.names)
             except AttributeError:  # a result class without the attribute: columns by index
                 pass
         row.update(success=bool(result.success), status=int(result.status), message=str(result.message))
