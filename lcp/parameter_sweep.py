@@ -13,7 +13,8 @@ which preserves every float exactly.
 
 Why chunks: a Dask task costs about a millisecond of scheduling, more than an event-driven run of
 the Jean-Pratt scene; the sets are therefore sent in chunks (a few per worker, ``chunk_size`` to
-override), so that this overhead stays small. A worker keeps its imports and its compiled kernels
+override), so that this overhead stays small. A chunk takes every k-th set (strided), so that the
+expensive corner of a grid is shared among the workers rather than left to one. A worker keeps its imports and its compiled kernels
 (cached per process) from one chunk to the next: they are built once per worker, not per task.
 
 Failures are rows too: a parameter set whose build or run raises, or whose simulation fails,
@@ -142,10 +143,6 @@ def _run_chunk(fn, chunk) -> list:
     return [fn(p) for p in chunk]
 
 
-def _chunks(sets, size):
-    return [sets[i:i + size] for i in range(0, len(sets), size)]
-
-
 def _connect(client, workers):
     """(client, cluster to close or None, client to close or None)."""
     try:
@@ -164,9 +161,14 @@ def _connect(client, workers):
             raise ConnectionError(f"cannot reach the Dask scheduler at {client!r} within "
                                   f"{CONNECT_TIMEOUT:g} s: {exc}") from None
         return c, None, c
-    # processes, one thread each: the runs hold the GIL, so threads would not run them in parallel
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           dashboard_address=None)
+    import dask
+
+    # processes, one thread each: the runs hold the GIL, so threads would not run them in
+    # parallel; and no statistical profiler, whose sampling thread takes the GIL from these
+    # pure-Python runs every few milliseconds (about 10% of a worker's time, measured)
+    with dask.config.set({"distributed.worker.profile.enabled": False}):
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
     c = Client(cluster)
     return c, cluster, c
 
@@ -230,13 +232,18 @@ def map_sets(fn: Callable, sets: Sequence, *, workers: int | None = None, client
     try:
         n_workers = max(1, len(c.scheduler_info().get("workers", {})) or (workers or 1))
         size = chunk_size or min(5000, max(1, math.ceil(n / (4 * n_workers))))
-        futures = [c.submit(_run_chunk, fn, ch, pure=False) for ch in _chunks(sets, size)]
+        n_chunks = max(1, math.ceil(n / size))
+        # strided chunks (sets i, i + n_chunks, ...): neighbouring sets of a grid cost alike (a
+        # corner of the grid may take the slow path throughout), so contiguous chunks would load
+        # one worker with all the expensive ones
+        futures = [c.submit(_run_chunk, fn, sets[i::n_chunks], pure=False) for i in range(n_chunks)]
         if show:
             from dask.distributed import progress as dask_progress
 
             dask_progress(futures)
-        for part in c.gather(futures):
-            out.extend(part)
+        out = [None] * n
+        for i, part in enumerate(c.gather(futures)):
+            out[i::n_chunks] = part
     finally:
         if own is not None:
             own.close()
