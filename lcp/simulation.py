@@ -1,6 +1,8 @@
 """``lcp.simulate``: one entry point for the contact branch, with methods chosen by name."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .events import event_driven
@@ -167,6 +169,6 @@ def _check_state(model, q0, v0):
     for name, x in (("q0", q0), ("v0", v0)):
         if x.shape != (model.n,):
             raise ValueError(f"{name} must have shape ({model.n},), got {x.shape}")
-        if not np.all(np.isfinite(x)):
+        if not all(map(math.isfinite, x.tolist())):
             raise ValueError(f"{name} must be finite, got {x}")
     return q0, v0
