@@ -146,10 +146,9 @@ def _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, 
                              projection_tol=projection_tol)
     q0, v0 = _check_state(model, q0, v0)
     if method == "event":
-        from .events.options import EventOptions
-        from .events.single_contact import single_contact_run
+        from .events.single_contact import event_options, single_contact_run
 
-        return single_contact_run(model, q0, v0, float(t_end), EventOptions.from_kwargs(**method_options))
+        return single_contact_run(model, q0, v0, float(t_end), event_options(method_options))
     if method_options:
         raise ValueError(f"unknown options for method 'moreau-jean': {sorted(method_options)}")
     if h > t_end and not allow_large_step:

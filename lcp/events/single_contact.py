@@ -28,10 +28,15 @@ from .event_location import first_stop
 from .options import EventOptions
 from .records import Event, EventResult, Phase
 
-__all__ = ["applicable", "single_contact_run"]
+__all__ = ["applicable", "event_options", "single_contact_run"]
 
 _DEFAULT = EventOptions()
 _EPS = float(np.finfo(float).eps)
+
+
+def event_options(options: dict) -> EventOptions:
+    """``EventOptions.from_kwargs(**options)`` (validated), the defaults shared when none are given."""
+    return EventOptions.from_kwargs(**options) if options else _DEFAULT
 
 
 def applicable(model, opts: EventOptions) -> bool:
@@ -75,6 +80,31 @@ def _at_rest(W00, W01, W10, W11, bN, bT, mu):
     return found[0] if len(found) == 1 else None
 
 
+_FILL = []
+
+
+def _fill():
+    """The output writer: the compiled loop when numba is installed, NumPy's row operations otherwise
+    (same operations, same bits)."""
+    if not _FILL:
+        from .closed_form_kernels import HAVE_NUMBA, fill_pieces
+
+        _FILL.append(fill_pieces if HAVE_NUMBA else _fill_numpy)
+    return _FILL[0]
+
+
+def _fill_numpy(t_out, lo, hi, t0, C0, C1, C2, Y):
+    for k in range(t0.size):
+        a, b = int(lo[k]), int(hi[k])
+        if b <= a:
+            continue
+        dt = t_out[a:b] - t0[k]
+        h = 0.5 * dt
+        h *= dt
+        Y[:, a:b] = (C0[k][:, None] + C1[k][:, None] * dt) + C2[k][:, None] * h
+    return Y
+
+
 def _dot(a, b) -> float:
     s = 0.0
     for x, y in zip(a, b):
@@ -89,14 +119,13 @@ def _coordinate(row) -> int:
 
 
 class _Piece:
-    """One closed-form phase, with the attributes :func:`lcp.events.phases.closed_form_output` reads."""
+    """One closed-form phase: start time and state (lists of floats), accelerations, forces, mode."""
 
-    __slots__ = ("t0", "t1", "q0", "v0", "P0", "qdd", "NF", "N", "f", "mode")
+    __slots__ = ("t0", "t1", "q0", "v0", "P0", "qdd", "N", "f", "mode")
 
     def __init__(self, t0, q0, v0, P0, qdd, N, f, mode):
         self.t0, self.q0, self.v0, self.P0, self.qdd = t0, q0, v0, P0, qdd
         self.N, self.f, self.mode = N, f, mode
-        self.NF = np.array([N, f])
         self.t1 = math.inf
 
 
@@ -127,9 +156,11 @@ def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> Event
     # the contact must start closed and at rest normally; anything else (flight, impact) is general
     if gap != 0.0 or _dot(HN, v) != 0.0:
         return None
-    X = np.linalg.solve(A, np.column_stack((H.T, model.F0)))  # A^-1 [H' F0], one factorization
-    (W00, W01, bN), (W10, W11, bT) = (H @ X).tolist()  # W = H A^-1 H', b = H A^-1 F0
-    cN, cT, qdd_free = X.T.tolist()
+    # A^-1 [H_N' H_T' F0 d+ d-] in one factorization, d+- = H_N -+ mu H_T the sliding directions
+    # with the friction folded in (as the general integrator forms them, lcp.events.modes)
+    X = np.linalg.solve(A, np.column_stack((H.T, model.F0, H[0] - mu * H[1], H[0] + mu * H[1])))
+    (W00, W01, bN), (W10, W11, bT) = (H @ X[:, :3]).tolist()  # W = H A^-1 H', b = H A^-1 F0
+    cN, cT, qdd_free = X[:, :3].T.tolist()
     cN_np, qdd_free_np = X[:, 0], X[:, 2]
     bN_np = float(H[0] @ qdd_free_np)
     free_size = max(map(abs, qdd_free))
@@ -149,8 +180,7 @@ def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> Event
             # friction folded into the normal direction d = H_N - s mu H_T, so that the two paths
             # agree to the last bit on the event times they compute
             iterations += 1
-            d = H[0] - (mu * s) * H[1]
-            SDc = np.linalg.solve(A, d)
+            SDc = X[:, 3] if s > 0 else X[:, 4]
             a_coef = float(H[0] @ SDc)
             if not a_coef > 0.0:
                 return None  # Painleve: no or several consistent sliding modes, general path decides
@@ -182,7 +212,7 @@ def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> Event
                 qdd = [a - r * x for a, x in zip(qdd, cN)]
         if coord_N >= 0:
             qdd[coord_N] = 0.0
-        piece = _Piece(t, np.array(q), np.array(v), np.array([PN, PT]), np.array(qdd), float(N), float(f), int(mode))
+        piece = _Piece(t, q, v, [PN, PT], qdd, float(N), float(f), int(mode))
         pieces.append(piece)
         aT = _dot(HT, qdd)
         if abs(aT) <= 16 * _EPS * acc_size:
@@ -224,17 +254,14 @@ def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> Event
     if bounds[-1] < N_out and t_out[bounds[-1]] == pieces[-1].t1:
         bounds[-1] += 1
     zeros = [0.0] * (n + 2)
-    for p, lo, hi in zip(pieces, bounds[:k], bounds[k:]):
-        if hi <= lo:
-            continue
-        dt = t_out[lo:hi] - p.t0
-        hdt2 = 0.5 * dt
-        hdt2 *= dt
-        c0 = np.array(p.q0.tolist() + p.v0.tolist() + p.P0.tolist())[:, None]
-        c1 = np.array(p.v0.tolist() + p.qdd.tolist() + [p.N, p.f])[:, None]
-        c2 = np.array(p.qdd.tolist() + zeros)[:, None]
-        Y[:, lo:hi] = c0 + c1 * dt + c2 * hdt2
-        FN[lo:hi], FT[lo:hi], MD[lo:hi] = p.N, p.f, p.mode
+    C0 = np.array([p.q0 + p.v0 + p.P0 for p in pieces])
+    C1 = np.array([p.v0 + p.qdd + [p.N, p.f] for p in pieces])
+    C2 = np.array([p.qdd + zeros for p in pieces])
+    lo, hi = np.array(bounds[:k], dtype=np.int64), np.array(bounds[k:], dtype=np.int64)
+    _fill()(t_out, lo, hi, np.array([p.t0 for p in pieces]), C0, C1, C2, Y)
+    for p, a, b in zip(pieces, bounds[:k], bounds[k:]):
+        if b > a:
+            FN[a:b], FT[a:b], MD[a:b] = p.N, p.f, p.mode
     Q, V = np.ascontiguousarray(Y[:n].T), np.ascontiguousarray(Y[n:2 * n].T)
     PC = Y[2 * n:]
     dP = (PC[:, 1:] - PC[:, :-1]).T
