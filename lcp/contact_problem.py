@@ -26,7 +26,7 @@ import numpy as np
 from ._imports import issparse
 from ._imports import sparse as sp
 
-__all__ = ["ContactMode", "ModeArray", "OPEN", "STICK", "SLIDE_POS", "SLIDE_NEG", "MODE_NAMES", "ContactProblem",
+__all__ = ["ContactMode", "ModeArray", "OPEN", "STICK", "SLIDE_POS", "SLIDE_NEG", "SLIDE", "MODE_NAMES", "ContactProblem",
            "planar_enum",
            "planar_refine", "PY_OPS", "NUMPY_OPS", "CASADI_OPS", "SPARSE_MIN_SIZE"]
 
@@ -40,12 +40,15 @@ class ContactMode(enum.IntEnum):
     STICK = 1
     SLIDE_POS = 2
     SLIDE_NEG = 3
+    #: a spatial contact sliding in its tangent plane (direction given by the velocity)
+    SLIDE = 4
 
 
 OPEN, STICK, SLIDE_POS, SLIDE_NEG = ContactMode.OPEN, ContactMode.STICK, ContactMode.SLIDE_POS, ContactMode.SLIDE_NEG
+SLIDE = ContactMode.SLIDE
 #: a scipy.sparse W with at most this many rows is stored dense (2 x 2 blocks gain nothing from sparsity)
 SPARSE_MIN_SIZE = 8
-MODE_NAMES = {OPEN: "open", STICK: "stick", SLIDE_POS: "slide+", SLIDE_NEG: "slide-"}
+MODE_NAMES = {OPEN: "open", STICK: "stick", SLIDE_POS: "slide+", SLIDE_NEG: "slide-", SLIDE: "slide"}
 
 
 class ModeArray(np.ndarray):
@@ -81,7 +84,7 @@ class ModeArray(np.ndarray):
         return out[()] if return_scalar else out
 
     def _named(self) -> bool:
-        return self.dtype == np.int8 and bool(np.all((self >= -1) & (self <= 3)))
+        return self.dtype == np.int8 and bool(np.all((self >= -1) & (self <= 4)))
 
     def __repr__(self):
         if not self._named():

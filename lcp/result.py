@@ -58,7 +58,7 @@ class SolverStats:
     max_iterations: int = 0
     qp_solves: int = 0
     max_residual: float = 0.0
-    mode_counts: dict = field(default_factory=lambda: {"open": 0, "stick": 0, "slide+": 0, "slide-": 0})
+    mode_counts: dict = field(default_factory=lambda: {"open": 0, "stick": 0, "slide+": 0, "slide-": 0, "slide": 0})
     ambiguous_steps: int = 0
     fallbacks: int = 0
     projections: int = 0
