@@ -15,8 +15,8 @@ divided by N. Paths:
 - ``osqp``: the general path (OSQP set up once per active set, warm-started, branch solved
   exactly);
 - ``osqp lean loop (prototype)``: NOT package code: the same OSQP workspace and branch solve in a
-  loop stripped to what the single-contact step needs (OSQP's C solve through the wrapper's
-  low-level object, a closed-form branch solve, no per-step problem objects). It measures what the
+  loop stripped to what the single-contact step needs (OSQP's public update/solve, a closed-form
+  branch solve, no per-step problem objects). It measures what the
   general OSQP path could cost and is checked like the others.
 
 Every path must keep the contact core's results: max |x - exact| <= B h^2/8 at every grid point (to
@@ -65,7 +65,6 @@ def lean_osqp_loop(scene, T, h, theta=0.5, eps=1e-10):
     solver.setup(P, np.zeros(2), sp.identity(2, format="csc"), np.array([0.0, 0.0]), np.array([np.inf, 0.0]),
                  eps_abs=eps, eps_rel=eps, polishing=False, verbose=False, warm_starting=True,
                  eps_prim_inf=1e-12, eps_dual_inf=1e-12, max_iter=20000)
-    low = solver._solver  # the C-level object: update_data_vec / solve / solution / info
     solved = osqp.SolverStatus.OSQP_SOLVED
     big = solver.constant("OSQP_INFTY")
     n_steps = int(math.ceil(T / h * (1 - 1e-12)))
@@ -93,12 +92,12 @@ def lean_osqp_loop(scene, T, h, theta=0.5, eps=1e-10):
         else:
             qv[0], qv[1] = qN, qT
             l[1], u[1] = -s, s
-            low.update_data_vec(q=qv, l=l, u=u)
-            low.solve()
+            solver.update(q=qv, l=l, u=u)  # OSQP's public API only
+            res = solver.solve(raise_error=False)
             qps += 1
-            if low.info.status_val != solved:
-                raise RuntimeError(f"OSQP status {low.info.status} at step {k}")
-            x = low.solution.x
+            if res.info.status_val != solved:
+                raise RuntimeError(f"OSQP status {res.info.status} at step {k}")
+            x = res.x
             tol = 1e-7 * max(abs(qN) / W00, abs(qT) / W11, abs(x[0]), abs(x[1]))
             if x[0] <= tol:
                 mode = OPEN

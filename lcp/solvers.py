@@ -147,7 +147,7 @@ class LemkeSolver(OneStepSolver):
         return StepSolution(p, 0, "solved", res.pivots)
 
 
-_OSQP_INFTY = 1e30  # osqp's OSQP_INFTY
+_OSQP_INFTY = np.inf  # an unbounded side: OSQP's public setup/update map it to its own OSQP_INFTY
 
 
 @functools.lru_cache(maxsize=None)
@@ -261,7 +261,7 @@ class OsqpSolver(OneStepSolver):
 
     @staticmethod
     def _bounds(pb, s):
-        # OSQP's own infinity (the public update clips to it; the direct call below does not)
+        # no upper bound on p_N
         k = pb.k
         if k == 1:
             s0 = float(s[0])
@@ -311,22 +311,12 @@ class OsqpSolver(OneStepSolver):
 
     @staticmethod
     def _qp(solver, q, l, u):
-        """Update and solve one QP: (status value, status text, x).
+        """Update and solve one QP through OSQP's public API: (status value, status text, x).
 
-        osqp-python's public ``solve`` copies every info field into a new namespace on each call,
-        which costs more than the solve of these tiny QPs; its extension object has the same
-        update/solve/status/solution calls without that, so it is used when present (checked, with
-        the public API as the fallback). The status is checked by the caller every time.
+        Only the vectors change between QPs (``update(q=, l=, u=)``; the workspace, its
+        factorization and the warm start are kept), and the status is checked by the caller every
+        time.
         """
-        low = getattr(solver, "_solver", None)
-        if low is not None and hasattr(low, "update_data_vec"):
-            try:
-                low.update_data_vec(q=q, l=l, u=u)
-                low.solve()
-                info = low.info
-                return info.status_val, info.status, np.array(low.solution.x)
-            except (AttributeError, TypeError):
-                pass
         solver.update(q=q, l=l, u=u)
         res = solver.solve(raise_error=False)
         return res.info.status_val, res.info.status, res.x
