@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import math
 import time
+import warnings
 
 import numpy as np
 
@@ -48,9 +49,10 @@ class BatchResult:
     steps : int
     h, theta : float
     path : str
-        ``"compiled"`` or ``"numpy"``.
+        The path that ran: ``"compiled"`` or ``"numpy"``.
     stats : dict
-        ``n_scenes`` and whether OpenMP threads ran (``openmp``).
+        ``n_scenes``, whether OpenMP threads ran (``openmp``) and, when ``path="auto"`` fell back
+        to NumPy, why (``fallback``; a :class:`RuntimeWarning` says so too).
     run_time, compile_time : float
         Seconds spent stepping, and building/compiling (0 when the compiled code was cached).
     """
@@ -151,7 +153,8 @@ def simulate_batch(scenes, t_end: float, h: float, theta: float = 0.5, path: str
         Step size and theta (the same for all scenes).
     path : {"auto", "compiled", "numpy"}
         ``"auto"`` is the compiled path (C with OpenMP threads, cached per machine), NumPy when no
-        compiler works.
+        compiler works (with a :class:`RuntimeWarning`; the result's ``path`` names the path that
+        ran).
 
     Returns
     -------
@@ -183,13 +186,20 @@ def simulate_batch(scenes, t_end: float, h: float, theta: float = 0.5, path: str
         raise ValueError("the scene constants were packed for another h or theta")
     steps = int(np.ceil(t_end / h * (1 - 1e-12)))
     t0 = time.perf_counter()
+    fallback = None
     try:
         run = compiled.batch_library(n) if path in ("auto", "compiled") else None
-    except NotImplementedError:  # an SX operation the C transcription does not know: NumPy instead
-        run = None
+        if run is None and path != "numpy":
+            fallback = "no working C compiler"
+    except NotImplementedError as exc:  # an SX operation the C transcription does not know: NumPy instead
+        run, fallback = None, f"the C transcription does not know an operation of the step ({exc})"
     t_compile = time.perf_counter() - t0
     if run is None and path == "compiled":
-        raise RuntimeError("no working C compiler for the compiled batch path")
+        raise RuntimeError(f"the compiled batch path cannot run: {fallback}")
+    if fallback is not None:
+        # the NumPy path gives the same numbers but runs far slower: a sweep should know
+        warnings.warn(f"simulate_batch: compiled path unavailable ({fallback}); running the NumPy path",
+                      RuntimeWarning, stacklevel=2)
     Z = np.vstack([x0, np.zeros((2, n_scenes))])
     t0 = time.perf_counter()
     if run is not None:
@@ -211,7 +221,8 @@ def simulate_batch(scenes, t_end: float, h: float, theta: float = 0.5, path: str
     return BatchResult(q=q, v=v, slide_steps=Z[4 * n].astype(np.int64), max_abs_gap=Z[4 * n + 1].copy(),
                        success=ok, steps=steps, h=float(h), theta=float(theta), path=used, run_time=run_time,
                        compile_time=t_compile,
-                       stats=dict(n_scenes=n_scenes, openmp=bool(run is not None and run.openmp)))
+                       stats=dict(n_scenes=n_scenes, openmp=bool(run is not None and run.openmp),
+                                  **({"fallback": fallback} if fallback is not None else {})))
 
 
 def _pack_scenes(scenes, h, theta):

@@ -46,7 +46,8 @@ def test_batch_stop_distances_against_exact():
 
 
 def test_batch_of_scene_objects_and_shock():
-    scenes = [lcp.scenes.jean_pratt(R=R) for R in (0.5, 2.0, 2.5)] + [lcp.scenes.jean_pratt(coordinates="reduced", v0=-1)]
+    scenes = [lcp.scenes.jean_pratt(R=R) for R in (0.5, 2.0, 2.5)]
+    scenes.append(lcp.scenes.jean_pratt(coordinates="reduced", v0=-1))
     res = simulate_batch(scenes, 0.2, h=1e-3, theta=1.0)
     np.testing.assert_array_equal(res.slide_steps[1:3], 0)  # kappa >= 1: stopped in the first step
     assert np.max(np.abs(res.q[1:3, 0])) <= 1e-15
@@ -63,3 +64,22 @@ def test_batch_bad_input():
         simulate_batch([lcp.scenes.block_chain(2)], 0.1, h=1e-3)
     with pytest.raises(ValueError, match="path"):
         simulate_batch([lcp.scenes.jean_pratt()], 0.1, h=1e-3, path="gpu")
+
+
+def test_batch_records_the_path_and_warns_on_fallback(monkeypatch):
+    import warnings
+
+    from lcp import compiled
+
+    consts = jean_pratt_constants(1.0, 1.0, 0.6, np.array([0.3, 0.8]), 1.0, h=1e-3)
+    ref = simulate_batch(consts, 0.1, h=1e-3, path="numpy")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # an explicit NumPy run is no fallback
+        assert simulate_batch(consts, 0.1, h=1e-3, path="numpy").path == "numpy"
+    monkeypatch.setattr(compiled, "batch_library", lambda n, affine=False: None)  # no compiler
+    with pytest.warns(RuntimeWarning, match="NumPy path"):
+        res = simulate_batch(consts, 0.1, h=1e-3)
+    assert res.path == "numpy" and "compiler" in res.stats["fallback"]
+    np.testing.assert_array_equal(res.q, ref.q)
+    with pytest.raises(RuntimeError, match="compiler"):
+        simulate_batch(consts, 0.1, h=1e-3, path="compiled")
