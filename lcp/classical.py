@@ -257,7 +257,7 @@ class PainleveRod:
       sliding equations by ``solve_ivp`` until lift-off (N = 0) or stop (u_T = 0).
     """
 
-    def __init__(self, mu, l, m, g, theta0, u0, omega0):
+    def __init__(self, mu, l, m, g, theta0, u0, omega0, horizon: float = 10.0):
         self.mu, self.l, self.m, self.g = mu, l, m, g
         self.theta0, self.u0, self.omega0 = theta0, u0, omega0
         s, c = math.sin(theta0), math.cos(theta0)
@@ -271,6 +271,9 @@ class PainleveRod:
         else:
             self.regime = "sliding" if self.b_N <= 0 else "lift-off"
         self._ref = None
+        # the reference is integrated over [0, horizon] only: near a singular configuration the
+        # sliding ODE becomes stiff, and integrating past what anybody asked for can take forever
+        self.horizon = float(horizon)
 
     def tangential_impact(self):
         """(p_N, p_T), the impulse that stops A at once (stick), and the velocity jump dv."""
@@ -300,7 +303,7 @@ class PainleveRod:
 
     @property
     def t_valid(self) -> float:
-        """End of the sliding reference: lift-off (N = 0), stop (u_T = 0) or the rod lying flat."""
+        """End of the sliding reference: lift-off (N = 0), stop (u_T = 0), the rod lying flat, or the horizon."""
         return float(self._sliding().t[-1])
 
     def _sliding(self):
@@ -324,7 +327,7 @@ class PainleveRod:
 
             for ev in (lift, stop, flat):
                 ev.terminal = True
-            self._ref = solve_ivp(lambda tt, z: self._rhs(tt, z)[0], (0.0, 10.0), z0, method="DOP853",
+            self._ref = solve_ivp(lambda tt, z: self._rhs(tt, z)[0], (0.0, self.horizon), z0, method="DOP853",
                                   rtol=1e-12, atol=1e-14, dense_output=True, events=(lift, stop, flat))
         return self._ref
 
@@ -370,7 +373,7 @@ def painleve_rod(mu: float = 0.3, theta0: float = math.pi / 6, u0: float = -1.0,
     s, c = math.sin(theta0), math.cos(theta0)
     q0 = np.array([0.0, l * s, theta0])
     v0 = np.array([u0 - l * s * omega0, l * c * omega0, omega0])
-    sol = PainleveRod(mu, l, m, g, theta0, u0, omega0)
+    sol = PainleveRod(mu, l, m, g, theta0, u0, omega0, horizon=2.0 * float(t_end))
     return Scene(system, q0, v0, float(t_end), "painleve_rod",
                  dict(mu=mu, theta0=theta0, u0=u0, omega0=omega0, l=l, m=m, g=g), sol)
 
