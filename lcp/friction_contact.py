@@ -18,6 +18,7 @@ numbers compare directly with that library's.
 from __future__ import annotations
 
 import numpy as np
+
 from ._imports import issparse
 from ._imports import sparse as sp
 
@@ -55,7 +56,7 @@ def _planar_cone_projection(zN, zT, mu):
     return pN, pT
 
 
-def natural_map_error(W, q, mu, r, order: str = "blocked") -> float:
+def natural_map_error(W, q, mu, r, order: str = "blocked", dims=None) -> float:
     """The normalised natural-map error of impulses r for the problem u = W r + q.
 
     Parameters
@@ -67,6 +68,10 @@ def natural_map_error(W, q, mu, r, order: str = "blocked") -> float:
     order : {"blocked", "interleaved"}
         ``"blocked"``: (p_N..., p_T...) as :class:`~lcp.contact_problem.ContactProblem`;
         ``"interleaved"``: (r_N,1, r_T,1, ...) as the problem files.
+    dims : array of int, shape (k,), optional
+        Tangent dimension of each contact (1 or 2; :class:`~lcp.cone_problem.ConeContactProblem`'s
+        layout, W, q and r of size k + sum(dims)). None: every contact planar. A 2-D tangent's cone
+        is the disk cone {|r_T| <= mu r_N}, projected onto in closed form.
 
     Returns
     -------
@@ -85,6 +90,8 @@ def natural_map_error(W, q, mu, r, order: str = "blocked") -> float:
     k = mu.size
     r = np.asarray(r, dtype=float)
     q = np.asarray(q, dtype=float)
+    if dims is not None:
+        return _cone_natural_map_error(W, q, mu, r, order, dims)
     if r.shape != (2 * k,) or q.shape != (2 * k,):
         raise ValueError(f"r and q must have shape ({2 * k},), got {r.shape} and {q.shape}")
     if order not in ("blocked", "interleaved"):
@@ -98,6 +105,56 @@ def natural_map_error(W, q, mu, r, order: str = "blocked") -> float:
         rN, rT, uN, uT = r[0::2], r[1::2], u[0::2], u[1::2]
     # r - proj_K(r - u~), u~ = (u_N + mu |u_T|, u_T)
     pN, pT = _planar_cone_projection(rN - uN - mu * np.abs(uT), rT - uT, mu)
+    err = float(np.sqrt(np.sum((rN - pN) ** 2) + np.sum((rT - pT) ** 2)))
+    scale = max(float(np.linalg.norm(r)), float(np.linalg.norm(u)), float(np.linalg.norm(q)))
+    return err / scale if scale > np.finfo(float).eps else err
+
+
+def _disk_cone_projection(zN, zT, mu):
+    """Projection of (zN, zT) onto {|r_T| <= mu r_N}, zT of shape (k, 2) (rows padded with 0)."""
+    aT = np.hypot(zT[:, 0], zT[:, 1])
+    inside = aT <= mu * zN
+    polar = mu * aT <= -zN
+    rN = (zN + mu * aT) / (1.0 + mu * mu)
+    f = np.where(inside | polar, 0.0, mu * rN / np.where(aT > 0, aT, 1.0))
+    pN = np.where(inside, zN, np.where(polar, 0.0, rN))
+    pT = np.where(inside[:, None], zT, zT * f[:, None])
+    return pN, pT
+
+
+def _cone_natural_map_error(W, q, mu, r, order, dims):
+    """natural_map_error for contacts of tangent dimension 1 or 2 (the disk cone)."""
+    dims = np.atleast_1d(np.asarray(dims))
+    k = mu.size
+    if dims.shape != (k,) or not np.all(np.isin(dims, (1, 2))):
+        raise ValueError(f"dims must hold 1 or 2 for each of the {k} contacts, got {dims}")
+    n = k + int(dims.sum())
+    if r.shape != (n,) or q.shape != (n,):
+        raise ValueError(f"r and q must have shape ({n},), got {r.shape} and {q.shape}")
+    if order not in ("blocked", "interleaved"):
+        raise ValueError(f"order must be 'blocked' or 'interleaved', got {order!r}")
+    if not np.all(np.isfinite(r)):
+        return float("nan")
+    u = W @ r + q
+    toff = np.concatenate([[0], np.cumsum(dims)[:-1]]).astype(int)
+    if order == "blocked":
+        iN, iT0 = np.arange(k), k + toff
+    else:
+        iN = toff + np.arange(k)
+        iT0 = iN + 1
+    two = dims == 2
+    iT1 = np.where(two, iT0 + 1, 0)
+
+    def split(x):
+        xT = np.zeros((k, 2))
+        xT[:, 0] = x[iT0]
+        xT[:, 1] = np.where(two, x[iT1], 0.0)
+        return x[iN], xT
+
+    rN, rT = split(r)
+    uN, uT = split(u)
+    # r - proj_K(r - u~), u~ = (u_N + mu |u_T|, u_T)
+    pN, pT = _disk_cone_projection(rN - uN - mu * np.hypot(uT[:, 0], uT[:, 1]), rT - uT, mu)
     err = float(np.sqrt(np.sum((rN - pN) ** 2) + np.sum((rT - pT) ** 2)))
     scale = max(float(np.linalg.norm(r)), float(np.linalg.norm(u)), float(np.linalg.norm(q)))
     return err / scale if scale > np.finfo(float).eps else err
@@ -131,14 +188,15 @@ class ProblemCheck:
 
 
 def check_problem(W, q, mu, name: str = "problem", sym_tol: float = 1e-5, psd_tol: float = 1e-9,
-                  dense_limit: int = 4096) -> ProblemCheck:
+                  dense_limit: int = 4096, dims=None) -> ProblemCheck:
     """Check a local problem (W, q, mu) before any solve.
 
     Sizes that disagree, negative or non-finite mu, non-finite entries of W or q are errors;
     an unsymmetric W (beyond ``sym_tol`` relative: files written with 6 digits are not exactly
     symmetric) and a W that is not positive semi-definite (smallest eigenvalue of its symmetric
     part below ``-psd_tol`` relative, computed densely up to ``dense_limit`` rows; above that,
-    negative diagonal entries and 2 x 2 minors) are warnings.
+    negative diagonal entries and 2 x 2 minors) are warnings. ``dims`` (tangent dimension 1 or 2
+    per contact, None: all planar) sets the expected size k + sum(dims).
 
     Examples
     --------
@@ -152,9 +210,16 @@ def check_problem(W, q, mu, name: str = "problem", sym_tol: float = 1e-5, psd_to
     q = np.asarray(q, dtype=float)
     k = mu.size
     shape = W.shape if hasattr(W, "shape") else np.shape(W)
-    if shape != (2 * k, 2 * k) or q.shape != (2 * k,):
-        out.errors.append(f"{name}: sizes disagree: {k} friction coefficients need W ({2 * k}, {2 * k}) "
-                          f"and q ({2 * k},), got W {shape} and q {q.shape}")
+    n = 2 * k
+    if dims is not None:
+        dims = np.atleast_1d(np.asarray(dims))
+        if dims.shape != (k,) or not np.all(np.isin(dims, (1, 2))):
+            out.errors.append(f"{name}: dims must hold 1 or 2 for each of the {k} contacts, got {dims}")
+            return out
+        n = k + int(dims.sum())
+    if shape != (n, n) or q.shape != (n,):
+        out.errors.append(f"{name}: sizes disagree: {k} friction coefficients need W ({n}, {n}) "
+                          f"and q ({n},), got W {shape} and q {q.shape}")
         return out
     if not np.all(np.isfinite(mu)):
         out.errors.append(f"{name}: friction coefficients must be finite")
@@ -178,7 +243,7 @@ def check_problem(W, q, mu, name: str = "problem", sym_tol: float = 1e-5, psd_to
     diag = W.diagonal() if issparse(W) else np.diag(W)
     if np.any(diag < -psd_tol * Wabs):
         out.warnings.append(f"{name}: W has negative diagonal entries: not positive semi-definite")
-    if 2 * k <= dense_limit:
+    if n <= dense_limit:
         Wd = W.toarray() if issparse(W) else np.asarray(W, dtype=float)
         lam = float(np.linalg.eigvalsh(0.5 * (Wd + Wd.T))[0]) / Wabs
         out.min_eigenvalue = lam
