@@ -58,6 +58,7 @@ class StepAssembly:
         # a control schedule's impulse over each step is integrated exactly (see _control_correction)
         self.schedule = getattr(system, "control_schedule", None)
         self.n, self.m = system.n, system.n_contacts
+        self.rows = system.n_contact_rows  # m normal rows, then the tangent rows (one or two per contact)
         self.constant = system.is_constant
         self.dv_const = None
         # the matrices (S, W, ...) are constant also when only an additive F(t) varies: then the
@@ -65,7 +66,7 @@ class StepAssembly:
         self.matrices_constant = (system.mass_is_constant and system.kinematics_is_constant
                                   and system.force_is_affine)
         # many contacts, no bilateral constraints: assemble sparsely (memory grows with nnz(W))
-        self.sparse = (self.matrices_constant and 2 * self.m >= SPARSE_MIN_CONTACT_ROWS
+        self.sparse = (self.matrices_constant and self.rows >= SPARSE_MIN_CONTACT_ROWS
                        and system.n_bilateral == 0)
         if self.sparse:
             self._init_sparse(h, theta)
@@ -120,7 +121,7 @@ class StepAssembly:
         self.T = np.zeros((n, 0))
         Ht = H.T.tocsc()
         cols = []
-        for a in range(0, 2 * m, 512):  # column blocks keep the dense intermediate small
+        for a in range(0, self.rows, 512):  # column blocks keep the dense intermediate small
             X = lu.solve(Ht[:, a:a + 512].toarray())
             big = np.max(np.abs(X)) if X.size else 0.0
             X[np.abs(X) <= SPARSE_DROP_TOL * big] = 0.0
@@ -142,14 +143,14 @@ class StepAssembly:
 
     def _eval(self, t, q, v):
         """CasADi's one-step data (System.one_step_fn) as NumPy arrays, checked."""
-        n, m = self.n, self.m
+        n, r = self.n, self.rows
         out = self.sys.one_step_fn(t, q, v, self.h, self.theta)
         vfree, S, T, SHt, W, gap, H = (np.array(x, dtype=float) for x in out)
         if not (np.all(np.isfinite(S)) and np.all(np.isfinite(vfree))):
             raise FloatingPointError("singular iteration matrix: the mass matrix is singular on the "
                                      "constraint manifold")
-        return (vfree.ravel(), S.reshape(n, n), T.reshape(n, -1), SHt.reshape(n, 2 * m),
-                W.reshape(2 * m, 2 * m), gap.ravel(), H.reshape(2 * m, n))
+        return (vfree.ravel(), S.reshape(n, n), T.reshape(n, -1), SHt.reshape(n, r),
+                W.reshape(r, r), gap.ravel(), H.reshape(r, n))
 
     def at(self, t, q, v):
         """(v_free - v, SHt, W, gap, H) at the start of a step from (t, q, v)."""

@@ -33,8 +33,8 @@ CHUNK = 2000
 
 
 def applicable(system) -> bool:
-    """Whether the compiled path applies: constant system, exactly one contact."""
-    return bool(system.is_constant and system.n_contacts == 1)
+    """Whether the compiled path applies: constant system, exactly one planar contact."""
+    return bool(system.is_constant and system.n_contacts == 1 and not system.is_spatial)
 
 
 def _layout(n: int, affine: bool):

@@ -86,7 +86,8 @@ class StepImpulses:
 @dataclass(frozen=True)
 class Impact:
     """One impact: a contact closing with approach velocity at time ``t`` (index ``contact``,
-    ``name`` its name), with normal impulse ``p_N`` and tangential impulse ``p_T``.
+    ``name`` its name), with normal impulse ``p_N`` and tangential impulse ``p_T`` (a float for a
+    planar contact, an array of its two components for a spatial one).
 
     Both methods list them in ``result.impacts``: Moreau-Jean the step in which an open contact
     closes with a normal impulse, the event method each impact it resolves (Newton restitution and
@@ -96,7 +97,7 @@ class Impact:
     contact: int
     name: str
     p_N: float
-    p_T: float
+    p_T: float | np.ndarray
 
 
 @dataclass
@@ -112,9 +113,12 @@ class SimulationResult(StepImpulses):
     p_N, p_T : ndarray, shape (n_points - 1, m)
         Normal and tangential contact impulses over each step (zero for inactive contacts). The
         mean contact forces over a step are ``p_N / h`` and ``p_T / h`` (:attr:`N`, :attr:`f`).
+        With spatial contacts ``p_T`` has one column per tangent row, shape (n_points - 1,
+        n_tangent): contact j's components are columns ``system.tangent_offsets[j]`` to
+        ``system.tangent_offsets[j + 1]``.
     modes : ndarray of int8, shape (n_points - 1, m)
-        Contact mode per step: -1 inactive, 0 open, 1 stick, 2 slide+, 3 slide- (see
-        :mod:`lcp.contact_problem`).
+        Contact mode per step: -1 inactive, 0 open, 1 stick, 2 slide+, 3 slide-, 4 slide (a spatial
+        contact sliding in its tangent plane; see :mod:`lcp.contact_problem`).
     status : int
         0 success; negative values are failures (:data:`STATUS_MESSAGES`).
     message : str

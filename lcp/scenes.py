@@ -3,6 +3,9 @@
 - :func:`jean_pratt`: the paper's system (docs/models.md), reduced (x, y) or in full
   coordinates (x, y, Y) with the slide as a bilateral constraint.
 - :func:`block_chain`: K blocks on a frictional floor joined by springs (K contacts).
+- spatial contacts (a block sliding in a plane, the Coulomb disk): :func:`plane_slide`,
+  :func:`incline_slide`, :func:`lateral_force_slide`, :func:`jean_pratt_spatial`
+  (:mod:`lcp.spatial_scenes`).
 """
 from __future__ import annotations
 
@@ -280,3 +283,15 @@ def block_chain(K: int = 3, m=1.0, k_spring: float = 50.0, mu=0.3, g: float = 9.
     vv[0::2] = v0
     params = dict(K=K, m=masses, k_spring=k_spring, mu=mus, g=g, spacing=spacing, damping=damping)
     return Scene(system, q0, vv, float(t_end), f"block_chain_{K}", params, None)
+
+
+_SPATIAL = ("plane_slide", "incline_slide", "lateral_force_slide", "jean_pratt_spatial")
+
+
+def __getattr__(name):
+    # the scenes with spatial contacts live in lcp.spatial_scenes (loaded on first use)
+    if name in _SPATIAL:
+        from . import spatial_scenes
+
+        return getattr(spatial_scenes, name)
+    raise AttributeError(f"module 'lcp.scenes' has no attribute {name!r}")

@@ -8,8 +8,13 @@ differentiation. The model follows docs/models.md:
     phi(t, q) = 0 (bilateral, frictionless),
     0 <= N_j  perp  g_j(q) >= 0,   |f_j| <= mu_j N_j,  f_j = -mu_j N_j sign(u_T,j) if u_T,j != 0.
 
-Contacts are planar point contacts: one normal and one tangent direction each (the 2D Coulomb law,
-which is exactly a linear complementarity problem).
+A contact is planar (one tangent direction: the 2D Coulomb law, exactly a linear complementarity
+problem) or spatial (two tangent directions: the sliding velocity U_j and the friction force f_j are
+vectors of the tangent plane, |f_j| <= mu_j N_j, f_j = -mu_j N_j U_j/|U_j| while U_j != 0: the
+Coulomb disk). Both kinds can be mixed in one system. The contact Jacobian H stacks the normal rows
+of all contacts first, then the tangent rows contact by contact (one or two each):
+``[H_N,1..H_N,m, H_T,1 (d_1 rows), .., H_T,m (d_m rows)]``; for planar contacts only this is
+``[H_N; H_T]`` with m rows each.
 """
 from __future__ import annotations
 
@@ -36,7 +41,7 @@ def _finite_nonneg(name: str, value) -> float:
 
 @dataclass(frozen=True)
 class Contact:
-    """A planar point contact with Coulomb friction.
+    """A point contact with Coulomb friction, planar (one tangent) or spatial (two tangents).
 
     Parameters
     ----------
@@ -44,10 +49,15 @@ class Contact:
         Scalar expression g(q) >= 0 of the system's coordinates; its gradient is the normal
         Jacobian row H_N.
     tangent : casadi.SX, optional
-        Scalar tangent coordinate s(q) whose rate is the sliding velocity (H_T = ds/dq).
+        Tangent coordinate s(q) whose rate is the sliding velocity (H_T = ds/dq): a scalar for a
+        planar contact, or two coordinates ``ca.vertcat(s1, s2)`` for a spatial contact, whose
+        rates are the two components of the sliding velocity U in the tangent plane.
     tangent_jacobian : casadi.SX, optional
-        Or the tangent Jacobian row itself (1 x n or n x 1), possibly depending on q. Give exactly
-        one of ``tangent`` and ``tangent_jacobian``.
+        Or the tangent Jacobian itself, possibly depending on q: one row (1 x n, or an n-vector)
+        for a planar contact, two rows (2 x n) for a spatial one. Give exactly one of ``tangent``
+        and ``tangent_jacobian``. The tangent rows must be independent of each other and of the
+        normal row (checked where the system is built, or at the initial state when they depend
+        on q).
     mu : float
         Coulomb friction coefficient (the paper's R), >= 0.
     e : float
@@ -93,7 +103,7 @@ def _sx(expr, shape_name: str, shape: tuple[int, int]) -> ca.SX:
 
 
 class System:
-    """A rigid-body system with bilateral constraints and planar frictional contacts.
+    """A rigid-body system with bilateral constraints and frictional point contacts (planar or spatial).
 
     Parameters
     ----------
@@ -195,16 +205,21 @@ class System:
                 raise ValueError(f"gap of {c.name} must depend on q only")
             gaps.append(g)
             HN.append(ca.jacobian(g, q))
-            if c.tangent is not None:
-                s = _sx(c.tangent, f"tangent of {c.name}", (1, 1))
-                HT.append(ca.jacobian(s, q))
-            else:
-                HT.append(_sx(c.tangent_jacobian, f"tangent_jacobian of {c.name}", (1, n)))
+            HT.append(_tangent_rows(c, q, v, self.t_sym, n))
         self.mu = np.array([c.mu for c in self.contacts], dtype=float)
         self.e = np.array([c.e for c in self.contacts], dtype=float)
+        #: tangent dimension of each contact: 1 (planar) or 2 (spatial, the Coulomb disk)
+        self.tangent_dims = np.array([r.shape[0] for r in HT], dtype=np.int64)
+        #: contact j's tangent rows of H are m + tangent_offsets[j] .. m + tangent_offsets[j + 1]
+        self.tangent_offsets = np.concatenate([[0], np.cumsum(self.tangent_dims)]).astype(np.int64)
+        self.n_tangent = int(self.tangent_offsets[-1])
+        #: rows of H (and of the Delassus operator): m normals, then the tangent rows
+        self.n_contact_rows = m + self.n_tangent
+        self.is_spatial = bool(np.any(self.tangent_dims == 2))
         gap = ca.vertcat(*gaps) if m else ca.SX.zeros(0, 1)
         H = ca.vertcat(*(HN + HT)) if m else ca.SX.zeros(0, n)
         self.gap_expr, self.H_expr = gap, H
+        self._contact_rows_checked = False
 
         # -dF/dq and -dF/dv: the implicit (theta) step linearizes the forces with them
         K = -ca.jacobian(self.force_expr, q)
@@ -227,6 +242,8 @@ class System:
         self.constraints_fn = ca.Function("constraints", [self.t_sym, q], [self.constraints_expr, G, phi_t])
         self.gap_fn = ca.Function("gap", [q], [gap])
         self.H_fn = ca.Function("H", [q], [H])
+        if m and not ca.depends_on(ca.vec(H), q):
+            self._check_contact_rows(np.zeros(n))  # constant kinematics: checked once, here
         # everything one Moreau-Jean step needs at (t, q, v), in one call
         self.step_data_fn = ca.Function(
             "step_data", [self.t_sym, q, v],
@@ -313,8 +330,52 @@ class System:
         return np.array(self.gap_fn(q), dtype=float).ravel()
 
     def contact_jacobian(self, q) -> np.ndarray:
-        """H(q): rows [H_N,1..H_N,m, H_T,1..H_T,m], shape (2m, n)."""
-        return np.array(self.H_fn(q), dtype=float).reshape(2 * self.n_contacts, self.n)
+        """H(q): rows [H_N,1..H_N,m, then the tangent rows contact by contact], shape (m + n_tangent, n)
+        ((2m, n) when every contact is planar)."""
+        return np.array(self.H_fn(q), dtype=float).reshape(self.n_contact_rows, self.n)
+
+    def contact_rows(self, active) -> np.ndarray:
+        """Rows of H (and of the Delassus operator) of the contacts ``active``: their normal rows,
+        then their tangent rows contact by contact (the layout of the one-step problem).
+
+        Examples
+        --------
+        >>> import casadi as ca
+        >>> q, v = ca.SX.sym("q", 3), ca.SX.sym("v", 3)
+        >>> s = System(q, v, mass=ca.SX.eye(3), force=ca.vertcat(0, 0, -9.81),
+        ...            contacts=[Contact(gap=q[2], tangent=q[0], mu=0.3, name="edge"),
+        ...                      Contact(gap=q[2] + 1, tangent=ca.vertcat(q[0], q[1]), mu=0.3, name="foot")])
+        >>> s.tangent_dims.tolist(), s.contact_rows([1]).tolist()
+        ([1, 2], [1, 3, 4])
+        """
+        active = np.asarray(active, dtype=np.int64)
+        m, off = self.n_contacts, self.tangent_offsets
+        if not self.is_spatial:
+            return np.concatenate([active, m + active])
+        tang = [np.arange(m + off[j], m + off[j + 1]) for j in active.tolist()]
+        return np.concatenate([active] + tang).astype(np.int64)
+
+    def require_planar(self, what: str) -> None:
+        """Raise a ValueError naming the first spatial contact when ``what`` handles planar contacts only."""
+        if self.is_spatial:
+            name = self.contacts[int(np.flatnonzero(self.tangent_dims == 2)[0])].name
+            raise ValueError(f"{what} handles planar contacts only; contact {name!r} is spatial "
+                             "(two tangent directions)")
+
+    def _check_contact_rows(self, q) -> None:
+        """The tangent rows of each contact must be independent of each other and of its normal."""
+        H = self.contact_jacobian(q)
+        m, off = self.n_contacts, self.tangent_offsets
+        for j, c in enumerate(self.contacts):
+            rows = H[np.r_[j, m + off[j]:m + off[j + 1]]]
+            s = np.linalg.svd(rows, compute_uv=False)
+            if not np.all(np.isfinite(s)):
+                raise ValueError(f"contact {c.name!r}: its Jacobian rows are not finite at q = {q}")
+            if s[-1] <= 1e-10 * max(s[0], 1e-300):
+                which = "normal" if s[0] == 0 else ("tangent rows" if rows.shape[0] > 2 else "tangent row")
+                raise ValueError(f"contact {c.name!r}: its {which} must be independent of each other and of "
+                                 f"the normal (the rows [H_N; H_T] are rank deficient, singular values {s})")
+        self._contact_rows_checked = True
 
     def constraint_residual(self, q, t: float = 0.0) -> np.ndarray:
         """phi(t, q), the bilateral constraint values (zero on the manifold)."""
@@ -334,7 +395,9 @@ class System:
             if not np.all(np.isfinite(x)):
                 raise ValueError(f"{name} must be finite, got {x}")
         if self.__dict__.get("_mass_checked_constant"):
-            return q0, v0  # a constant mass matrix (and constraints) passed the check below once
+            return q0, v0
+        if self.n_contacts and not self._contact_rows_checked:
+            self._check_contact_rows(q0)  # a constant mass matrix (and constraints) passed the check below once
         A = self.mass(q0, t0)
         if not np.all(np.isfinite(A)):
             raise ValueError("mass matrix is not finite at q0")
@@ -352,6 +415,33 @@ class System:
         # eigenvalue decomposition, seconds for thousands of coordinates)
         self._mass_checked_constant = self.mass_is_constant and self.kinematics_is_constant
         return q0, v0
+
+
+def _tangent_rows(c: Contact, q, v, t, n: int) -> ca.SX:
+    """The tangent Jacobian rows of contact c: one (planar) or two (spatial), n columns each."""
+    if c.tangent is not None:
+        s = _sx_any(c.tangent, f"tangent of {c.name}")
+        if s.numel() not in (1, 2):
+            raise ValueError(f"tangent of {c.name} must be a scalar (planar contact) or two coordinates "
+                             f"(spatial contact), got {s.numel()} entries")
+        s = ca.reshape(s, s.numel(), 1)
+        if ca.depends_on(s, v):
+            raise ValueError(f"tangent of {c.name} must depend on t and q only")
+        return ca.jacobian(s, q)
+    J = _sx_any(c.tangent_jacobian, f"tangent_jacobian of {c.name}")
+    if J.numel() == n:  # a row or a column: one tangent
+        return _sx(J, f"tangent_jacobian of {c.name}", (1, n))
+    if J.shape == (2, n):
+        return _sx(J, f"tangent_jacobian of {c.name}", (2, n))
+    raise ValueError(f"tangent_jacobian of {c.name} must have one row (1, {n}) or two rows (2, {n}), "
+                     f"got {J.shape}")
+
+
+def _sx_any(expr, name: str) -> ca.SX:
+    try:
+        return ca.SX(expr) if not isinstance(expr, ca.SX) else expr
+    except Exception as exc:  # noqa: BLE001 - CasADi raises NotImplementedError/RuntimeError variously
+        raise ValueError(f"{name} must be a CasADi SX expression or numeric array") from exc
 
 
 def _breakpoints(values) -> np.ndarray:

@@ -123,8 +123,9 @@ class MoreauJeanOptions:
             raise ValueError(f"theta must lie in [1/2, 1], got {th!r}")
         if not isinstance(self.save_every, (int, np.integer)) or self.save_every < 1:
             raise ValueError(f"save_every must be an integer >= 1, got {self.save_every!r}")
-        if isinstance(self.solver, str) and self.solver not in SOLVERS:
-            raise ValueError(f"unknown solver {self.solver!r}; known solvers: {sorted(SOLVERS)}")
+        if isinstance(self.solver, str) and self.solver not in SOLVERS and self.solver not in _cone_solvers():
+            raise ValueError(f"unknown solver {self.solver!r}; known solvers: {sorted(SOLVERS)} (planar contacts), "
+                             f"{sorted(_cone_solvers())} (spatial contacts)")
         if not isinstance(self.solver, (str, OneStepSolver)):
             raise ValueError(f"solver must be a solver name or a OneStepSolver, got {self.solver!r}")
         if self.solver_options is not None and not isinstance(self.solver_options, dict):
@@ -136,8 +137,33 @@ class MoreauJeanOptions:
             raise ValueError(f"projection_tol must lie in [1e-15, 1), got {tol!r}")
 
 
+def _cone_solvers() -> dict:
+    """The registry of the spatial (Coulomb disk) one-step solvers, imported when first needed."""
+    from .cone_solvers import CONE_SOLVERS
+
+    return CONE_SOLVERS
+
+
+def _spatial_solver(options):
+    """The disk-law solver of a system with spatial contacts (ValueError for a planar-only name)."""
+    from .cone_solvers import OneStepConeSolver, make_cone_solver
+
+    name = options.solver
+    if isinstance(name, str) and name not in _cone_solvers():
+        raise ValueError(f"solver {name!r} handles planar contacts only; the system has spatial contacts: "
+                         f"use one of {sorted(_cone_solvers())}")
+    if not isinstance(name, (str, OneStepConeSolver)):
+        raise ValueError(f"solver {getattr(name, 'name', name)!r} handles planar contacts only; the system "
+                         f"has spatial contacts: use one of {sorted(_cone_solvers())}")
+    return make_cone_solver(name, **(options.solver_options or {}))
+
+
 def _fallback_for(solver, k: int):
     """The other exact solver that retries a step on which ``solver`` failed (k active contacts)."""
+    if getattr(solver, "spatial", False):
+        from .cone_solvers import make_cone_solver
+
+        return make_cone_solver("nsgs" if solver.name == "newton" else "newton")
     name = {"auto": "osqp", "enum": "lemke", "lemke": "enum" if k == 1 else "osqp",
             "osqp": "enum" if k == 1 else "lemke"}.get(solver.name, "lemke")
     return make_solver(name)
@@ -189,7 +215,8 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
     q0, v0 = system.check_state(q0, v0)
     h, th = float(options.h), float(options.theta)
-    solver = make_solver(options.solver, **(options.solver_options or {}))
+    spatial = system.is_spatial
+    solver = _spatial_solver(options) if spatial else make_solver(options.solver, **(options.solver_options or {}))
     n_steps = int(np.ceil(t_end / h * (1 - 1e-12)))
     if n_steps > 2_000_000_000:
         raise ValueError(f"h = {h!r} needs {n_steps} steps to reach t_end = {t_end!r}: too many")
@@ -206,12 +233,16 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     m, n = system.n_contacts, system.n
     mu, e = system.mu, system.e
     names = [c.name for c in system.contacts]
+    if spatial:  # the disk law: the cone problem, its tangent rows laid out contact by contact
+        from .cone_problem import ConeContactProblem
+
+        dims, toff = system.tangent_dims, system.tangent_offsets
 
     n_saved = n_steps // every
     Q = np.empty((n_saved + 1, n))
     V = np.empty((n_saved + 1, n))
     PN = np.zeros((n_saved, m))
-    PT = np.zeros((n_saved, m))
+    PT = np.zeros((n_saved, system.n_tangent))  # tangent components, contact by contact
     modes = np.full((n_saved, m), -1, dtype=np.int8)
     Q[0], V[0] = q0, v0
     stats = SolverStats()
@@ -255,14 +286,21 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             key = active.tobytes()
             local = cache.get(key) if keyed else None
             if local is None:  # the active set's slices of the (constant) operators, built once
-                idx = np.concatenate([active, m + active])
                 ea = e[active]
-                local = (idx, H[idx], SHt[:, idx], ea if np.any(ea) else None,
-                         ContactProblem(W[np.ix_(idx, idx)], np.zeros(idx.size), mu[active],
-                                        key=tuple(active) if keyed else None))
+                if spatial:
+                    idx = system.contact_rows(active)
+                    cols = np.concatenate([np.arange(toff[j], toff[j + 1]) for j in active.tolist()])
+                    template = ConeContactProblem(W[np.ix_(idx, idx)], np.zeros(idx.size), mu[active], dims[active],
+                                                  key=tuple(active) if keyed else None)
+                else:
+                    idx = np.concatenate([active, m + active])
+                    cols = active
+                    template = ContactProblem(W[np.ix_(idx, idx)], np.zeros(idx.size), mu[active],
+                                              key=tuple(active) if keyed else None)
+                local = (idx, H[idx], SHt[:, idx], ea if np.any(ea) else None, template, cols)
                 if keyed:
                     cache[key] = local
-            idx, Ha, SHta, ea, template = local
+            idx, Ha, SHta, ea, template, cols = local
             qa = Ha @ vfree
             if ea is not None:
                 # Newton restitution u_N+ >= -e u_N- acts only on approaching contacts: with a
@@ -296,22 +334,33 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             stats.ambiguous_steps += int(sol.ambiguous)
             stats.max_residual = max(stats.max_residual, sol.residual)
             p = sol.p
-            dv = dvf + SHta @ p
-            md = pb.modes(p)
-            # one refinement on the branch: with an ill-conditioned mass matrix the solve leaves
-            # cond(W) eps in the velocities, which would let a stuck block creep and a pressed one sink
-            r = Ha @ (v + dv)
-            if ea is not None:
-                r[: active.size] += shift
-            dp = pb.with_q(r).solve_branch(md)
-            if dp is not None and math.isfinite(float(dp.sum())):
-                p = p + dp
-                dv = dv + SHta @ dp
+            if spatial:
+                # the branch refinement of the disk law (a stuck contact's velocity to the last bit)
+                p = pb.refine(p)
+                dv = dvf + SHta @ p
+                md = pb.modes(p)
+            else:
+                dv = dvf + SHta @ p
+                md = pb.modes(p)
+                # one refinement on the branch: with an ill-conditioned mass matrix the solve leaves
+                # cond(W) eps in the velocities, which would let a stuck block creep and a pressed one sink
+                r = Ha @ (v + dv)
+                if ea is not None:
+                    r[: active.size] += shift
+                dp = pb.with_q(r).solve_branch(md)
+                if dp is not None and math.isfinite(float(dp.sum())):
+                    p = p + dp
+                    dv = dv + SHta @ dp
             pa = p[: active.size]
             loaded = activation.loaded
             now = pa > 0
             if not activation.all_loaded:  # a contact that carried no load: perhaps an impact
-                _record_impacts(impacts, tk, h, active, pa, p[active.size:], loaded, gap, uN_minus, uN_free, names)
+                pTa = p[active.size:]
+                if spatial:  # each contact's tangent components (one or two)
+                    ends = np.cumsum(dims[active])
+                    pTa = [pTa[b - d:b] if d == 2 else float(pTa[b - 1]) for b, d in zip(ends.tolist(),
+                                                                                     dims[active].tolist())]
+                _record_impacts(impacts, tk, h, active, pa, pTa, loaded, gap, uN_minus, uN_free, names)
             if active.size < m:
                 loaded[:] = False
             loaded[active] = now
@@ -321,7 +370,7 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
                 closed[active] = (pa > 0) & ((e[active] == 0) | (uN_minus[active] >= 0))
             if row >= 0:
                 PN[row, active] = pa
-                PT[row, active] = p[active.size:]
+                PT[row, cols] = p[active.size:]
                 modes[row, active] = md
             for code in md:
                 stats.mode_counts[MODE_NAMES[int(code)]] += 1
@@ -386,7 +435,8 @@ def _record_impacts(impacts, tk, h, active, pN, pT, loaded, gap, uN_minus, uN_fr
     for i in np.flatnonzero(hit):
         j = int(active[i])
         dt = min(h, max(0.0, float(gap[j]) / -float(um[i])))
-        impacts.append(Impact(tk + dt, j, names[j], float(pN[i]), float(pT[i])))
+        impacts.append(Impact(tk + dt, j, names[j], float(pN[i]),
+                              pT[i].copy() if isinstance(pT[i], np.ndarray) else float(pT[i])))
 
 
 def _impacts_compiled(asm, Q, V, PN, PT, h, name):

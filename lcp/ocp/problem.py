@@ -115,6 +115,7 @@ class OptimalControlProblem:
             system = system.system
         if not isinstance(system, System):
             raise ValueError(f"system must be a System or a Scene, got {type(system).__name__}")
+        system.require_planar("the optimal-control transcription")
         if control_matrix is not None:
             system = add_control(system, control_matrix,
                                  -np.inf if u_min is None else u_min, np.inf if u_max is None else u_max)
