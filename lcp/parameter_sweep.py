@@ -14,8 +14,9 @@ which preserves every float exactly.
 Why chunks: a Dask task costs about a millisecond of scheduling, more than an event-driven run of
 the Jean-Pratt scene; the sets are therefore sent in chunks (a few per worker, ``chunk_size`` to
 override), so that this overhead stays small. A chunk takes every k-th set (strided), so that the
-expensive corner of a grid is shared among the workers rather than left to one. A worker keeps its imports and its compiled kernels
-(cached per process) from one chunk to the next: they are built once per worker, not per task.
+expensive corner of a grid is shared among the workers rather than left to one. A worker keeps its
+imports and its compiled kernels (cached per process) from one chunk to the next: they are built
+once per worker, not per task.
 
 Failures are rows too: a parameter set whose build or run raises, or whose simulation fails,
 appears with ``success`` False, its ``status`` and its ``message``; the sweep goes on. A worker
@@ -23,6 +24,7 @@ lost mid-sweep costs nothing: Dask runs its chunks again elsewhere.
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import itertools
 import math
@@ -33,7 +35,7 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["BUILD_FAILED", "default_summary", "map_sets", "parameter_sets", "sweep"]
+__all__ = ["BUILD_FAILED", "cluster", "default_summary", "map_sets", "parameter_sets", "sweep"]
 
 #: ``status`` of a row whose build or simulate call raised (its message names the exception)
 BUILD_FAILED = -10
@@ -58,8 +60,12 @@ def parameter_sets(params) -> list[dict]:
     Examples
     --------
     >>> from lcp.parameter_sweep import parameter_sets
-    >>> parameter_sets({"R": [0.3, 0.5], "v0": [1.0, -1.0], "M": 2.0})
-    [{'R': 0.3, 'v0': 1.0, 'M': 2.0}, {'R': 0.3, 'v0': -1.0, 'M': 2.0}, {'R': 0.5, 'v0': 1.0, 'M': 2.0}, {'R': 0.5, 'v0': -1.0, 'M': 2.0}]
+    >>> for p in parameter_sets({"R": [0.3, 0.5], "v0": [1.0, -1.0], "M": 2.0}):
+    ...     print(p)
+    {'R': 0.3, 'v0': 1.0, 'M': 2.0}
+    {'R': 0.3, 'v0': -1.0, 'M': 2.0}
+    {'R': 0.5, 'v0': 1.0, 'M': 2.0}
+    {'R': 0.5, 'v0': -1.0, 'M': 2.0}
     """
     if isinstance(params, Mapping):
         keys = list(params)
@@ -173,23 +179,69 @@ def _connect(client, workers):
     return c, cluster, c
 
 
-def _progress_bar(total, enabled):
+@contextlib.contextmanager
+def cluster(workers: int | None = None, client=None):
+    """Where several :func:`map_sets` calls run: None (this process), or one Dask client for all.
+
+    A study with several sweeps opens its cluster once (a LocalCluster takes seconds to start)
+    and passes the client to each call; the cluster it started is closed on leaving.
+
+    Parameters
+    ----------
+    workers : int, optional
+        Start a LocalCluster of this many worker processes.
+    client : dask.distributed.Client or str, optional
+        An existing cluster, or its scheduler's address (``ConnectionError`` if unreachable).
+
+    Examples
+    --------
+    >>> from lcp.parameter_sweep import cluster, map_sets
+    >>> with cluster() as c:  # neither workers nor client: this process
+    ...     map_sets(abs, [-1, 2], client=c)[0]
+    [1, 2]
+    """
+    _check_where(workers, client)
+    if workers is None and client is None:
+        yield None
+        return
+    c, started, own = _connect(client, workers)
+    try:
+        yield c
+    finally:
+        if own is not None:
+            own.close()
+        if started is not None:
+            started.close()
+
+
+def _check_where(workers, client):
+    if workers is not None and (not isinstance(workers, numbers.Integral) or isinstance(workers, bool)
+                                or workers < 1):
+        raise ValueError(f"workers must be a positive integer, got {workers!r}")
+    if workers is not None and client is not None:
+        raise ValueError("give workers (a new LocalCluster) or client (an existing cluster), not both")
+
+
+def _progress_bar(total, enabled, desc="sweep"):
     if not enabled:
         return None
     try:
         from tqdm.auto import tqdm
     except ImportError:
         return None
-    return tqdm(total=total, unit="set", desc="sweep", file=sys.stderr)
+    return tqdm(total=total, unit="set", desc=desc, file=sys.stderr)
 
 
 def map_sets(fn: Callable, sets: Sequence, *, workers: int | None = None, client=None,
-             chunk_size: int | None = None, progress: bool | None = None) -> tuple[list, dict]:
+             chunk_size: int | None = None, progress: bool | None = None,
+             desc: str = "sweep") -> tuple[list, dict]:
     """``[fn(p) for p in sets]``, in this process or on Dask, in chunks; the engine of :func:`sweep`.
 
     Studies whose unit of work is not a ``simulate`` call (a LEM solve, a work-precision point) use
     it directly. ``fn`` must not raise for a set that should become a row (catch inside it), and on
     a cluster it must be picklable (a module-level function, or ``functools.partial`` of one).
+    ``workers``, ``client``, ``chunk_size`` and ``progress`` are those of :func:`sweep`; ``desc``
+    labels the serial progress bar. Several calls can share one cluster (:func:`cluster`).
 
     Returns
     -------
@@ -206,11 +258,7 @@ def map_sets(fn: Callable, sets: Sequence, *, workers: int | None = None, client
     """
     if not callable(fn):
         raise ValueError(f"fn must be callable, got {type(fn).__name__}")
-    if workers is not None and (not isinstance(workers, numbers.Integral) or isinstance(workers, bool)
-                                or workers < 1):
-        raise ValueError(f"workers must be a positive integer, got {workers!r}")
-    if workers is not None and client is not None:
-        raise ValueError("give workers (a new LocalCluster) or client (an existing cluster), not both")
+    _check_where(workers, client)
     if chunk_size is not None and (not isinstance(chunk_size, numbers.Integral) or chunk_size < 1):
         raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
     if progress is not None and not isinstance(progress, bool):
@@ -220,7 +268,7 @@ def map_sets(fn: Callable, sets: Sequence, *, workers: int | None = None, client
     show = progress if progress is not None else n >= PROGRESS_MIN_SETS
     out: list = []
     if workers is None and client is None:
-        bar = _progress_bar(n, show)
+        bar = _progress_bar(n, show, desc)
         for p in sets:
             out.append(fn(p))
             if bar is not None:

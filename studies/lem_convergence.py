@@ -1,7 +1,9 @@
 """How far LEM (Toma's Linear Equivalence Method) can be trusted: convergence, cost, series, Troesch.
 
-``python -m studies.lem_convergence [--out DIR] [--quick]`` writes, into DIR (default
-figures/lem_convergence/):
+``python -m studies.lem_convergence [--out DIR] [--quick] [--workers N | --scheduler ADDRESS]`` writes,
+into DIR (default figures/lem_convergence/) the files below; ``--workers`` (a new local Dask cluster)
+or ``--scheduler`` (a running one) computes the degrees of the error sweep and the Troesch cases side
+by side, with the same numbers (the cost sweep, a timing, stays in this process):
 
 - ``error_vs_degree.csv``, ``error_vs_degree.png``: y'' = tanh y, y(0) = 0, y'(0) = 1 (the paper's
   (3.9) with z0 = 1). Error of y against solve_ivp (rtol 1e-13) against the truncation degree N at
@@ -30,6 +32,7 @@ True
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 import warnings
@@ -46,6 +49,7 @@ from lem.propagation import solve
 from lem.result import LEMWarning
 from lem.taylor import taylor_coefficients
 from lem.troesch import TROESCH_REFERENCE, solve_troesch, troesch_field
+from studies._cluster import add_options, cluster, pieces
 from studies._common import out_dir, parse_args, save, write_csv
 
 NAME = "lem_convergence"
@@ -93,31 +97,36 @@ def _quiet(fn, *args, **kw):
 
 
 # ----------------------------------------------------------------------------- error vs degree
-def error_vs_degree(quick: bool) -> list:
+def error_vs_degree(quick: bool, client=None) -> list:
+    """Rows per degree N and point x. ``client``: a Dask client to run the degrees on (None: here)."""
     Ns = [1, 5, 11, 21, 31, 41, 51, 61] if quick else list(range(1, 82, 4))
     xs = np.array(XS)
     Y = reference(tanh_f, [0.0, Z0], xs)
     Ymp = reference_mp([0.0, Z0], xs)
+    return [r for part in pieces(functools.partial(degree_rows, xs, Y, Ymp), Ns, client, "degrees") for r in part]
+
+
+def degree_rows(xs, Y, Ymp, N) -> list:
+    """The rows of one degree N of :func:`error_vs_degree` (one piece of work)."""
     rows = []
-    for N in Ns:
-        plain = _quiet(solve, tanh_f, (0.0, xs[-1]), [0.0, Z0], degree=N, t_eval=xs)
-        rest = _quiet(solve, tanh_f, (0.0, xs[-1]), [0.0, Z0], degree=N, t_eval=xs, restart=RESTART_H)
-        for i, x in enumerate(xs):
-            j = int(np.flatnonzero(rest.t == x)[0]) if np.any(rest.t == x) else None
-            rows.append(dict(
-                x=float(x), N=N,
-                plain_error_y=float(abs(plain.y[0, i] - Y[0, i])),
-                plain_error_z=float(abs(plain.y[1, i] - Y[1, i])),
-                plain_error_y_mp=float(abs(plain.y[0, i] - Ymp[0, i])),
-                plain_estimate_y=float(plain.error_estimate[0, i]),
-                plain_diverging=bool(plain.diverging_points[i]),
-                plain_status=plain.status,
-                moment_dimension=plain.moment_dimension,
-                restart_error_y=float(abs(rest.y[0, j] - Y[0, i])) if j is not None else math.nan,
-                restart_error_y_mp=float(abs(rest.y[0, j] - Ymp[0, i])) if j is not None else math.nan,
-                solve_ivp_error_y=float(abs(Y[0, i] - Ymp[0, i])),
-                restart_estimate_y=float(rest.error_estimate[0, j]) if j is not None else math.nan,
-                restart_status=rest.status))
+    plain = _quiet(solve, tanh_f, (0.0, xs[-1]), [0.0, Z0], degree=N, t_eval=xs)
+    rest = _quiet(solve, tanh_f, (0.0, xs[-1]), [0.0, Z0], degree=N, t_eval=xs, restart=RESTART_H)
+    for i, x in enumerate(xs):
+        j = int(np.flatnonzero(rest.t == x)[0]) if np.any(rest.t == x) else None
+        rows.append(dict(
+            x=float(x), N=N,
+            plain_error_y=float(abs(plain.y[0, i] - Y[0, i])),
+            plain_error_z=float(abs(plain.y[1, i] - Y[1, i])),
+            plain_error_y_mp=float(abs(plain.y[0, i] - Ymp[0, i])),
+            plain_estimate_y=float(plain.error_estimate[0, i]),
+            plain_diverging=bool(plain.diverging_points[i]),
+            plain_status=plain.status,
+            moment_dimension=plain.moment_dimension,
+            restart_error_y=float(abs(rest.y[0, j] - Y[0, i])) if j is not None else math.nan,
+            restart_error_y_mp=float(abs(rest.y[0, j] - Ymp[0, i])) if j is not None else math.nan,
+            solve_ivp_error_y=float(abs(Y[0, i] - Ymp[0, i])),
+            restart_estimate_y=float(rest.error_estimate[0, j]) if j is not None else math.nan,
+            restart_status=rest.status))
     return rows
 
 
@@ -385,21 +394,26 @@ def plot_smooth_friction(motions, path):
 
 
 # -------------------------------------------------------------------------------------- Troesch
-def troesch(quick: bool) -> list:
+def troesch(quick: bool, client=None) -> list:
+    """Rows per lambda. ``client``: a Dask client to run them on (None: here)."""
     lams = (0.5, 1.0, 5.0) if quick else (0.5, 1.0, 5.0, 10.0)
+    return [r for part in pieces(troesch_rows, lams, client, "Troesch") for r in part]
+
+
+def troesch_rows(lam) -> list:
+    """The row of one lambda of :func:`troesch` (one piece of work), in a list."""
     rows = []
-    for lam in lams:
-        t0 = time.perf_counter()
-        r = solve_troesch(lam)
-        dt = time.perf_counter() - t0
-        te = np.linspace(0.0, 1.0, 101)
-        traj = solve(troesch_field(lam), (0.0, 1.0), [0.0, r.slope], degree=16, restart="auto",
-                     t_eval=te, rtol=1e-12, atol=1e-14)
-        rows.append(dict(lam=lam, slope=r.slope, reference=TROESCH_REFERENCE[lam],
-                         relative_error=r.relative_error, slope_error_estimate=r.slope_error_estimate,
-                         status=r.status, iterations=r.iterations, failed_trials=r.failed_trials,
-                         segments=r.n_segments, dyds=r.dyds, time_s=dt,
-                         x=te, y=traj.y[0]))
+    t0 = time.perf_counter()
+    r = solve_troesch(lam)
+    dt = time.perf_counter() - t0
+    te = np.linspace(0.0, 1.0, 101)
+    traj = solve(troesch_field(lam), (0.0, 1.0), [0.0, r.slope], degree=16, restart="auto",
+                 t_eval=te, rtol=1e-12, atol=1e-14)
+    rows.append(dict(lam=lam, slope=r.slope, reference=TROESCH_REFERENCE[lam],
+                     relative_error=r.relative_error, slope_error_estimate=r.slope_error_estimate,
+                     status=r.status, iterations=r.iterations, failed_trials=r.failed_trials,
+                     segments=r.n_segments, dyds=r.dyds, time_s=dt,
+                     x=te, y=traj.y[0]))
     return rows
 
 
@@ -436,11 +450,17 @@ def plot_troesch(rows, path):
 
 
 # ------------------------------------------------------------------------------------------ run
-def run(out=None, quick: bool = False) -> dict:
-    """Run the study; write figures and CSV into ``out``; return the numbers behind them."""
+def run(out=None, quick: bool = False, workers: int | None = None, scheduler: str | None = None) -> dict:
+    """Run the study; write figures and CSV into ``out``; return the numbers behind them.
+
+    ``workers`` (a new local Dask cluster) or ``scheduler`` (a running one's address) runs the
+    degrees of the error sweep and the Troesch cases side by side; the numbers are the same.
+    """
     folder = out_dir(out, NAME)
     files = []
-    ev = error_vs_degree(quick)
+    with cluster(workers, scheduler) as client:
+        ev = error_vs_degree(quick, client)
+        tr = troesch(quick, client)
     files.append(write_csv(folder / "error_vs_degree.csv", list(ev[0]), [list(r.values()) for r in ev]))
     files.append(plot_error_vs_degree(ev, folder / "error_vs_degree.png"))
     auto = auto_restart_check()
@@ -469,7 +489,6 @@ def run(out=None, quick: bool = False) -> dict:
                              float(motions["printed"][i])] + [float(motions[e]["q"][i]) for e in epss]
                             for i in range(motions["t"].size)]))
 
-    tr = troesch(quick)
     keys = [k for k in tr[0] if k not in ("x", "y")]
     files.append(write_csv(folder / "troesch.csv", keys, [[r[k] for k in keys] for r in tr]))
     files.append(plot_troesch(tr, folder / "troesch.png"))
@@ -497,9 +516,9 @@ def run(out=None, quick: bool = False) -> dict:
 
 
 def main(argv=None):
-    args = parse_args(NAME, __doc__.splitlines()[0], argv)
+    args = parse_args(NAME, __doc__.splitlines()[0], argv, extra=add_options)
     t0 = time.perf_counter()
-    res = run(out=args.out, quick=args.quick)
+    res = run(out=args.out, quick=args.quick, workers=args.workers, scheduler=args.scheduler)
     c = res["checks"]
     print(f"x = 1, N = 61: error {c['x1_error_N61']:.3g} (estimate {c['x1_estimate_N61']:.3g})")
     print(f"x = 2, N = 61: plain diverging flag {c['x2_plain_diverging_N61']} "

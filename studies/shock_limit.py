@@ -1,6 +1,9 @@
 """The shock limit kappa -> 1 of the Jean-Pratt system: exact, event-driven and Moreau-Jean side by side.
 
-``python -m studies.shock_limit [--out DIR] [--quick]`` writes, into DIR (default figures/shock_limit/):
+``python -m studies.shock_limit [--out DIR] [--quick] [--workers N | --scheduler ADDRESS]`` writes,
+into DIR (default figures/shock_limit/) the files below; ``--workers`` (a new local Dask cluster) or
+``--scheduler`` (a running one) computes the kappa sweep and the regime map side by side, with the
+same numbers:
 
 - ``sweep.csv``, ``sweep_v0_pos.png``, ``sweep_v0_neg.png``: kappa = 1 - 10^-k (k = 1..12) and
   kappa in [1, 1.5]; tau0, N0, the stop distance and the stop impulses, exact against the
@@ -24,6 +27,7 @@ True
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 
@@ -32,6 +36,7 @@ import numpy as np
 import lcp
 from lcp.exact import JeanPrattExact
 from lem import series
+from studies._cluster import add_options, cluster, pieces
 from studies._common import floored, legend, out_dir, parse_args, save, write_csv
 
 import matplotlib.pyplot as plt  # noqa: E402  (studies._common selects the Agg backend first)
@@ -56,44 +61,48 @@ def _scene(kappa, v0, **kw):
 
 
 # ----------------------------------------------------------------------------------- sweep
-def sweep(quick: bool) -> list:
+def sweep(quick: bool, client=None) -> list:
+    """Rows per (kappa, v0): (rows, hs). ``client``: a Dask client to run them on (None: here)."""
     hs = [1e-2, 1e-3] if quick else [1e-2, 1e-3, 1e-4]
-    rows = []
-    for kappa, label in kappas(quick):
-        for v0 in (1.0, -1.0):
-            sc = _scene(kappa, v0)
-            ex = sc.solution
-            shock = bool(ex.shocks)
-            # stop impulses: beyond the static (m + M) g t, over the whole horizon (shocks included)
-            PN, PT = ex.impulse(0.0, T_END)
-            ex_excess_N, ex_PT = float(PN[0]) - N_STICK * T_END, float(PT[0])
-            ev = lcp.simulate(sc, T_END, method="event")
-            tex = sc.exact(ev.t)
-            ev_stop = ev.t_events[0] if ev.t_events else math.inf
-            ev_N0 = math.inf if ev.impulses else float(ev.force_N[0, 0])
-            ev_excess_N = float(np.sum(ev.p_N)) - N_STICK * (ev.t[-1] - ev.t[0])
-            row = dict(kappa=kappa, label=label, v0=v0, shock=shock,
-                       tau0_exact=ex.tau0, N0_exact=ex.N0, x_stop_exact=ex.x_stop,
-                       excess_PN_exact=ex_excess_N, PT_exact=ex_PT,
-                       shock_PN_exact=ex.shocks[0][1] if shock else 0.0,
-                       shock_PT_exact=ex.shocks[0][2] if shock else 0.0,
-                       tau0_event=ev_stop, N0_event=ev_N0, x_stop_event=float(ev.q[-1, 0]),
-                       excess_PN_event=ev_excess_N, PT_event=float(np.sum(ev.p_T)),
-                       shock_PN_event=ev.impulses[0].P_N if ev.impulses else 0.0,
-                       shock_PT_event=ev.impulses[0].P_T if ev.impulses else 0.0,
-                       event_x_error=float(np.max(np.abs(ev.q[:, 0] - tex["x"]))),
-                       event_success=ev.success)
-            for h in hs:
-                mj = lcp.simulate(sc, T_END, h=h)
-                stopped = np.flatnonzero(mj.v[:, 0] * np.sign(v0) <= 0.0)
-                T = mj.t[-1]
-                row[f"x_stop_mj_{h:g}"] = float(mj.q[-1, 0])
-                row[f"tau0_mj_{h:g}"] = float(mj.t[stopped[0]]) if stopped.size else math.inf
-                row[f"N0_mj_{h:g}"] = float(mj.p_N[0, 0] / h)
-                row[f"excess_PN_mj_{h:g}"] = float(np.sum(mj.p_N)) - N_STICK * T
-                row[f"PT_mj_{h:g}"] = float(np.sum(mj.p_T))
-            rows.append(row)
-    return rows, hs
+    sets = [(kappa, label, v0) for kappa, label in kappas(quick) for v0 in (1.0, -1.0)]
+    return pieces(functools.partial(sweep_row, hs), sets, client, "kappa sweep"), hs
+
+
+def sweep_row(hs, kappa_label_v0) -> dict:
+    """One row of :func:`sweep`: exact, event-driven and Moreau-Jean at each h (one piece of work)."""
+    kappa, label, v0 = kappa_label_v0
+    sc = _scene(kappa, v0)
+    ex = sc.solution
+    shock = bool(ex.shocks)
+    # stop impulses: beyond the static (m + M) g t, over the whole horizon (shocks included)
+    PN, PT = ex.impulse(0.0, T_END)
+    ex_excess_N, ex_PT = float(PN[0]) - N_STICK * T_END, float(PT[0])
+    ev = lcp.simulate(sc, T_END, method="event")
+    tex = sc.exact(ev.t)
+    ev_stop = ev.t_events[0] if ev.t_events else math.inf
+    ev_N0 = math.inf if ev.impulses else float(ev.force_N[0, 0])
+    ev_excess_N = float(np.sum(ev.p_N)) - N_STICK * (ev.t[-1] - ev.t[0])
+    row = dict(kappa=kappa, label=label, v0=v0, shock=shock,
+               tau0_exact=ex.tau0, N0_exact=ex.N0, x_stop_exact=ex.x_stop,
+               excess_PN_exact=ex_excess_N, PT_exact=ex_PT,
+               shock_PN_exact=ex.shocks[0][1] if shock else 0.0,
+               shock_PT_exact=ex.shocks[0][2] if shock else 0.0,
+               tau0_event=ev_stop, N0_event=ev_N0, x_stop_event=float(ev.q[-1, 0]),
+               excess_PN_event=ev_excess_N, PT_event=float(np.sum(ev.p_T)),
+               shock_PN_event=ev.impulses[0].P_N if ev.impulses else 0.0,
+               shock_PT_event=ev.impulses[0].P_T if ev.impulses else 0.0,
+               event_x_error=float(np.max(np.abs(ev.q[:, 0] - tex["x"]))),
+               event_success=ev.success)
+    for h in hs:
+        mj = lcp.simulate(sc, T_END, h=h)
+        stopped = np.flatnonzero(mj.v[:, 0] * np.sign(v0) <= 0.0)
+        T = mj.t[-1]
+        row[f"x_stop_mj_{h:g}"] = float(mj.q[-1, 0])
+        row[f"tau0_mj_{h:g}"] = float(mj.t[stopped[0]]) if stopped.size else math.inf
+        row[f"N0_mj_{h:g}"] = float(mj.p_N[0, 0] / h)
+        row[f"excess_PN_mj_{h:g}"] = float(np.sum(mj.p_N)) - N_STICK * T
+        row[f"PT_mj_{h:g}"] = float(np.sum(mj.p_T))
+    return row
 
 
 def _log_only_over_a_decade(ax):
@@ -457,27 +466,42 @@ def classify_event(m, M, alpha, R, v0, phi) -> str:
     return "slide, then stick" if seq[-1] == "stick" else "slide for ever"
 
 
-def regimes(quick: bool) -> dict:
+def exact_regime_row(Rs, m_M_a_v0_phi) -> list:
+    """Regime indices along R at one alpha, from the exact solution (one piece of work)."""
+    m, M, a, v0, phi = m_M_a_v0_phi
+    return [REGIMES.index(classify_exact(m, M, a, R, v0, phi)) for R in Rs]
+
+
+def checked_point(m_M_a_R_v0_phi) -> tuple:
+    """(exact regime, event-driven regime) at one point (one piece of work)."""
+    return classify_exact(*m_M_a_R_v0_phi), classify_event(*m_M_a_R_v0_phi)
+
+
+def regimes(quick: bool, client=None) -> dict:
+    """Regime maps over (R, alpha), checked by the event integrator on a coarse sub-grid.
+
+    ``client``: a Dask client to run the pieces on (None: this process)."""
     ratios = [0.5, 1.0, 2.0]
     nR, na = (50, 50) if quick else (160, 160)
     nc = 5 if quick else 12
     Rs = np.linspace(0.02, 5.0, nR)
     alphas = np.linspace(0.03, 1.45, na)
-    maps, rows, mismatches = {}, [], []
-    for ratio in ratios:
-        m, M = ratio, 1.0
-        for ci, (title, v0, load) in enumerate(CASES):
-            phi = load * (m + M) * G
-            grid = np.array([[REGIMES.index(classify_exact(m, M, a, R, v0, phi)) for R in Rs] for a in alphas])
-            maps[(ratio, ci)] = grid
-            # the event integrator on a coarse sub-grid
-            for a in np.linspace(alphas[2], alphas[-3], nc):
-                for R in np.linspace(Rs[2], Rs[-3], nc):
-                    ce, cv = classify_exact(m, M, a, R, v0, phi), classify_event(m, M, a, R, v0, phi)
-                    rows.append(dict(m_over_M=ratio, case=ci, v0=v0, phi=phi, alpha=a, R=R,
-                                     kappa=R * M * math.tan(a) / (m + M * math.tan(a) ** 2), exact=ce, event=cv))
-                    if ce != cv:
-                        mismatches.append(rows[-1])
+    panels = [(ratio, 1.0, ci, v0, load * (ratio + 1.0) * G)
+              for ratio in ratios for ci, (_title, v0, load) in enumerate(CASES)]
+    map_rows = pieces(functools.partial(exact_regime_row, Rs),
+                      [(m, M, a, v0, phi) for m, M, _ci, v0, phi in panels for a in alphas], client, "regime map")
+    maps = {(m, ci): np.array(map_rows[k * na:(k + 1) * na]) for k, (m, _M, ci, _v0, _phi) in enumerate(panels)}
+    # the event integrator on a coarse sub-grid
+    points = [(m, M, ci, v0, phi, a, R) for m, M, ci, v0, phi in panels
+              for a in np.linspace(alphas[2], alphas[-3], nc) for R in np.linspace(Rs[2], Rs[-3], nc)]
+    classes = pieces(checked_point, [(m, M, a, R, v0, phi) for m, M, _ci, v0, phi, a, R in points], client,
+                     "regime checks")
+    rows, mismatches = [], []
+    for (m, M, ci, v0, phi, a, R), (ce, cv) in zip(points, classes):
+        rows.append(dict(m_over_M=m, case=ci, v0=v0, phi=phi, alpha=a, R=R,
+                         kappa=R * M * math.tan(a) / (m + M * math.tan(a) ** 2), exact=ce, event=cv))
+        if ce != cv:
+            mismatches.append(rows[-1])
     return dict(ratios=ratios, Rs=Rs, alphas=alphas, maps=maps, rows=rows, mismatches=mismatches)
 
 
@@ -537,8 +561,11 @@ def plot_regimes(reg, path):
 
 
 # ------------------------------------------------------------------------------------ run
-def run(out=None, quick: bool = False) -> dict:
+def run(out=None, quick: bool = False, workers: int | None = None, scheduler: str | None = None) -> dict:
     """Run the study; write CSV and PNG into ``out`` (a folder; None: figures/shock_limit).
+
+    ``workers`` (a new local Dask cluster) or ``scheduler`` (a running one's address) runs the
+    kappa sweep and the regime map side by side; the numbers are the same.
 
     Returns
     -------
@@ -550,7 +577,9 @@ def run(out=None, quick: bool = False) -> dict:
     t0 = time.perf_counter()
     path = out_dir(out, NAME)
     files = []
-    rows, hs = sweep(quick)
+    with cluster(workers, scheduler) as client:
+        rows, hs = sweep(quick, client)
+        reg = regimes(quick, client)
     keys = list(rows[0].keys())
     files.append(write_csv(path / "sweep.csv", keys, [[r[k] for k in keys] for r in rows]))
     files.append(plot_sweep(rows, hs, 1.0, path / "sweep_v0_pos.png"))
@@ -571,7 +600,6 @@ def run(out=None, quick: bool = False) -> dict:
     files.append(write_csv(path / "series.csv", keys, [[r[k] for k in keys] for r in ser["rows"]]))
     files.append(plot_series(ser, path / "series.png"))
 
-    reg = regimes(quick)
     keys = list(reg["rows"][0].keys())
     files.append(write_csv(path / "regimes.csv", keys, [[r[k] for k in keys] for r in reg["rows"]]))
     files.append(plot_regimes(reg, path / "regimes.png"))
@@ -596,8 +624,8 @@ def run(out=None, quick: bool = False) -> dict:
 
 
 def main(argv=None):
-    args = parse_args(NAME, __doc__.splitlines()[0], argv)
-    res = run(args.out, args.quick)
+    args = parse_args(NAME, __doc__.splitlines()[0], argv, extra=add_options)
+    res = run(args.out, args.quick, workers=args.workers, scheduler=args.scheduler)
     for k, v in res["checks"].items():
         print(f"{k:32s} {v}")
     print(f"wrote {len(res['files'])} files to {args.out} in {res['seconds']:.1f} s")

@@ -1,7 +1,8 @@
 """Numerical stability under stress: every method on hard cases, and every failure visible.
 
-``python -m studies.stability [--out DIR] [--quick]`` runs each method on each hard case and
-classifies the outcome:
+``python -m studies.stability [--out DIR] [--quick] [--workers N | --scheduler ADDRESS]`` runs each
+method on each hard case (the cases side by side on a Dask cluster with ``--workers`` or
+``--scheduler``; the table is the same, only the seconds differ) and classifies the outcome:
 
 - **correct**: the run succeeded and every check holds (finite, Coulomb residual, no lift-off or
   sinking, constraint drift, energy, agreement with the exact solution or a reference);
@@ -22,6 +23,7 @@ exactly that bound for theta = 1/2, and nothing for theta = 1 (the "theta = 1" c
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import functools
 import math
 import time
 import tracemalloc
@@ -32,9 +34,11 @@ import casadi as ca
 import numpy as np
 
 import lcp
+from lcp.compiled import applicable as compiled_applicable
 from lcp.scenes import block_chain, jean_pratt
 from lcp.system import Contact, System
 
+from ._cluster import add_options, cluster, pieces
 from ._common import out_dir, parse_args, plt, save, write_csv
 
 NAME = "stability"
@@ -535,7 +539,7 @@ def run_case(case: Case, method: str, ref_cache: dict) -> Row:
     kw.update(case.sim_kw)
     if kw["method"] == "moreau-jean":
         kw.update(h=h, theta=case.theta, save_every=every)
-        if method == "MJ compiled" and not lcp.compiled.applicable(scene.system):
+        if method == "MJ compiled" and not compiled_applicable(scene.system):
             kw["solver"] = "auto"  # several contacts: auto (Lemke) in the Python loop
     else:
         n_eval = min(2001, int(t_end / h) + 1) if every == 1 else 1001
@@ -571,8 +575,30 @@ def run_case(case: Case, method: str, ref_cache: dict) -> Row:
     return row
 
 
-def run(out=None, quick: bool = False) -> dict:
+def case_rows(quick: bool, index: int) -> list:
+    """The rows of case ``index`` of :func:`cases`, every method (one piece of work)."""
+    case = cases(quick)[index]
+    ref_cache = {}
+    rows = []
+    for method in METHODS:
+        if method not in case.methods:
+            rows.append(Row(case.group, case.name, method, "not applicable"))
+            continue
+        rows.append(run_case(case, method, ref_cache))
+    return rows
+
+
+def lem_case_rows(quick: bool, index: int) -> list:
+    """The rows of LEM case ``index`` of :func:`lem_cases` (one piece of work)."""
+    group, name, fn = lem_cases(quick)[index]
+    return [Row(group, name, method, "not applicable") for method in METHODS] + [run_lem_case(group, name, fn)]
+
+
+def run(out=None, quick: bool = False, workers: int | None = None, scheduler: str | None = None) -> dict:
     """Run every case with every applicable method; write the table and the figure.
+
+    ``workers`` (a new local Dask cluster) or ``scheduler`` (a running one's address) runs the
+    cases side by side; the rows are the same, only ``seconds`` differs.
 
     Returns
     -------
@@ -581,17 +607,12 @@ def run(out=None, quick: bool = False) -> dict:
     """
     outdir = out_dir(out, NAME)
     rows = []
-    for case in cases(quick):
-        ref_cache = {}
-        for method in METHODS:
-            if method not in case.methods:
-                rows.append(Row(case.group, case.name, method, "not applicable"))
-                continue
-            rows.append(run_case(case, method, ref_cache))
-    for group, name, fn in lem_cases(quick):
-        for method in METHODS:
-            rows.append(Row(group, name, method, "not applicable"))
-        rows.append(run_lem_case(group, name, fn))
+    with cluster(workers, scheduler) as client:
+        for part in pieces(functools.partial(case_rows, quick), range(len(cases(quick))), client, "cases"):
+            rows.extend(part)
+        for part in pieces(functools.partial(lem_case_rows, quick), range(len(lem_cases(quick))), client,
+                           "LEM cases"):
+            rows.extend(part)
     for case in cases(quick):  # the simulators have nothing to say about the LEM-only cases
         rows.append(Row(case.group, case.name, LEM_METHOD, "not applicable"))
     fields_ = ["group", "case", "method", "outcome", "reason", "steps", "seconds", "peak_mb", "nan_inf",
@@ -632,8 +653,9 @@ def _figure(rows, outdir):
 
 
 def main(argv=None):
-    args = parse_args(NAME, "Stress every method on hard cases; no silently wrong result allowed.", argv)
-    res = run(args.out, args.quick)
+    args = parse_args(NAME, "Stress every method on hard cases; no silently wrong result allowed.", argv,
+                      extra=add_options)
+    res = run(args.out, args.quick, workers=args.workers, scheduler=args.scheduler)
     print(f"Stability table written to {res['out']}/")
     print(f"{'method':18s} " + " ".join(f"{o:>17s}" for o in OUTCOMES))
     for mth, c in res["per_method"].items():

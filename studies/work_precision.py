@@ -1,7 +1,9 @@
 """Run time against error: every method of the package and the usual smooth-friction baseline on one set of axes.
 
-``python -m studies.work_precision [--out DIR] [--quick]`` writes, into DIR (default
-figures/work_precision/):
+``python -m studies.work_precision [--out DIR] [--quick] [--workers N | --scheduler ADDRESS]`` writes,
+into DIR (default figures/work_precision/) the files below (``--workers``, a new local Dask cluster,
+or ``--scheduler``, a running one, runs the measurements side by side: the same errors, each time
+measured where it ran, alongside the others):
 
 - ``work_precision_<scene>.csv``: one row per method and setting (wall time, e_max, e_final,
   stop-time error, max |y|, the error the method claims, status);
@@ -67,6 +69,7 @@ True
 """
 from __future__ import annotations
 
+import functools
 import math
 import os
 import statistics
@@ -78,6 +81,7 @@ from scipy.integrate import solve_ivp
 
 import lcp
 from lem import series
+from studies._cluster import add_options, cluster, pieces
 from studies._common import out_dir, parse_args, save, write_csv
 
 import matplotlib.pyplot as plt  # noqa: E402  (studies._common selects the Agg backend first)
@@ -486,45 +490,67 @@ def run_mujoco(key, scene, T, h, cfg) -> dict:
 
 
 # ----------------------------------------------------------------------------------- the sweep
-def sweep(quick: bool, log=print, **overrides) -> tuple[list, list]:
-    """Every method on every scene: (rows, messages). ``overrides`` replace entries of :func:`settings`."""
+def sweep(quick: bool, log=print, client=None, **overrides) -> tuple[list, list]:
+    """Every method on every scene: (rows, messages). ``overrides`` replace entries of :func:`settings`.
+
+    ``client``: a Dask client to run the measurements on, side by side (None: this process, one
+    after the other). The errors are the same either way; the times are each measured where it ran,
+    alongside the others (on a busy machine they are larger).
+    """
     cfg = settings(quick)
     unknown = sorted(set(overrides) - set(cfg))
     if unknown:
         raise ValueError(f"unknown setting(s) {unknown}; known: {sorted(cfg)}")
     cfg.update(overrides)
-    rows, messages = [], []
-    ref_cache = {}
+    messages = []
     have_mj, mj_msg = mujoco_available()
     messages.append(mj_msg)
     log(mj_msg)
-    for key, (scene, T) in make_scenes().items():
-        t_scene = time.perf_counter()
+    tasks = []
+    for key, (_scene, _T) in make_scenes().items():
         for theta in cfg["thetas"]:
             for h in cfg["hs"]:
-                rows.append(run_moreau_jean(key, scene, T, h, theta, "auto", True, cfg))
+                tasks.append(("moreau-jean", key, h, theta, "auto", True))
                 if h >= cfg["h_min_python"][theta] * (1 - 1e-9):
                     for solver in cfg["python_solvers"]:
-                        rows.append(run_moreau_jean(key, scene, T, h, theta, solver, False, cfg))
-        rows.append(run_event(key, scene, T, cfg))
-        rows.append(run_printed_series(key, scene, T, cfg))
-        for sk, eps, rk in cfg["lem"]:
-            if sk == key:
-                rows.append(run_lem(key, scene, T, eps, rk, cfg, ref_cache))
-        for method in cfg["ivp_methods"]:
-            for eps in cfg["epss"]:
-                for rtol in cfg["rtols"]:
-                    rows.append(run_tanh(key, scene, T, eps, method, rtol, cfg))
+                        tasks.append(("moreau-jean", key, h, theta, solver, False))
+        tasks += [("event", key), ("printed series", key)]
+        tasks += [("lem", key, eps, rk) for sk, eps, rk in cfg["lem"] if sk == key]
+        tasks += [("tanh", key, eps, method, rtol)
+                  for method in cfg["ivp_methods"] for eps in cfg["epss"] for rtol in cfg["rtols"]]
         if have_mj:
-            for h in ([1e-3] if quick else [1e-3, 1e-4]):
-                try:
-                    rows.append(run_mujoco(key, scene, T, h, cfg))
-                except Exception as exc:  # a peer's failure must not stop the benchmark
-                    msg = f"MuJoCo failed on {key}: {type(exc).__name__}: {exc}"
-                    messages.append(msg)
-                    log(msg)
-        log(f"{key}: {sum(r['scene'] == key for r in rows)} rows in {time.perf_counter() - t_scene:.1f} s")
+            tasks += [("mujoco", key, h) for h in ([1e-3] if quick else [1e-3, 1e-4])]
+    rows = []
+    for task_rows, msg in pieces(functools.partial(sweep_piece, cfg), tasks, client, "measurements"):
+        rows += task_rows
+        if msg:
+            messages.append(msg)
+            log(msg)
+    for key in make_scenes():
+        log(f"{key}: {sum(r['scene'] == key for r in rows)} rows")
     return rows, messages
+
+
+def sweep_piece(cfg, task) -> tuple[list, str]:
+    """One measurement of :func:`sweep` (one piece of work): (rows, message)."""
+    kind, key, *args = task
+    scene, T = make_scenes()[key]
+    if kind == "moreau-jean":
+        return [run_moreau_jean(key, scene, T, *args, cfg)], ""
+    if kind == "event":
+        return [run_event(key, scene, T, cfg)], ""
+    if kind == "printed series":
+        return [run_printed_series(key, scene, T, cfg)], ""
+    if kind == "lem":
+        return [run_lem(key, scene, T, *args, cfg, {})], ""
+    if kind == "tanh":
+        return [run_tanh(key, scene, T, *args, cfg)], ""
+    if kind == "mujoco":
+        try:
+            return [run_mujoco(key, scene, T, *args, cfg)], ""
+        except Exception as exc:  # a peer's failure must not stop the benchmark
+            return [], f"MuJoCo failed on {key}: {type(exc).__name__}: {exc}"
+    raise ValueError(f"unknown measurement kind {kind!r}")
 
 
 def _num(x) -> float:
@@ -781,8 +807,11 @@ def write_tables(rows, summary, folder, prefix="work_precision"):
     return files
 
 
-def run(out=None, quick: bool = False, log=None) -> dict:
+def run(out=None, quick: bool = False, log=None, workers: int | None = None, scheduler: str | None = None) -> dict:
     """Run the sweep and the creep study, write CSV and figures; return the numbers.
+
+    ``workers`` (a new local Dask cluster) or ``scheduler`` (a running one's address) runs the
+    sweep's measurements side by side: the same errors; each time measured where it ran.
 
     Returns
     -------
@@ -795,7 +824,8 @@ def run(out=None, quick: bool = False, log=None) -> dict:
     t_start = time.perf_counter()
     load0 = os.getloadavg()
     folder = out_dir(out, NAME)
-    rows, messages = sweep(quick, log)
+    with cluster(workers, scheduler) as client:
+        rows, messages = sweep(quick, log, client)
     summary = summarize(rows)
     cr = creep(quick)
     files = write_tables(rows, summary, folder)
@@ -811,8 +841,8 @@ def run(out=None, quick: bool = False, log=None) -> dict:
 
 
 def main(argv=None):
-    args = parse_args(NAME, __doc__.splitlines()[0], argv)
-    res = run(args.out, args.quick, log=print)
+    args = parse_args(NAME, __doc__.splitlines()[0], argv, extra=add_options)
+    res = run(args.out, args.quick, log=print, workers=args.workers, scheduler=args.scheduler)
     for key, s in res["summary"].items():
         print(f"{key:13s} best package e_max {s['best_package_e_max']:.2e}, best baseline {s['best_baseline_e_max']:.2e}, "
               f"package ahead below {TARGET:g}: {s['package_ahead_below_target']} (min speed-up {s['min_speedup']:.3g})")
