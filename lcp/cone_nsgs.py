@@ -400,16 +400,13 @@ class ConeOperator:
         self.data = Wi.data.astype(float)
         self.nnz = Wi.nnz
         k = problem.k
+        # diagonal blocks: the entries whose row and column belong to the same contact
+        owner = np.repeat(np.arange(k), problem.dims + 1)
+        local = np.arange(problem.n) - problem.start[owner]
+        C = Wi.tocoo()
+        same = owner[C.row] == owner[C.col]
         self.blocks = np.zeros((k, 3, 3))
-        for a in range(3):
-            for b in range(3):
-                ra, rb = problem.R[:, a], problem.R[:, b]
-                ok = (ra >= 0) & (rb >= 0)
-                if np.any(ok):
-                    if sp.issparse(W):
-                        self.blocks[ok, a, b] = np.asarray(W[ra[ok], rb[ok]]).ravel()
-                    else:
-                        self.blocks[ok, a, b] = W[ra[ok], rb[ok]]
+        self.blocks[owner[C.row[same]], local[C.row[same]], local[C.col[same]]] = C.data[same]
         self.rhoN, self.rhoT = problem.rhoN, problem.rhoT
 
 

@@ -28,6 +28,9 @@ from .contact_problem import OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, SPARSE_MIN_SIZE,
 
 __all__ = ["ConeContactProblem", "cone_layout", "local_disk"]
 
+#: a sparse operator with at most this many rows gets dense Newton/refinement matrices (LAPACK beats SuperLU there)
+DENSE_JACOBIAN_MAX = 96
+
 
 def cone_layout(dims) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Offsets of a layout with tangent dimensions ``dims``: (toff, start, perm).
@@ -358,7 +361,7 @@ class ConeContactProblem:
     def jacobian(self, A, B):
         """J = A + B W from per-contact blocks: dense ndarray for a dense W, CSC for a sparse one."""
         R, V = self.R, self._valid
-        if issparse(self.W):
+        if issparse(self.W) and self.n > DENSE_JACOBIAN_MAX:
             rows, cols, av, bv = [], [], [], []
             for a in range(3):
                 for b in range(3):
@@ -372,7 +375,7 @@ class ConeContactProblem:
             Bm = sp.csr_matrix((np.concatenate(bv), (rows, cols)), shape=(self.n, self.n))
             return (Am + Bm @ self.W).tocsc()
         J = np.zeros((self.n, self.n))
-        W = self.W
+        W = self._dense_W()
         for a in range(3):
             ra = V[:, a]
             for b in range(3):
@@ -381,8 +384,28 @@ class ConeContactProblem:
                 J[R[ok, a]] += B[ok, a, b][:, None] * W[R[ok, b]]
         return J
 
+    def _dense_W(self) -> np.ndarray:
+        """W as a dense array (kept: small sparse operators factorize faster dense)."""
+        if not issparse(self.W):
+            return self.W
+        Wd = self._cache.get("dense_W")
+        if Wd is None:
+            Wd = self._cache["dense_W"] = self.W.toarray()
+        return Wd
+
+    def operator(self):
+        """The contact-by-contact operator of the sweeps (:class:`lcp.cone_nsgs.ConeOperator`),
+        built once and shared by :meth:`with_q` copies."""
+        op = self._cache.get("operator")
+        if op is None:
+            from .cone_nsgs import ConeOperator
+
+            op = self._cache["operator"] = ConeOperator(self)
+        return op
+
     def solve_linear(self, J, rhs):
-        """J x = rhs (dense or sparse); None if J is singular or the result is not finite."""
+        """J x = rhs (dense or sparse; a singular dense J gets its least-squares solution); None if
+        no finite solution is found."""
         try:
             if issparse(J):
                 from scipy.sparse.linalg import splu
@@ -391,8 +414,14 @@ class ConeContactProblem:
             else:
                 x = np.linalg.solve(J, rhs)
         except (np.linalg.LinAlgError, RuntimeError):
-            return None
-        return x if np.all(np.isfinite(x)) else None
+            x = None
+        if (x is None or not np.all(np.isfinite(x))) and not issparse(J):
+            # redundant contacts make J singular: the least-squares (minimum-norm) step
+            try:
+                x = np.linalg.lstsq(J, rhs, rcond=None)[0]
+            except np.linalg.LinAlgError:
+                return None
+        return x if x is not None and np.all(np.isfinite(x)) else None
 
     def refine(self, p, iterations: int = 3) -> np.ndarray:
         """Branch-wise exact correction of a solution p: Newton on the equations of its modes.

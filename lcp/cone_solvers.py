@@ -103,13 +103,11 @@ class _Warm:
     """The contact-by-contact operator and the last impulses of an operator (keyed problems)."""
 
     def __init__(self, solver, pb):
-        from .cone_nsgs import ConeOperator
-
         hit = solver._cache.get(pb.key) if pb.key is not None else None
         if hit is not None and hit[0].n == pb.n and np.array_equal(hit[0].dims, pb.dims):
             self.op, self.p = hit
         else:
-            self.op, self.p = ConeOperator(pb), None
+            self.op, self.p = pb.operator(), None
         self.key, self.cache = pb.key, solver._cache
 
     def store(self, p):
