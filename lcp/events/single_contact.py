@@ -7,9 +7,10 @@ slide back. Each piece follows from the acceleration-level contact problem of th
 
     a = W lambda + b,   W = H A^-1 H',   b = H A^-1 F0,
 
-in closed form (stick where its forces lie in the friction cone, the sliding branch p_T = -+mu p_N otherwise), and each event is a linear root (the stop, u_T = 0). Nothing
-here calls CasADi or a solver, so a new parameter set costs microseconds: this is the event path
-of the Jean-Pratt scene and of any block on a flat support under constant loads.
+in closed form (stick where its forces lie in the friction cone, the sliding branch p_T = -+mu p_N
+otherwise), and each event is a linear root (the stop, u_T = 0). Nothing here calls CasADi or a
+solver, so a new parameter set costs microseconds: this is the event path of the Jean-Pratt scene
+and of any block on a flat support under constant loads.
 
 :func:`single_contact_run` returns None whenever the general integrator is needed (the contact
 opens or starts open, an impact, a Painleve case with no or several consistent modes, non-default
@@ -80,29 +81,16 @@ def _at_rest(W00, W01, W10, W11, bN, bT, mu):
     return found[0] if len(found) == 1 else None
 
 
-_FILL = []
+_OUTPUT = []
 
 
-def _fill():
-    """The output writer: the compiled loop when numba is installed, NumPy's row operations otherwise
-    (same operations, same bits)."""
-    if not _FILL:
-        from .closed_form_kernels import HAVE_NUMBA, fill_pieces
+def _output():
+    """The output writer (:mod:`.closed_form_kernels`, imported on first use: numba loads there)."""
+    if not _OUTPUT:
+        from .closed_form_kernels import piece_output
 
-        _FILL.append(fill_pieces if HAVE_NUMBA else _fill_numpy)
-    return _FILL[0]
-
-
-def _fill_numpy(t_out, lo, hi, t0, C0, C1, C2, Y):
-    for k in range(t0.size):
-        a, b = int(lo[k]), int(hi[k])
-        if b <= a:
-            continue
-        dt = t_out[a:b] - t0[k]
-        h = 0.5 * dt
-        h *= dt
-        Y[:, a:b] = (C0[k][:, None] + C1[k][:, None] * dt) + C2[k][:, None] * h
-    return Y
+        _OUTPUT.append(piece_output)
+    return _OUTPUT[0]
 
 
 def _dot(a, b) -> float:
@@ -158,7 +146,12 @@ def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> Event
         return None
     # A^-1 [H_N' H_T' F0 d+ d-] in one factorization, d+- = H_N -+ mu H_T the sliding directions
     # with the friction folded in (as the general integrator forms them, lcp.events.modes)
-    X = np.linalg.solve(A, np.column_stack((H.T, model.F0, H[0] - mu * H[1], H[0] + mu * H[1])))
+    rhs = np.empty((n, 5))
+    rhs[:, :2] = H.T
+    rhs[:, 2] = model.F0
+    rhs[:, 3] = H[0] - mu * H[1]
+    rhs[:, 4] = H[0] + mu * H[1]
+    X = np.linalg.solve(A, rhs)
     (W00, W01, bN), (W10, W11, bT) = (H @ X[:, :3]).tolist()  # W = H A^-1 H', b = H A^-1 F0
     cN, cT, qdd_free = X[:, :3].T.tolist()
     cN_np, qdd_free_np = X[:, 0], X[:, 2]
@@ -242,36 +235,21 @@ def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> Event
     else:  # pragma: no cover - constant data allow no fourth piece
         return None
     t_out = opts.output_times(t_end)
-    N_out = t_out.size
-    # rows (q, v, cumulative impulses) over the output times: c0 + dt c1 + dt^2/2 c2 per piece,
-    # whole rows at once (the general integrator's closed-form output, same operations)
-    Y = np.empty((2 * n + 2, N_out))
-    FN = np.empty((N_out, 1))
-    FT = np.empty((N_out, 1))
-    MD = np.empty((N_out, 1), dtype=np.int8)
-    k = len(pieces)
-    bounds = np.searchsorted(t_out, [p.t0 for p in pieces] + [p.t1 for p in pieces]).tolist()
-    if bounds[-1] < N_out and t_out[bounds[-1]] == pieces[-1].t1:
-        bounds[-1] += 1
+    # rows (q, v, cumulative impulses) over the output times: c0 + dt c1 + dt^2/2 c2 per piece
+    # (the general integrator's closed-form output, same operations), written in one call
     zeros = [0.0] * (n + 2)
-    C0 = np.array([p.q0 + p.v0 + p.P0 for p in pieces])
-    C1 = np.array([p.v0 + p.qdd + [p.N, p.f] for p in pieces])
-    C2 = np.array([p.qdd + zeros for p in pieces])
-    lo, hi = np.array(bounds[:k], dtype=np.int64), np.array(bounds[k:], dtype=np.int64)
-    _fill()(t_out, lo, hi, np.array([p.t0 for p in pieces]), C0, C1, C2, Y)
-    for p, a, b in zip(pieces, bounds[:k], bounds[k:]):
-        if b > a:
-            FN[a:b], FT[a:b], MD[a:b] = p.N, p.f, p.mode
-    Q, V = np.ascontiguousarray(Y[:n].T), np.ascontiguousarray(Y[n:2 * n].T)
-    PC = Y[2 * n:]
-    dP = (PC[:, 1:] - PC[:, :-1]).T
+    P = np.array([[p.t0, p.t1, p.N, p.f, p.mode] for p in pieces])
+    C = np.array([[p.q0 + p.v0 + p.P0 for p in pieces], [p.v0 + p.qdd + [p.N, p.f] for p in pieces],
+                  [p.qdd + zeros for p in pieces]])
+    Q, V, dPN, dPT, FN, FT, MD = _output()(t_out, P, C, n)
+    k = len(pieces)
     stats = SolverStats()
     stats.steps = stats.solver_calls = k
     stats.iterations, stats.max_iterations = iterations, 4
     for p in pieces:
         stats.mode_counts[MODE_NAMES[p.mode]] += 1
     phases = [Phase(p.t0, p.t1, (MODE_NAMES[p.mode],), "closed-form") for p in pieces]
-    return EventResult(t=t_out, q=Q, v=V, p_N=dP[:, :1], p_T=dP[:, 1:], modes=MD[:-1],
+    return EventResult(t=t_out, q=Q, v=V, p_N=dPN, p_T=dPT, modes=MD[:-1],
                        status=0, message=STATUS_MESSAGES[0], stats=stats, method="event",
                        solver="enumerate", t_events=[ev.t for ev in events], force_N=FN, force_T=FT,
                        events=events, impulses=[], phases=phases, impacts=[], accumulations=[],
