@@ -147,7 +147,7 @@ def test_faceted_exact_for_planar_contacts():
 
 def test_auto_never_faceted():
     auto = ConeAutoSolver()
-    parts = [auto.local, auto.newton]
+    parts = [auto.local, auto.nsgs, auto.newton]
     assert not any(isinstance(s, FacetedSolver) for s in parts)
     pb, _ = problem([2, 1, 2, 2], 3, mu_max=0.5)
     sol = auto.solve(pb)
