@@ -146,13 +146,13 @@ def _cone_solvers() -> dict:
 
 def _spatial_solver(options):
     """The disk-law solver of a system with spatial contacts (ValueError for a planar-only name)."""
-    from .cone_solvers import OneStepConeSolver, make_cone_solver
+    from .cone_solvers import ConeSolver, make_cone_solver
 
     name = options.solver
     if isinstance(name, str) and name not in _cone_solvers():
         raise ValueError(f"solver {name!r} handles planar contacts only; the system has spatial contacts: "
                          f"use one of {sorted(_cone_solvers())}")
-    if not isinstance(name, (str, OneStepConeSolver)):
+    if not isinstance(name, (str, ConeSolver)):
         raise ValueError(f"solver {getattr(name, 'name', name)!r} handles planar contacts only; the system "
                          f"has spatial contacts: use one of {sorted(_cone_solvers())}")
     return make_cone_solver(name, **(options.solver_options or {}))
@@ -160,9 +160,9 @@ def _spatial_solver(options):
 
 def _fallback_for(solver, k: int):
     """The other exact solver that retries a step on which ``solver`` failed (k active contacts)."""
-    if getattr(solver, "spatial", False):
-        from .cone_solvers import make_cone_solver
+    from .cone_solvers import ConeSolver, make_cone_solver
 
+    if isinstance(solver, ConeSolver):
         return make_cone_solver("nsgs" if solver.name == "newton" else "newton")
     name = {"auto": "osqp", "enum": "lemke", "lemke": "enum" if k == 1 else "osqp",
             "osqp": "enum" if k == 1 else "lemke"}.get(solver.name, "lemke")
@@ -254,6 +254,7 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     fallbacks = {}
     first_fallback = None
     first_ambiguous = None
+    approx = (0, "", 0.0)  # steps solved by an approximate solver: count, its message, worst residual
     activation = _Activation(asm, m)
     closed = np.zeros(m, dtype=bool)  # contacts closed in the step, held at g = 0 by the projection
     impacts = []
@@ -332,6 +333,8 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             if sol.ambiguous and first_ambiguous is None:
                 first_ambiguous = (k, tk)
             stats.ambiguous_steps += int(sol.ambiguous)
+            if sol.status > 0:  # an approximation (the faceted disk): said in the message, never silent
+                approx = (approx[0] + 1, approx[1] or sol.message, max(approx[2], sol.residual))
             stats.max_residual = max(stats.max_residual, sol.residual)
             p = sol.p
             if spatial:
@@ -403,6 +406,9 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
                     f"step {k} (t = {tk:.10g}) after: {why}")
     if status == 0:
         message += _ambiguity_note(stats.ambiguous_steps, first_ambiguous)
+    if approx[0]:
+        message += (f" {approx[0]} step(s) were solved approximately, not by the Coulomb law itself "
+                    f"({approx[1]}); worst disk-law residual {approx[2]:.3g}.")
     # never return a trajectory past an unreported failure: cut at the last good state
     last = k_done // every
     t = every * h * np.arange(last + 1)
@@ -478,7 +484,7 @@ def _moreau_jean_compiled(asm, q0, v0, n_steps, every, solver_name, contact_name
     stats = SolverStats()
     stats.steps = done
     stats.free_steps = counts.pop("inactive")
-    stats.mode_counts = counts
+    stats.mode_counts.update(counts)  # the compiled kernel counts the planar modes; "slide" stays 0
     stats.solver_calls = done - stats.free_steps
     stats.iterations = 4 * stats.solver_calls  # the four cases of the closed form
     stats.max_iterations = 4 if stats.solver_calls else 0
