@@ -89,8 +89,10 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     if not (isinstance(t_end, (int, float, np.floating)) and math.isfinite(t_end) and t_end > 0):
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
     t_end = float(t_end)
-    if getattr(system, "is_spatial", False):
-        system.require_planar("the event-driven method")
+    if getattr(system, "is_spatial", False):  # the Coulomb disk: its own integrator (lcp.events.spatial)
+        from .spatial import spatial_event_driven
+
+        return spatial_event_driven(system, q0, v0, t_end, opts, frozenset(options), scene)
     q0, v0 = check_state(system, q0, v0)
     t_out = opts.output_times(t_end)
     integ = Integrator(system, q0, v0, t_end, opts)
