@@ -210,8 +210,8 @@ class ConstantLoadSlide:
             return (s0 / f) * (c2 * np.exp(-(k - 1) * z) + sg2 * np.exp(-(k + 1) * z))
 
         lo = np.zeros_like(t)
-        hi = np.ones_like(t)
-        for _ in range(1100):          # bracket: T(hi) >= t (hi reaches ~1e308 at most)
+        hi = np.full_like(t, 1.0 / (k + 1))   # z scales like 1/k: a weak load (k ~ 1e80) needs tiny z
+        for _ in range(2200):          # bracket: T(hi) >= t
             short = T(hi) < t
             if not np.any(short):
                 break
