@@ -20,11 +20,16 @@ Solvers are in :mod:`lcp.cone_solvers`; the exact local solve of one contact is 
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ._imports import issparse
 from ._imports import sparse as sp
 from .contact_problem import OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, SPARSE_MIN_SIZE, STICK
+
+# the mode codes as plain ints: IntEnum members in NumPy comparisons cost an enum lookup each
+_OPEN, _STICK, _SLIDE_POS, _SLIDE_NEG, _SLIDE = int(OPEN), int(STICK), int(SLIDE_POS), int(SLIDE_NEG), int(SLIDE)
 
 __all__ = ["ConeContactProblem", "cone_layout", "local_disk"]
 
@@ -158,12 +163,16 @@ class ConeContactProblem:
         rho[:k] = self.rhoN
         rho[k:] = np.repeat(self.rhoT, self.dims)
         self.rho = rho
+        self._rho_list = rho.tolist()
         self._cache: dict = {}
         self._set_scale()
 
     def _set_scale(self):
         # impulse scale: the impulse that cancels the free velocity contact by contact
-        self.scale = max(float(np.max(np.abs(self.q) * self.rho)) if self.k else 0.0, 1e-300)
+        if 0 < self.n <= 8:  # floats: cheaper than three NumPy calls on a few numbers (the same products)
+            self.scale = max(max([abs(a) * b for a, b in zip(self.q.tolist(), self._rho_list)]), 1e-300)
+        else:
+            self.scale = max(float(np.max(np.abs(self.q) * self.rho)) if self.k else 0.0, 1e-300)
 
     def with_q(self, q) -> ConeContactProblem:
         """The same operator with another free velocity (cheap: W's derived data is shared)."""
@@ -243,7 +252,7 @@ class ConeContactProblem:
             return 0.0
         p = np.asarray(p, dtype=float)
         ker = _kernels()
-        if ker is not None and np.all(np.isfinite(p)):
+        if ker is not None and math.isfinite(p.sum()):  # one reduction: NaN/inf propagate into the sum
             if issparse(self.W):
                 W = self.W
                 return float(ker.residual_blocked_csr(W.indptr, W.indices, W.data, self.q, self.mu, self.dims,
@@ -270,16 +279,24 @@ class ConeContactProblem:
         """Mode of each contact: OPEN, STICK, SLIDE (d = 2) or SLIDE_POS / SLIDE_NEG (d = 1)."""
         from .contact_problem import ModeArray
 
+        return ModeArray.of(self._modes(np.asarray(p, dtype=float), rtol))
+
+    def _modes(self, p, rtol: float = 1e-9) -> np.ndarray:
+        """:meth:`modes` as a plain int8 array (the codes of :class:`lcp.contact_problem.ContactMode`)."""
+        ker = _kernels()
+        if ker is not None:
+            u = self.W @ p + self.q
+            return ker.modes_blocked(p, u, self.dims, self.toff, self.rhoT, self.scale, rtol)
         tol = rtol * max(self.scale, float(np.max(np.abs(p))) if self.n else 0.0)
-        P, U = self._gather(np.asarray(p, dtype=float)), self._gather(self.velocity(p))
+        P, U = self._gather(p), self._gather(self.velocity(p))
         uT = U[:, 1:] * self.rhoT[:, None]  # impulse units
-        out = np.full(self.k, STICK, dtype=np.int8)
+        out = np.full(self.k, _STICK, dtype=np.int8)
         planar = self.dims == 1
-        out[planar & (uT[:, 0] > tol)] = SLIDE_POS
-        out[planar & (uT[:, 0] < -tol)] = SLIDE_NEG
-        out[~planar & (np.hypot(uT[:, 0], uT[:, 1]) > tol)] = SLIDE
-        out[P[:, 0] <= tol] = OPEN
-        return ModeArray.of(out)
+        out[planar & (uT[:, 0] > tol)] = _SLIDE_POS
+        out[planar & (uT[:, 0] < -tol)] = _SLIDE_NEG
+        out[~planar & (np.hypot(uT[:, 0], uT[:, 1]) > tol)] = _SLIDE
+        out[P[:, 0] <= tol] = _OPEN
+        return out
 
     # ----------------------------------------------------------------- linearisations
     def alart_curnier(self, p):
@@ -325,27 +342,27 @@ class ConeContactProblem:
         slide+/- (d = 1): p_T +- mu p_N = 0. Newton on F (J = A + B W) keeps the branch.
         """
         k = self.k
-        modes = np.asarray(modes)
+        modes = np.asarray(modes, dtype=np.int64)
         P, U = self._gather(p), self._gather(self.velocity(p))
         F = np.zeros((k, 3))
         A = np.zeros((k, 3, 3))
         B = np.zeros((k, 3, 3))
         eye = np.eye(2)
-        op = modes == OPEN
+        op = modes == _OPEN
         F[op] = P[op]
         A[op] = np.eye(3)
         cl = ~op
         F[cl, 0] = U[cl, 0]
         B[cl, 0, 0] = 1.0
-        st = modes == STICK
+        st = modes == _STICK
         F[st, 1:] = U[st, 1:]
         B[st, 1:, 1:] = eye
-        sl1 = (modes == SLIDE_POS) | (modes == SLIDE_NEG)
-        sgn = np.where(modes == SLIDE_POS, 1.0, -1.0)
+        sl1 = (modes == _SLIDE_POS) | (modes == _SLIDE_NEG)
+        sgn = np.where(modes == _SLIDE_POS, 1.0, -1.0)
         F[sl1, 1] = P[sl1, 1] + self.mu[sl1] * P[sl1, 0] * sgn[sl1]
         A[sl1, 1:, 1:] = eye
         A[sl1, 1, 0] = self.mu[sl1] * sgn[sl1]
-        sl = modes == SLIDE
+        sl = modes == _SLIDE
         if np.any(sl):
             uT = U[sl, 1:]
             nu = np.hypot(uT[:, 0], uT[:, 1])
@@ -383,6 +400,31 @@ class ConeContactProblem:
                 J[R[ok, a], R[ok, b]] += A[ok, a, b]
                 J[R[ok, a]] += B[ok, a, b][:, None] * W[R[ok, b]]
         return J
+
+    def newton_system(self, p, jacobian: bool = True):
+        """(Phi, J) of the Alart-Curnier function at p (:meth:`alart_curnier`, :meth:`jacobian`),
+        compiled when numba is installed; J is None with ``jacobian=False`` (a line search needs
+        Phi only)."""
+        ker = _kernels()
+        p = np.asarray(p, dtype=float)
+        if ker is None or not math.isfinite(p.sum()):
+            phi, A, B = self.alart_curnier(p)
+            return phi, (self.jacobian(A, B) if jacobian else None)
+        sparse = issparse(self.W)
+        if sparse:
+            W = self.W
+            u = ker.velocity_csr(W.indptr, W.indices, W.data, self.q, p)
+        else:
+            u = ker.velocity_dense(self.W, self.q, p)
+        if not jacobian:
+            return ker.alart_curnier_phi(u, self.mu, self.dims, self.toff, self.rhoN, self.rhoT, p), None
+        if not sparse or self.n <= DENSE_JACOBIAN_MAX:
+            return ker.alart_curnier_dense(self._dense_W(), u, self.mu, self.dims, self.toff, self.rhoN,
+                                           self.rhoT, p)
+        W = self.W
+        phi, r, c, v = ker.alart_curnier_csr(W.indptr, W.indices, W.data, u, self.mu, self.dims, self.toff,
+                                             self.rhoN, self.rhoT, p)
+        return phi, sp.csc_matrix((v, (r, c)), shape=(self.n, self.n))
 
     def _dense_W(self) -> np.ndarray:
         """W as a dense array (kept: small sparse operators factorize faster dense)."""
@@ -432,10 +474,28 @@ class ConeContactProblem:
         velocity ends at rounding level of W p + q (it does not creep step after step). Returns
         the corrected impulse (p itself when nothing improves).
         """
+        return self.refine_modes(p, iterations)[0]
+
+    def refine_modes(self, p, iterations: int = 3) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`refine` and the modes of its result (int8 codes, as :meth:`modes`) in one pass.
+
+        With numba installed and W dense or small (at most :data:`DENSE_JACOBIAN_MAX` rows) the
+        whole refinement is one compiled call; ``iterations = 0`` gives (p, modes of p).
+        """
         p = np.asarray(p, dtype=float)
-        if self.k == 0 or not np.all(np.isfinite(p)):
-            return p
-        modes = self.modes(p)
+        if self.k == 0:
+            return p, np.zeros(0, dtype=np.int8)
+        if not math.isfinite(p.sum()):
+            return p, self._modes(p)
+        ker = _kernels()
+        if ker is not None and (not issparse(self.W) or self.n <= DENSE_JACOBIAN_MAX):
+            return ker.refine_dense(self._dense_W(), self.q, self.mu, self.dims, self.toff, self.rhoN, self.rhoT,
+                                    self.scale, p, int(iterations), 1e-9)
+        best = self._refine_numpy(p, iterations)
+        return best, self._modes(best)
+
+    def _refine_numpy(self, p, iterations):
+        modes = self._modes(p)
         r0 = self.residual(p)
         r_ok = max(r0, 1e-15 * max(self.scale, float(np.max(np.abs(p)))))
         best = p
@@ -456,7 +516,6 @@ class ConeContactProblem:
             if self.residual(x) <= r_ok:
                 best, f_best = x, fx
         return best
-
 
 def local_disk(W, q, mu: float, guess=None, compiled: bool = True):
     """Exact solution of one contact's Coulomb problem u = W p + q (W 3 x 3 for a disk, 2 x 2 planar).

@@ -26,6 +26,9 @@ impulse) is rejected with status -2.
 """
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import numpy as np
 
 from ._imports import issparse
@@ -39,12 +42,25 @@ __all__ = [
     "ConeNewtonSolver",
     "ConeNsgsSolver",
     "ConeSolver",
+    "ConeStepSolution",
     "FacetedSolver",
     "LocalSolver",
     "TrescaSolver",
     "cone_newton",
     "make_cone_solver",
 ]
+
+
+@dataclass
+class ConeStepSolution(StepSolution):
+    """A :class:`lcp.solvers.StepSolution` with the contact modes of a branch-refined impulse.
+
+    ``modes`` (int8 codes of :class:`lcp.contact_problem.ContactMode`) is set when the solver
+    finished with :meth:`ConeContactProblem.refine_modes`: p is then refined on its branch and a
+    caller needs neither a second refinement nor a second mode classification. None otherwise.
+    """
+
+    modes: np.ndarray | None = None
 
 
 class ConeSolver(OneStepSolver):
@@ -66,12 +82,13 @@ class ConeSolver(OneStepSolver):
             return StepSolution(np.full(problem.n, np.nan), -3,
                                 f"solver '{self.name}' does not apply to {problem.k} contacts")
         sol = self._solve(problem)
-        if sol.p.shape == (problem.n,) and np.all(np.isfinite(sol.p)):
-            sol.residual = problem.residual(sol.p)
+        p = sol.p
+        if p.shape == (problem.n,) and math.isfinite(p.sum()):  # NaN/inf propagate into the sum
+            sol.residual = problem.residual(p)
         else:
             sol.residual = float("nan")
         if sol.success and self.exact:
-            scale = max(problem.scale, float(np.max(np.abs(sol.p))) if sol.p.size else 0.0, 1e-300)
+            scale = max(problem.scale, float(np.abs(p).max()) if p.size else 0.0, 1e-300)
             if not np.isfinite(sol.residual) or sol.residual > self.residual_tol * scale:
                 sol.status = -2
                 sol.message = (f"solver '{self.name}' returned an impulse violating the Coulomb law "
@@ -81,22 +98,42 @@ class ConeSolver(OneStepSolver):
 
 # ----------------------------------------------------------------- local
 class LocalSolver(ConeSolver):
-    """One contact (disk or planar): the exact local solve, then nothing else to do."""
+    """One contact (disk or planar): the exact local solve (:func:`lcp.cone_problem.local_disk`),
+    then, with ``polish``, the branch refinement (:meth:`ConeContactProblem.refine_modes`: a stuck
+    contact's velocity to rounding level of W p + q)."""
 
     name = "local"
+
+    def __init__(self, residual_tol: float = 1e-10, polish: bool = True):
+        super().__init__(residual_tol)
+        self.polish = bool(polish)
 
     def applicable(self, pb):
         return pb.k == 1
 
     def _solve(self, pb):
-        from .cone_problem import local_disk
+        from .cone_nsgs import local_disk3
+        from .nsgs import local_planar
 
-        W = pb.W.toarray() if issparse(pb.W) else pb.W
-        p, mode = local_disk(W, pb.q, float(pb.mu[0]))
+        # the problem is validated: the kernels directly (local_disk checks its arguments again)
+        W = pb._dense_W()
+        mu = float(pb.mu[0])
+        if pb.n == 3:
+            qN, qT0, qT1 = pb.q.tolist()
+            pN, pT0, pT1, mode, _ = local_disk3(W, qN, qT0, qT1, mu, 0.0, 0.0)
+            p = np.array([pN, pT0, pT1])
+        else:
+            qN, qT = pb.q.tolist()
+            (W00, W01), (W10, W11) = W.tolist()
+            pN, pT, mode = local_planar(W00, W01, W10, W11, qN, qT, mu)
+            p = np.array([float(pN), float(pT)])
         if mode < 0:
-            return StepSolution(p, -1, "no admissible case (open, stick, slide) for this contact: "
-                                "a Painleve-type local problem", 1)
-        return StepSolution(p, 0, "solved", 1)
+            return ConeStepSolution(np.full(pb.n, np.nan), -1, "no admissible case (open, stick, slide) for this "
+                                    "contact: a Painleve-type local problem", 1)
+        if not self.polish:
+            return ConeStepSolution(p, 0, "solved", 1)
+        p, md = pb.refine_modes(p)
+        return ConeStepSolution(p, 0, "solved", 1, modes=md)
 
 
 # ----------------------------------------------------------------- NSGS
@@ -138,13 +175,14 @@ class _Iterative(ConeSolver):
         self._cache: dict = {}
 
     def _finish(self, pb, p, its, res, tol, msg, warm=None):
+        md = None
         if self.polish and res <= tol:
-            p = pb.refine(p)
+            p, md = pb.refine_modes(p)
         if warm is not None:
             warm.store(p)
         if not res <= tol:
-            return StepSolution(p, -1, f"{self.name}: {msg}; residual {res:.3g} > tolerance {tol:.3g}", its)
-        return StepSolution(p, 0, "solved", its)
+            return ConeStepSolution(p, -1, f"{self.name}: {msg}; residual {res:.3g} > tolerance {tol:.3g}", its)
+        return ConeStepSolution(p, 0, "solved", its, modes=md)
 
 
 class ConeNsgsSolver(_Iterative):
@@ -182,7 +220,7 @@ def cone_newton(pb: ConeContactProblem, p0, tol: float, max_iter: int = 50, max_
     """Semismooth Newton on the Alart-Curnier function of ``pb`` from p0 until residual <= tol.
 
     Each iteration solves J d = -Phi with the exact generalized Jacobian of the piece
-    (:meth:`ConeContactProblem.alart_curnier`; dense LU or SuperLU), and takes the largest step
+    (:meth:`ConeContactProblem.newton_system`, compiled; dense LU or SuperLU), and takes the largest step
     2^-i that decreases ||Phi||^2 (Armijo).
 
     Returns
@@ -193,11 +231,12 @@ def cone_newton(pb: ConeContactProblem, p0, tol: float, max_iter: int = 50, max_
     res = pb.residual(p)
     if res <= tol:
         return p, 0, res, "converged"
-    phi, A, B = pb.alart_curnier(p)
+    phi, J = pb.newton_system(p)
     merit = float(phi @ phi)
     damped = 0
     for it in range(1, max_iter + 1):
-        J = pb.jacobian(A, B)
+        if J is None:
+            phi, J = pb.newton_system(p)
         d = pb.solve_linear(J, -phi)
         if d is None:
             # a singular piece (redundant contacts): a tiny Levenberg shift keeps a direction
@@ -209,14 +248,14 @@ def cone_newton(pb: ConeContactProblem, p0, tol: float, max_iter: int = 50, max_
         t = 1.0
         for _ in range(40):
             p_new = p + t * d
-            phi_new, A_n, B_n = pb.alart_curnier(p_new)
+            phi_new = pb.newton_system(p_new, jacobian=False)[0]  # the line search needs Phi only
             m_new = float(phi_new @ phi_new)
             if m_new <= (1 - 1e-4 * t) * merit or m_new == 0.0:
                 break
             t *= 0.5
         else:
             return p, it, res, f"line search failed at iteration {it} (merit {merit:.3g})"
-        p, phi, merit, A, B = p_new, phi_new, m_new, A_n, B_n
+        p, phi, merit, J = p_new, phi_new, m_new, None
         res = pb.residual(p)
         if res <= tol:
             return p, it, res, "converged"
@@ -433,14 +472,14 @@ class TrescaSolver(ConeSolver):
             it = self.max_iter
         qp_solves = it
         p, n_it, res, msg = cone_newton(pb, x, 0.1 * self.residual_tol * pb.scale, 30)
-        p = pb.refine(p)
+        p, md = pb.refine_modes(p)
         res = pb.residual(p)
         if pb.key is not None:
             self._last_s[pb.key] = pb.mu * np.maximum(p[:k], 0.0)
         if res > 0.1 * self.residual_tol * max(pb.scale, float(np.max(np.abs(p)))):
-            return StepSolution(p, -1, f"Tresca fixed point + Newton polish stopped ({it} SOCP solves; "
-                                f"Newton: {msg})", it + n_it, qp_solves)
-        return StepSolution(p, 0, "solved", it + n_it, qp_solves)
+            return ConeStepSolution(p, -1, f"Tresca fixed point + Newton polish stopped ({it} SOCP solves; "
+                                    f"Newton: {msg})", it + n_it, qp_solves)
+        return ConeStepSolution(p, 0, "solved", it + n_it, qp_solves, modes=md)
 
 
 # ----------------------------------------------------------------- faceted (approximation)

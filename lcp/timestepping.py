@@ -338,10 +338,12 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
             stats.max_residual = max(stats.max_residual, sol.residual)
             p = sol.p
             if spatial:
-                # the branch refinement of the disk law (a stuck contact's velocity to the last bit)
-                p = pb.refine(p)
+                # the branch refinement of the disk law (a stuck contact's velocity to the last bit):
+                # done by the solver when it reports the modes of its refined impulse
+                md = getattr(sol, "modes", None)
+                if md is None:
+                    p, md = pb.refine_modes(p)
                 dv = dvf + SHta @ p
-                md = pb.modes(p)
             else:
                 dv = dvf + SHta @ p
                 md = pb.modes(p)
