@@ -143,8 +143,8 @@ def jean_pratt(m: float = 1.0, M: float = 1.0, alpha: float = math.pi / 4, R: fl
     >>> round(sc.kappa, 12), round(sc.tau0, 6), sc.q0, sc.v0
     (0.25, 0.152905, array([0., 0.]), array([1., 0.]))
     """
+    _check_params(m=m, M=M, alpha=alpha, R=R, g=g, v0=v0, phi=phi)  # one scene: numbers, not arrays
     check_parameters(m, M, alpha, R, g)
-    _check_params(v0=v0, phi=phi)
     if coordinates not in ("reduced", "full"):
         raise ValueError(f"coordinates must be 'reduced' or 'full', got {coordinates!r}")
     t = tan_alpha(alpha)

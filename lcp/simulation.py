@@ -163,8 +163,10 @@ def _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, 
 
 
 def _check_state(model, q0, v0):
-    q0 = np.asarray(q0, dtype=float)
-    v0 = np.asarray(v0, dtype=float)
+    try:
+        q0, v0 = np.asarray(q0, dtype=float), np.asarray(v0, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"q0 and v0 must be arrays of numbers, got {q0!r}, {v0!r}") from exc
     for name, x in (("q0", q0), ("v0", v0)):
         if x.shape != (model.n,):
             raise ValueError(f"{name} must have shape ({model.n},), got {x.shape}")

@@ -31,6 +31,8 @@ __all__ = ["Contact", "System"]
 
 
 def _finite_nonneg(name: str, value) -> float:
+    if isinstance(value, (str, bytes)) or np.ndim(value) != 0:  # float("0.3") would pass a typo'd string through
+        raise ValueError(f"{name} must be a number, got {value!r}")
     value = float(value)
     if not np.isfinite(value):
         raise ValueError(f"{name} must be finite, got {value!r}")
@@ -82,6 +84,13 @@ class Contact:
             raise ValueError(f"{self.name}: give exactly one of 'tangent' and 'tangent_jacobian'")
         if ca.SX(self.gap).numel() != 1:
             raise ValueError(f"gap of {self.name} must be a scalar expression")
+
+
+def _float_array(name: str, x) -> np.ndarray:
+    try:
+        return np.asarray(x, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be an array of numbers, got {x!r}") from exc
 
 
 def _sx(expr, shape_name: str, shape: tuple[int, int]) -> ca.SX:
@@ -171,6 +180,8 @@ class System:
         self.mass_expr = _sx(mass, "mass", (n, n))
         self.force_expr = _sx(force, "force", (n, 1))
         self._init_control(control, control_bounds, q, v, t)
+        if isinstance(contacts, Contact):
+            raise ValueError("contacts must be a list of Contact objects, got a single Contact")
         self.contacts = tuple(contacts)
         for c in self.contacts:
             if not isinstance(c, Contact):
@@ -387,8 +398,7 @@ class System:
 
     def check_state(self, q0, v0, t0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """Validate an initial state: finite, right shape, mass matrix positive definite there."""
-        q0 = np.asarray(q0, dtype=float)
-        v0 = np.asarray(v0, dtype=float)
+        q0, v0 = _float_array("q0", q0), _float_array("v0", v0)
         for name, x in (("q0", q0), ("v0", v0)):
             if x.shape != (self.n,):
                 raise ValueError(f"{name} must have shape ({self.n},), got {x.shape}")

@@ -129,3 +129,58 @@ def test_step_larger_than_horizon_is_rejected_unless_asked():
 def test_event_method_rejects_invalid_ignored_options(bad, name):
     with pytest.raises(ValueError, match=name):
         lcp.simulate(jean_pratt(), 0.3, method="event", **bad)
+
+
+def _free_block():
+    q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
+    return System(q, v, mass=2 * ca.SX.eye(2), force=ca.vertcat(0, -2 * 9.81),
+                  contacts=[Contact(gap=q[1], tangent=q[0], mu=0.3)])
+
+
+@pytest.mark.parametrize("q0, v0, name", [
+    ([[0.0, 0.0]], [1.5, 0.0], "q0"), ([0.0], [1.5, 0.0], "q0"), ([0.0, 0.0], [1.5, 0.0, 0.0], "v0"),
+    ("0,0", [1.5, 0.0], "q0"), ([0.0, 0.0], ["fast", 0.0], "v0"),
+])
+def test_newcomer_state_mistakes(q0, v0, name):
+    with pytest.raises(ValueError, match=name):
+        lcp.simulate(_free_block(), 1.0, h=1e-3, q0=q0, v0=v0)
+
+
+def test_newcomer_model_mistakes():
+    q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
+    with pytest.raises(ValueError, match="mu"):
+        Contact(gap=q[1], tangent=q[0], mu="0.3")  # a string is a typo, not a number
+    with pytest.raises(ValueError, match="mu"):
+        Contact(gap=q[1], tangent=q[0], mu=[0.3, 0.4])
+    with pytest.raises(ValueError, match="e of"):
+        Contact(gap=q[1], tangent=q[0], mu=0.3, e=-0.1)
+    with pytest.raises(ValueError, match="mass"):
+        System(q, v, mass=[1.0, 1.0], force=ca.vertcat(0, -9.81))
+    with pytest.raises(ValueError, match="contacts"):
+        System(q, v, mass=np.eye(2), force=ca.vertcat(0, -9.81), contacts=Contact(gap=q[1], tangent=q[0], mu=0.3))
+
+
+@pytest.mark.parametrize("kw, name", [
+    (dict(R=[0.5, 1.0]), "R"), (dict(M="1"), "M"), (dict(alpha=45.0), "alpha"), (dict(m=-1.0), "m"),
+])
+def test_newcomer_scene_mistakes(kw, name):
+    with pytest.raises(ValueError, match=name):
+        jean_pratt(**kw)
+
+
+@pytest.mark.parametrize("args, kw, name", [
+    ((0.3,), dict(h="1e-3"), "h"), (("0.3",), {}, "t_end"), ((0.0,), {}, "t_end"), ((0.3,), dict(theta=0), "theta"),
+    ((0.3,), dict(tol=1e-6), "tol"), ((0.3,), dict(solver="Lemke"), "solver"),
+    ((0.3,), dict(method="events"), "method"),
+    ((0.3,), dict(save_every=2.5), "save_every"), ((0.3,), dict(method="event", n_eval=0), "n_eval"),
+    ((0.3,), dict(method="event", t_eval=[0.0, 1.0]), "t_eval"),
+])
+def test_newcomer_simulate_mistakes(args, kw, name):
+    with pytest.raises(ValueError, match=name):
+        lcp.simulate(jean_pratt(), *args, **kw)
+
+
+def test_block_chain_count_must_be_an_integer():
+    for K in (2.5, "3"):
+        with pytest.raises(ValueError, match="K"):
+            block_chain(K)
