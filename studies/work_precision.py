@@ -82,7 +82,7 @@ from scipy.integrate import solve_ivp
 import lcp
 from lem import series
 from studies._cluster import add_options, cluster, pieces
-from studies._common import out_dir, parse_args, save, write_csv
+from studies._common import floored, legend, out_dir, parse_args, save, write_csv
 
 import matplotlib.pyplot as plt  # noqa: E402  (studies._common selects the Agg backend first)
 
@@ -757,38 +757,66 @@ def figure(rows, summary, metric, path, ylabel):
     return save(fig, path)
 
 
+def _thinned(t, y, floor, keep=25):
+    """Indices to draw: every point at or above the floor, about `keep` of those below it (their markers
+    would otherwise merge into a band; the CSV holds every point)."""
+    below = np.flatnonzero(y < floor)
+    step = max(1, len(below) // keep)
+    return np.union1d(np.flatnonzero(y >= floor), below[::step])
+
+
+PREDICTED = "predicted drift eps atanh(phi/(R N)) (t - t1)"
+
+
+def _predicted_drift(cr):
+    """(eps, t, drift) of the creep law the regularized runs should follow (the figure's dash-dot lines)."""
+    t = np.geomspace(cr["t1"], cr["T"], 50)[1:]
+    return [(eps, ti, cr["predicted"](ti, eps) - cr["predicted"](cr["t1"], eps))
+            for eps in sorted({s["eps"] for s in cr["series"] if s["eps"] != ""}, reverse=True) for ti in t]
+
+
 def creep_figure(cr, path):
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5))
+    fig, axes = plt.subplots(1, 2, figsize=(14, 5))
     eps_colors = {}
     for s in cr["series"]:
         if s["method"].startswith("tanh"):
-            eps_colors.setdefault(s["eps"], ["tab:orange", "tab:purple", "tab:brown", "tab:olive", "tab:cyan"][len(eps_colors) % 5])
+            eps_colors.setdefault(s["eps"], ["tab:orange", "tab:purple", "tab:brown", "tab:olive",
+                                             "tab:cyan"][len(eps_colors) % 5])
             st = dict(lw=1.5, color=eps_colors[s["eps"]], ls="-" if "LSODA" in s["method"] else ":")
             label = f"{s['method']}, eps = {s['eps']:g}"
         else:
             color = "k" if "compiled" in s["method"] else ("tab:red" if "osqp" in s["method"] else "tab:green")
             st = dict(lw=2.0, color=color, ls="--")
             label = s["method"]
-        axes[0].loglog(s["t"], np.maximum(s["err"], FLOOR), label=label, **st)
+        fmt = st.pop("ls")
+        i = _thinned(s["t"], s["err"], FLOOR)
+        floored(axes[0], s["t"][i], s["err"][i], FLOOR, fmt=fmt, label=label, **st)
         later = s["t"] > cr["t1"]
-        axes[1].loglog(s["t"][later], np.maximum(s["drift"][later], FLOOR), label=label, **st)
-    t = np.geomspace(cr["t1"], cr["T"], 50)
-    for eps in sorted({s["eps"] for s in cr["series"] if s["eps"] != ""}, reverse=True):
-        axes[1].loglog(t[1:], cr["predicted"](t[1:], eps) - cr["predicted"](cr["t1"], eps), color="k", lw=0.8,
-                       ls="-.", label="eps atanh(phi/(R N)) (t - t1)" if eps == 1e-2 else None)
-    axes[0].set_title("|x - exact| on the loaded stick (phi = 5 N < R (m+M) g)")
-    axes[1].set_title("drift since t1 = tau0 + 0.05 s")
+        t_l, d_l = s["t"][later], s["drift"][later]
+        i = _thinned(t_l, d_l, FLOOR)
+        if np.any(d_l >= FLOOR):
+            floored(axes[1], t_l[i], d_l[i], FLOOR, fmt=fmt, label=label, **st)
+        else:  # drift exactly 0: crosses at the floor, and a legend entry (no data) for the left panel's line
+            floored(axes[1], t_l[i], d_l[i], FLOOR, fmt=fmt, **st)
+            axes[1].plot([], [], fmt, label=label, **st)
+    pred = _predicted_drift(cr)
+    for k, eps in enumerate(sorted({e for e, _, _ in pred}, reverse=True)):
+        t, d = np.array([(ti, di) for e, ti, di in pred if e == eps]).T
+        axes[1].plot(t, d, color="k", lw=0.8, ls="-.", label="eps atanh(phi/(R N)) (t - t1)" if k == 0 else None)
+    axes[0].set_title("|x - exact| on the loaded stick (phi = 5 N < R (m+M) g)", fontsize=10)
+    axes[1].set_title("drift since t1 = tau0 + 0.05 s", fontsize=10)
     for ax in axes:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
         ax.set_xlabel("t (s)")
         ax.grid(True, alpha=0.3)
     axes[0].set_ylabel("error (m)")
     axes[1].set_ylabel("|x(t) - x(t1)| (m)")
-    axes[1].text(0.03, 0.1, "MJ (compiled, OSQP) and event-driven: drift exactly 0", transform=axes[1].transAxes,
+    axes[1].text(0.03, 0.16, "MJ (compiled, OSQP) and event-driven: drift exactly 0", transform=axes[1].transAxes,
                  fontsize=9)
-    axes[1].legend(fontsize=8, loc="center right", ncol=2)
-    fig.suptitle(f"The regularized law creeps; the complementarity methods hold the stick "
-                 f"(0 drawn at {FLOOR:g})", fontsize=12)
-    fig.tight_layout()
+    axes[1].set_ylim(bottom=FLOOR / 30)  # room for the floor note below the floor's markers
+    legend(axes[1])
+    fig.suptitle("The regularized law creeps; the complementarity methods hold the stick", fontsize=12)
     return save(fig, path)
 
 
@@ -831,7 +859,8 @@ def run(out=None, quick: bool = False, log=None, workers: int | None = None, sch
     files = write_tables(rows, summary, folder)
     files.append(write_csv(folder / "creep.csv", ["method", "eps", "t", "error", "drift"],
                            [[s["method"], s["eps"], float(t), float(e), float(d)]
-                            for s in cr["series"] for t, e, d in zip(s["t"], s["err"], s["drift"])]))
+                            for s in cr["series"] for t, e, d in zip(s["t"], s["err"], s["drift"])]
+                           + [[PREDICTED, eps, float(t), "", float(d)] for eps, t, d in _predicted_drift(cr)]))
     files.append(figure(rows, summary, "e_max", folder / "work_precision.png", "e_max = max |x - exact|"))
     files.append(figure(rows, summary, "e_final", folder / "work_precision_final.png", "e_final = |x(T) - exact|"))
     files.append(figure(rows, summary, "stop_err", folder / "work_precision_stop.png", "stop-time error (s)"))
