@@ -7,7 +7,7 @@ s_j > 0, with a sign that continues smoothly through zero, where U_j and s_j cha
 (The quotient U_j / s_j would do the same in exact arithmetic, but its length drifts from 1 and
 the drift grows like 1 / s_j^2 toward the stop.) The phase's equations are then smooth through the stop,
 and the stop is the simple sign change s_j = 0, located by root finding on the dense output of
-SciPy's ``solve_ivp`` (DOP853, rtol 1e-13 by default here). A phase that starts sliding from rest
+SciPy's ``solve_ivp`` (DOP853, rtol 1e-13 and atol 1e-16 of the scene's scales by default here). A phase that starts sliding from rest
 has s_j = 0 and U_j = 0; its direction d_j is then the one the mode decision found, until the
 motion defines it. The drift between s_j and |U_j| is checked at the end of each phase
 (``stats``-like note in the message when it exceeds 1e-8 of the velocity scale).
@@ -18,7 +18,11 @@ of the closed contacts at each evaluation: one small linear solve
 kinematics the inverse mass matrix and S H' are assembled once).
 
 Events: a stop (s_j = 0), a lift-off (N_j = 0), a slip (|f_j| = mu_j N_j), a gap closing (impact:
-the velocity-level disk problem with Newton restitution), a breakpoint of the forces.
+the velocity-level disk problem with Newton restitution), a breakpoint of the forces. A sliding
+contact whose direction turns into the Painleve region (its effective normal mass
+H_N S (H_N' - mu H_T' d) falls to zero, so N grows without bound: the Jean-Pratt block launched
+obliquely with kappa >= 1) ends the run with status -3 and the time in the message, when that mass
+has fallen to 1e-6 of its two terms (``"painleve"`` event).
 
 At each event the next modes come from the acceleration-level disk problem
 (:class:`~lcp.events.spatial_modes.AccelDisk`): a contact at rest sticks if that is admissible, else
@@ -53,6 +57,15 @@ __all__ = ["SpatialIntegrator", "SpatialPhase", "spatial_event_driven"]
 
 #: default relative tolerance of the smooth phases (tighter than the planar integrator's)
 SPATIAL_RTOL = 1e-13
+#: default absolute tolerance, relative to the scene's scales: a velocity component that tends to
+#: zero (the cross-slope velocity on an incline) must still be integrated to rtol of the motion
+SPATIAL_ATOL = 1e-16
+#: a sliding contact whose relative effective normal mass (:meth:`SpatialPhase.normal_mass`) falls
+#: to this value is reported as reaching the Painleve singularity (status -3)
+PAINLEVE_MARGIN = 1e-6
+_EXPLICIT = ("DOP853", "RK45", "RK23")
+#: a slide from rest keeps its initial direction over this fraction of the scene's time scale
+FROZEN_START = 1e-6
 
 
 class Inconsistent(Exception):
@@ -102,6 +115,12 @@ class SpatialPhase:
             U = H[model.trows[self.idx[i]]] @ v0
             s0.append(float(U @ self.d0[i]))
         self.s0 = np.array(s0)
+        # A slide from rest starts at s = 0 with s' = 0 at a slip (the force on its bound), and
+        # rounding may dip s below zero at once: its stop (and the sign of its direction) is
+        # a fall below -1e-3 of the velocity zero test.
+        self.s_off = np.where(self.s0 == 0.0, 1e-3 * integ.vel_tol, 0.0)
+        self.from_rest = bool(np.any(self.s0 == 0.0))
+        self.frozen = False
         self.o = integ.o
         self.integrator = integ.o.ode_method
         self.nfev = 0
@@ -123,13 +142,13 @@ class SpatialPhase:
         s = y[y.size - ns:] if ns else y[:0]
         fr = model.frame(min(t, self.t_left), q, v)
         dirs = list(self.d0)
-        for k_, i in enumerate(self.slide):
+        for k_, i in enumerate([] if self.frozen else self.slide):
             U = fr.H[model.trows[self.idx[i]]] @ v
             nU = math.hypot(*U.tolist())
             if nU != 0.0:
                 # U/|U| with the sign of s: continuous through the stop (U and s change sign
                 # together), and of unit length (U/s drifts off it, unstably as s -> 0)
-                dirs[i] = U / (nU if s[k_] >= 0 else -nU)
+                dirs[i] = U / (nU if s[k_] >= -self.s_off[k_] else -nU)
         qdd, N, f_st, _ = model.phase_accel(fr, self.idx, self.stick, dirs)
         Nm = np.zeros(m)
         fm = np.zeros(model.H_rows - m)
@@ -173,20 +192,37 @@ class SpatialPhase:
 
         base = y0.size - len(self.slide)
         for k_, i in enumerate(self.slide):
-            make(lambda t, y, c=base + k_: float(y[c]), "stop", self.idx[i])
+            make(lambda t, y, c=base + k_, off=self.s_off[k_]: float(y[c]) + off, "stop", self.idx[i])
         for i, j in enumerate(self.idx):
             make(lambda t, y, j=j: float(ev(t, y)[1][j]), "lift-off", j, force=True)
             if self.stick[i]:
                 tr, mu = model.trows[j] - m, model.mu[j]
                 make(lambda t, y, j=j, tr=tr, mu=mu: float(mu * ev(t, y)[1][j] - np.linalg.norm(ev(t, y)[2][tr])),
                      "slip", j, force=True)
+        for k_, i in enumerate(self.slide):
+            make(lambda t, y, i=i: self.normal_mass(t, y, i) - PAINLEVE_MARGIN, "painleve", self.idx[i])
         for j in self.open_idx:
             make(lambda t, y, j=j: approach_gap(model, y, n, j), "impact", j)
         return evs, meta
 
+    def normal_mass(self, t, y, i):
+        """H_N,j S (H_N,j' - mu_j H_T,j' d_j) / (|H_N,j S H_N,j'| + mu_j |H_N,j S H_T,j' d_j|) of sliding
+        contact i: 1 without friction coupling, 0 at the Painleve singularity (N_j -> inf)."""
+        model, n = self.model, self.model.n
+        q, v = y[:n], y[n:2 * n]
+        fr = model.frame(min(t, self.t_left), q, v)
+        j = self.idx[i]
+        tr = model.trows[j]
+        U = fr.H[tr] @ v
+        nU = math.hypot(*U.tolist())
+        d = self.d0[i] if nU == 0.0 else U / nU
+        a = float(fr.H[j] @ fr.SH[:, j])
+        c = model.mu[j] * float(fr.H[j] @ (fr.SH[:, tr] @ d))
+        ref = abs(a) + abs(c)
+        return (a - c) / ref if ref > 0 else 1.0
+
     def run(self, t_stop, breakpoint=False):
         """Integrate to the first event before t_stop: (t, kind, contact) or None."""
-        from scipy.integrate import solve_ivp
 
         if breakpoint:
             self.t_left = float(np.nextafter(t_stop, -np.inf))
@@ -194,14 +230,39 @@ class SpatialPhase:
         y0 = np.concatenate([self.q0, self.v0, self.P0, self.s0])
         evs, meta = self._events(y0)
         o, sc = self.o, self.integ.scales
-        atol = np.concatenate([np.full(n, o.atol * sc["L"]), np.full(n, o.atol * sc["V"]),
-                               np.full(self.P0.size, o.atol * sc["P"]), np.full(self.s0.size, o.atol * sc["V"])])
-        sol = solve_ivp(self._rhs, (self.t0, t_stop), y0, method=o.ode_method, rtol=self.integ.rtol, atol=atol,
-                        events=evs, dense_output=True)
-        self.nfev = sol.nfev
+        a = self.integ.atol
+        atol = np.concatenate([np.full(n, a * sc["L"]), np.full(n, a * sc["V"]),
+                               np.full(self.P0.size, a * sc["P"]), np.full(self.s0.size, a * sc["V"])])
+        method, rtol = o.ode_method, self.integ.rtol
+        self.segments = []
+        t_start = self.t0
+        if self.from_rest and method in _EXPLICIT:
+            # Sliding from rest: the direction's transverse dynamics has the rate mu N / (m |U|),
+            # unbounded while |U| grows from 0 (no explicit method follows it stably), and U/|U|
+            # jumps at U = 0 (no Newton iteration of an implicit one converges there). The first
+            # FROZEN_START of the scene's time scale slides along the decided direction; Radau
+            # continues with U/|U|.
+            t_fr = min(t_stop, self.t0 + FROZEN_START * self.integ.scales["L"] / self.integ.scales["V"])
+            self.frozen = True
+            out = self._solve(t_start, t_fr, y0, method, rtol, atol, evs, meta)
+            self.frozen = False
+            if out is not None or t_fr >= t_stop:
+                return out
+            t_start, y0 = t_fr, self.y1
+            method, rtol = "Radau", max(rtol, 1000 * EPS)
+            self.integrator = f"{o.ode_method}+Radau"
+        return self._solve(t_start, t_stop, y0, method, rtol, atol, evs, meta)
+
+    def _solve(self, ta, tb, y0, method, rtol, atol, evs, meta):
+        from scipy.integrate import solve_ivp
+
+        sol = solve_ivp(self._rhs, (ta, tb), y0, method=method, rtol=rtol, atol=atol, events=evs,
+                        dense_output=True)
+        self.nfev += sol.nfev
+        self.segments.append((ta, sol))
         self.sol = sol
         if sol.status < 0:
-            raise FloatingPointError(f"solve_ivp ({o.ode_method}) failed at t = {sol.t[-1]:.10g}: {sol.message}")
+            raise FloatingPointError(f"solve_ivp ({method}) failed at t = {sol.t[-1]:.10g}: {sol.message}")
         self.y1 = sol.y[:, -1]
         if sol.status == 1:
             first = min((float(te[0]), i) for i, te in enumerate(sol.t_events) if te.size)
@@ -209,7 +270,7 @@ class SpatialPhase:
             self.y1 = sol.y_events[first[1]][0]
             kind, j = meta[first[1]]
             return self.t1, kind, j
-        self.t1 = t_stop
+        self.t1 = tb
         return None
 
     def speed_drift(self) -> float:
@@ -232,7 +293,13 @@ class SpatialPhase:
         """Write (q, v, cumulative forces) at the times t into ``out``; return (N, f) there."""
         model = self.model
         r = out.shape[0]
-        Y = self.sol.sol(t) if t.size else np.zeros((self.y1.size, 0))
+        Y = np.zeros((self.y1.size, t.size))
+        starts = [ta for ta, _ in self.segments]
+        seg = np.searchsorted(starts, t, "right") - 1
+        for i, (_, sol) in enumerate(self.segments):
+            sel = np.flatnonzero(np.maximum(seg, 0) == i)
+            if sel.size:
+                Y[:, sel] = sol.sol(t[sel])
         out[:] = Y[:r]
         N = np.zeros((t.size, model.m))
         f = np.zeros((t.size, model.H_rows - model.m))
@@ -244,11 +311,11 @@ class SpatialPhase:
 class SpatialIntegrator:
     """One event-driven integration of a System with spatial contacts over [0, t_end]."""
 
-    def __init__(self, system, q0, v0, t_end, options, rtol):
+    def __init__(self, system, q0, v0, t_end, options, rtol, atol):
         self.sys = system
         self.model = model = SpatialModel(system)
         model.H_rows = system.n_contact_rows
-        self.o, self.rtol, self.t_end = options, rtol, t_end
+        self.o, self.rtol, self.atol, self.t_end = options, rtol, atol, t_end
         self.m = system.n_contacts
         self.stats = SolverStats()
         self.events, self.impulses, self.phases, self.impact_list = [], [], [], []
@@ -273,7 +340,8 @@ class SpatialIntegrator:
                 self.impulses.append(Impulse(float(t), int(j), float(P[i]), pT_out, kind, reason))
                 if kind == "impact":
                     self.impact_list.append(Impact(float(t), int(j), self.sys.contacts[j].name, float(P[i]), pT_out))
-        self.events.append(Event(float(t), kind, int(contacts[0]) if k == 1 else -1))
+        if not (self.events and self.events[-1].t == t and self.events[-1].kind == kind):
+            self.events.append(Event(float(t), kind, int(contacts[0]) if k == 1 else -1))
 
     def decide(self, t, q, v, last):
         """Impulses where needed, then the next modes: (v, closed contacts kept, modes, dirs)."""
@@ -436,6 +504,14 @@ class SpatialIntegrator:
                 ev = (t_stop, "breakpoint", -1)
             te, kind, j = ev
             last = (kind, j)
+            if kind == "painleve":
+                status = -3
+                message = (f"{EVENT_STATUS_MESSAGES[-3]} At t = {te:.17g} contact {self.sys.contacts[j].name!r} "
+                           "slides into the Painleve singularity (its effective normal mass tends to zero, the "
+                           "normal force grows without bound); the integration stops there.")
+                self.events.append(Event(float(te), kind, int(j)))
+                t = te
+                break
             q, v, P = ph.end_state()
             stick = [c for c, md in zip(idx, modes) if md == STICK]
             if kind == "stop":
@@ -464,7 +540,7 @@ def spatial_event_driven(system, q0, v0, t_end, opts, given, scene=None) -> Even
     """:func:`lcp.events.driver.event_driven` for a system with spatial contacts.
 
     ``opts`` are the validated :class:`~lcp.events.options.EventOptions`, ``given`` the names of
-    the options the caller set (rtol defaults to 1e-13 here). ``smooth="closed-form"`` and
+    the options the caller set (rtol and atol default to 1e-13 and 1e-16 here). ``smooth="closed-form"`` and
     ``mode_solver``/``impact_solver``/``max_branches`` other than their defaults are rejected
     (ValueError naming them): phases are integrated by ``solve_ivp``, and the disk problems by the
     solvers of :mod:`lcp.events.spatial_modes`.
@@ -487,8 +563,9 @@ def spatial_event_driven(system, q0, v0, t_end, opts, given, scene=None) -> Even
                              f"problems itself); leave {name} at {default!r}")
     q0, v0 = system.check_state(q0, v0)
     rtol = opts.rtol if "rtol" in given else SPATIAL_RTOL
+    atol = opts.atol if "atol" in given else SPATIAL_ATOL
     t_out = opts.output_times(t_end)
-    integ = SpatialIntegrator(system, q0, v0, t_end, opts, rtol)
+    integ = SpatialIntegrator(system, q0, v0, t_end, opts, rtol, atol)
     gap = integ.model.gaps(q0)
     if system.n_contacts and np.min(gap) < -integ.gap_tol:
         j = int(np.argmin(gap))

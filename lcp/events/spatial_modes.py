@@ -291,7 +291,9 @@ class AccelDisk:
             p = np.concatenate([[N], -mu * N * d])
             aT = W[k:] @ p + b[k:]
             lam = float(aT @ d)
-            if lam <= atol or np.linalg.norm(aT - lam * d) > 1e-8 * max(abs(lam), atol):
+            # lambda > 0 without tolerance: at the friction bound the stick (within its
+            # tolerance) and this slide are one motion, grouped by their accelerations
+            if lam <= 0.0 or np.linalg.norm(aT - lam * d) > 1e-8 * max(abs(lam), atol):
                 continue
             sols.append(DiskSolution([_slide_mode(d)], [d], p, self.qdd(p)))
         return sols
