@@ -65,8 +65,9 @@ def test_lateral_force_slide_stops_then_sticks(F, v0):
     t_stop = sc.solution.t_stop
     assert abs(res.t_events[0] - t_stop) <= 1e-12 * t_stop
     ex = sc.exact(np.array([t_stop]))
-    assert np.max(np.abs(res.q[-1, :2] - [ex["x"][0], ex["z"][0]])) <= 1e-10
-    assert _errors(res, sc.exact(res.t)) <= 1e-10
+    # measured: stop time 3e-15 relative, stop position 6e-16, trajectory 3e-13
+    assert np.max(np.abs(res.q[-1, :2] - [ex["x"][0], ex["z"][0]])) <= 1e-12
+    assert _errors(res, sc.exact(res.t)) <= 1e-11
     assert np.all(res.v[res.t > res.t_events[0]] == 0.0)
 
 
