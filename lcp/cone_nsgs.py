@@ -61,35 +61,44 @@ def disk_residual(pN, pT0, pT1, uN, uT0, uT1, mu, rhoN, rhoT):
 
 @njit(cache=True)
 def _solve3(W, b0, b1, b2):
-    """x with W x = b (3 x 3, Gaussian elimination with partial pivoting); ok False if singular."""
-    A = np.empty((3, 4))
-    for i in range(3):
-        for j in range(3):
-            A[i, j] = W[i, j]
-    A[0, 3], A[1, 3], A[2, 3] = b0, b1, b2
-    big = 0.0
-    for i in range(3):
-        for j in range(3):
-            big = max(big, abs(W[i, j]))
+    """x with W x = b (3 x 3, Gaussian elimination with partial pivoting); ok False if singular.
+
+    Scalars only (no heap allocation: this runs once per contact and sweep)."""
+    a00, a01, a02 = W[0, 0], W[0, 1], W[0, 2]
+    a10, a11, a12 = W[1, 0], W[1, 1], W[1, 2]
+    a20, a21, a22 = W[2, 0], W[2, 1], W[2, 2]
+    big = max(abs(a00), abs(a01), abs(a02), abs(a10), abs(a11), abs(a12), abs(a20), abs(a21), abs(a22))
     if big == 0.0:
         return 0.0, 0.0, 0.0, False
-    for c in range(3):
-        piv = c
-        for i in range(c + 1, 3):
-            if abs(A[i, c]) > abs(A[piv, c]):
-                piv = i
-        if abs(A[piv, c]) <= 1e-14 * big:
-            return 0.0, 0.0, 0.0, False
-        if piv != c:
-            for j in range(4):
-                A[c, j], A[piv, j] = A[piv, j], A[c, j]
-        for i in range(c + 1, 3):
-            f = A[i, c] / A[c, c]
-            for j in range(c, 4):
-                A[i, j] -= f * A[c, j]
-    x2 = A[2, 3] / A[2, 2]
-    x1 = (A[1, 3] - A[1, 2] * x2) / A[1, 1]
-    x0 = (A[0, 3] - A[0, 1] * x1 - A[0, 2] * x2) / A[0, 0]
+    small = 1e-14 * big
+    # column 0: pivot row first
+    if abs(a10) > abs(a00) and abs(a10) >= abs(a20):
+        a00, a01, a02, b0, a10, a11, a12, b1 = a10, a11, a12, b1, a00, a01, a02, b0
+    elif abs(a20) > abs(a00) and abs(a20) > abs(a10):
+        a00, a01, a02, b0, a20, a21, a22, b2 = a20, a21, a22, b2, a00, a01, a02, b0
+    if abs(a00) <= small:
+        return 0.0, 0.0, 0.0, False
+    f = a10 / a00
+    a11 -= f * a01
+    a12 -= f * a02
+    b1 -= f * b0
+    f = a20 / a00
+    a21 -= f * a01
+    a22 -= f * a02
+    b2 -= f * b0
+    # column 1
+    if abs(a21) > abs(a11):
+        a11, a12, b1, a21, a22, b2 = a21, a22, b2, a11, a12, b1
+    if abs(a11) <= small:
+        return 0.0, 0.0, 0.0, False
+    f = a21 / a11
+    a22 -= f * a12
+    b2 -= f * b1
+    if abs(a22) <= small:
+        return 0.0, 0.0, 0.0, False
+    x2 = b2 / a22
+    x1 = (b1 - a12 * x2) / a11
+    x0 = (b0 - a01 * x1 - a02 * x2) / a00
     return x0, x1, x2, True
 
 
@@ -105,11 +114,13 @@ def _par(c, s, v0x, v0y, V00, V01, V10, V11):
 
 @njit(cache=True)
 def _polish(c, s, v0x, v0y, V00, V01, V10, V11):
-    """Newton on h(t) = 0 from the unit vector (c, s), rotating it; steps limited to 0.5 rad (a
-    double root converges linearly). A direction where h is exactly zero is returned unchanged."""
+    """Newton on h(t) = 0 from the unit vector (c, s), rotating it; steps limited to 0.5 (a
+    double root converges linearly). A direction where h is exactly zero is returned unchanged;
+    the iteration stops once a tiny step no longer shrinks (the rounding floor of h)."""
     nrm = math.hypot(c, s)
     c /= nrm
     s /= nrm
+    prev = np.inf
     for _ in range(60):
         h, dh = _par(c, s, v0x, v0y, V00, V01, V10, V11)
         if h == 0.0 or dh == 0.0:
@@ -119,9 +130,13 @@ def _polish(c, s, v0x, v0y, V00, V01, V10, V11):
             step = 0.5
         elif step < -0.5:
             step = -0.5
-        cs = math.cos(step)
-        sn = math.sin(step)
-        c, s = c * cs - s * sn, s * cs + c * sn
+        if abs(step) < 1e-12 and abs(step) >= prev:
+            break  # no longer shrinking: h is at its rounding floor (further steps only dither)
+        prev = abs(step)
+        # rotate by atan(step) (= step + O(step^3): still Newton's quadratic convergence) with one
+        # square root instead of a cosine and a sine
+        w = 1.0 / math.sqrt(1.0 + step * step)
+        c, s = (c - s * step) * w, (s + c * step) * w
         if abs(step) <= 1e-16:
             break
     return c, s

@@ -143,6 +143,7 @@ class ConeContactProblem:
         if not np.all(np.isfinite(q)):
             raise ValueError("q must be finite")
         self.W, self.q = W, q
+        self._sparse = issparse(W)
         self.toff, self.start, self.perm = cone_layout(self.dims)
         # (k, 3) rows of each contact's (N, T0, T1) in the blocked order, -1 where d_j = 1
         R = np.full((k, 3), -1, dtype=np.int64)
@@ -253,7 +254,7 @@ class ConeContactProblem:
         p = np.asarray(p, dtype=float)
         ker = _kernels()
         if ker is not None and math.isfinite(p.sum()):  # one reduction: NaN/inf propagate into the sum
-            if issparse(self.W):
+            if self._sparse:
                 W = self.W
                 return float(ker.residual_blocked_csr(W.indptr, W.indices, W.data, self.q, self.mu, self.dims,
                                                       self.toff, self.rhoN, self.rhoT, p))
@@ -410,7 +411,7 @@ class ConeContactProblem:
         if ker is None or not math.isfinite(p.sum()):
             phi, A, B = self.alart_curnier(p)
             return phi, (self.jacobian(A, B) if jacobian else None)
-        sparse = issparse(self.W)
+        sparse = self._sparse
         if sparse:
             W = self.W
             u = ker.velocity_csr(W.indptr, W.indices, W.data, self.q, p)
@@ -428,7 +429,7 @@ class ConeContactProblem:
 
     def _dense_W(self) -> np.ndarray:
         """W as a dense array (kept: small sparse operators factorize faster dense)."""
-        if not issparse(self.W):
+        if not self._sparse:
             return self.W
         Wd = self._cache.get("dense_W")
         if Wd is None:
@@ -488,7 +489,7 @@ class ConeContactProblem:
         if not math.isfinite(p.sum()):
             return p, self._modes(p)
         ker = _kernels()
-        if ker is not None and (not issparse(self.W) or self.n <= DENSE_JACOBIAN_MAX):
+        if ker is not None and (not self._sparse or self.n <= DENSE_JACOBIAN_MAX):
             return ker.refine_dense(self._dense_W(), self.q, self.mu, self.dims, self.toff, self.rhoN, self.rhoT,
                                     self.scale, p, int(iterations), 1e-9)
         best = self._refine_numpy(p, iterations)

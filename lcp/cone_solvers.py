@@ -7,9 +7,13 @@ Each solver takes a :class:`~lcp.cone_problem.ConeContactProblem` and returns a
 solver's answer above ``residual_tol`` (relative to the problem's impulse scale and the largest
 impulse) is rejected with status -2.
 
-- ``"local"``: one contact, the exact local solve (:func:`lcp.cone_problem.local_disk`).
+- ``"local"``: one contact, the exact local solve (:func:`lcp.cone_problem.local_disk`), then the
+  branch refinement.
 - ``"nsgs"``: nonsmooth Gauss-Seidel with exact local solves (:mod:`lcp.cone_nsgs`), warm-started
-  on ``problem.key``, finished by a branch refinement (:meth:`ConeContactProblem.refine`).
+  on ``problem.key``, finished by a branch refinement (:meth:`ConeContactProblem.refine_modes`).
+
+Polished solvers return a :class:`ConeStepSolution` whose ``modes`` are those of the refined
+impulse, so a time stepper needs neither a second refinement nor a second classification.
 - ``"newton"``: NSGS sweeps, then semismooth Newton on the Alart-Curnier function with its exact
   generalized Jacobian (sparse LU when W is sparse), Armijo line search, to rounding level.
 - ``"tresca"``: the Tresca fixed point on the friction bound s = mu p_N: for fixed s the convex
@@ -20,8 +24,9 @@ impulse) is rejected with status -2.
 - ``"faceted"``: an APPROXIMATION, the disk replaced by an inscribed polygon of ``n_facets``
   directions, solved exactly as an LCP by Lemke's method. Its status is 1 ("approximate"), its
   residual is the true disk law's, and the residual check does not apply; ``"auto"`` never uses it.
-- ``"auto"``: ``"local"`` for one contact, ``"nsgs"`` up to 20 contacts, ``"newton"`` above (the
-  fastest exact solvers in ``benchmarks/spatial_one_step.py``), with ``"newton"`` and then
+- ``"auto"``: ``"local"`` for one contact, ``"nsgs"`` up to 40 contacts, ``"newton"`` above (the
+  fastest exact solvers in ``benchmarks/spatial_one_step.py``; measured crossover in
+  :class:`ConeAutoSolver`), with ``"newton"`` and then
   ``"tresca"`` (when Clarabel is installed) as fallbacks.
 """
 from __future__ import annotations
@@ -33,7 +38,9 @@ import numpy as np
 
 from ._imports import issparse
 from ._imports import sparse as sp
+from .cone_nsgs import local_disk3
 from .cone_problem import ConeContactProblem
+from .nsgs import local_planar
 from .solvers import OneStepSolver, StepSolution
 
 __all__ = [
@@ -112,9 +119,6 @@ class LocalSolver(ConeSolver):
         return pb.k == 1
 
     def _solve(self, pb):
-        from .cone_nsgs import local_disk3
-        from .nsgs import local_planar
-
         # the problem is validated: the kernels directly (local_disk checks its arguments again)
         W = pb._dense_W()
         mu = float(pb.mu[0])
@@ -234,12 +238,14 @@ def cone_newton(pb: ConeContactProblem, p0, tol: float, max_iter: int = 50, max_
     phi, J = pb.newton_system(p)
     merit = float(phi @ phi)
     damped = 0
+    shifted = False  # redundant contacts stay redundant: once singular, shift at once (one LU, not two)
     for it in range(1, max_iter + 1):
         if J is None:
             phi, J = pb.newton_system(p)
-        d = pb.solve_linear(J, -phi)
+        d = None if shifted else pb.solve_linear(J, -phi)
         if d is None:
             # a singular piece (redundant contacts): a tiny Levenberg shift keeps a direction
+            shifted = True
             shift = 1e-12 * max(1.0, float(abs(J).max()))
             J = J + shift * (sp.identity(pb.n, format="csc") if issparse(J) else np.eye(pb.n))
             d = pb.solve_linear(J, -phi)
@@ -557,14 +563,18 @@ class FacetedSolver(ConeSolver):
 class ConeAutoSolver(ConeSolver):
     """The fastest exact solver for the problem at hand (never the faceted approximation): the
     local solve for one contact; NSGS (at most ``NSGS_SWEEPS`` sweeps) up to ``NSGS_MAX_CONTACTS``
-    contacts; NSGS with a Newton finish (``"newton"``) above. The crossover is measured in
-    ``benchmarks/spatial_one_step.py`` (box rows: NSGS 9x faster than Newton at 10 contacts,
-    Newton 8-11x faster than NSGS at 100). A failure is retried by ``"newton"`` and then by
-    ``"tresca"`` when Clarabel is installed."""
+    contacts; NSGS with a Newton finish (``"newton"``) above. A failure is retried by ``"newton"``
+    and then by ``"tresca"`` when Clarabel is installed.
+
+    The crossover is measured on the box-row scene of ``benchmarks/spatial_one_step.py`` (cold
+    solves, compiled kernels, load about 5 on 2 cores), median ms NSGS / Newton: 5 contacts
+    0.04 / 0.08, 10: 0.49 / 0.84, 20: 1.4 / 6.4, 30: 12 / 16, 50: 35 / 21, 70: 42 / 31,
+    100: 186 / 34. NSGS wins up to 30 contacts, Newton from 50 (NSGS needs 1000-4300 sweeps
+    there): the switch is at 40."""
 
     name = "auto"
     #: largest number of contacts solved by NSGS first
-    NSGS_MAX_CONTACTS = 20
+    NSGS_MAX_CONTACTS = 40
     NSGS_SWEEPS = 1000
 
     def __init__(self, residual_tol: float = 1e-10):
@@ -574,6 +584,14 @@ class ConeAutoSolver(ConeSolver):
         self.newton = ConeNewtonSolver(residual_tol)
         self._tresca = None
         self.fallbacks = 0
+
+    def solve(self, problem: ConeContactProblem) -> StepSolution:
+        # the chosen solver (and every fallback) checks its own answer with the same tolerance
+        if not isinstance(problem, ConeContactProblem):
+            raise TypeError(f"problem must be a ConeContactProblem, got {type(problem).__name__}")
+        if problem.k == 0:
+            return StepSolution(np.zeros(0))
+        return self._solve(problem)
 
     def _solve(self, pb):
         first = self.local if pb.k == 1 else (self.nsgs if pb.k <= self.NSGS_MAX_CONTACTS else self.newton)

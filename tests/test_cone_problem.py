@@ -308,3 +308,78 @@ def test_sparse_kept_sparse_above_small_size():
     assert sp.issparse(pb.W)
     small = ConeContactProblem(sp.identity(3, format="csr"), np.zeros(3), [0.5], [2])
     assert isinstance(small.W, np.ndarray)
+
+
+@given(dims=dims_st, seed=st.integers(0, 2**32 - 1), sparse=st.booleans())
+def test_compiled_refinement_matches_numpy(dims, seed, sparse):
+    """refine_modes (one compiled call) = the NumPy refinement followed by modes, to rounding."""
+    rng = np.random.default_rng(seed)
+    k = len(dims)
+    n = k + sum(dims)
+    W, mu = spd(rng, n), rng.uniform(0.1, 1.0, k)
+    q, p, modes = constructed(W, mu, dims, rng)
+    pb = ConeContactProblem(sp.csr_matrix(W) if sparse else W, q, mu, dims)
+    p_noisy = p + 1e-11 * rng.normal(size=n)
+    p_noisy[:k][modes == OPEN] = 0.0
+    pr, md = pb.refine_modes(p_noisy)
+    ref = pb._refine_numpy(p_noisy, 3)
+    scale = max(pb.scale, np.max(np.abs(p)))
+    np.testing.assert_allclose(pr, ref, atol=1e-14 * scale)
+    assert md.dtype == np.int8 and np.array_equal(md, np.asarray(pb.modes(pr)))
+    assert np.array_equal(pb.refine_modes(p_noisy, iterations=0)[1], np.asarray(pb.modes(p_noisy)))
+
+
+@given(dims=st.lists(st.sampled_from([1, 2]), min_size=1, max_size=40), seed=st.integers(0, 2**32 - 1))
+def test_newton_system_matches_blocks(dims, seed):
+    """The compiled Alart-Curnier (Phi, J), dense and sparse (CSR assembly above the dense limit),
+    equal alart_curnier's blocks assembled by jacobian."""
+    rng = np.random.default_rng(seed)
+    k = len(dims)
+    n = k + sum(dims)
+    W = spd(rng, n)
+    W[np.abs(W) < 0.3] = 0.0  # some sparsity
+    W = W @ W.T + np.eye(n)
+    q, mu, p = rng.normal(size=n), rng.uniform(0, 1, k), rng.normal(size=n)
+    for Wx in (W, sp.csr_matrix(W)):
+        pb = ConeContactProblem(Wx, q, mu, dims)
+        phi, J = pb.newton_system(p)
+        phi0, A, B = pb.alart_curnier(p)
+        J0 = pb.jacobian(A, B)
+        dense = lambda M: M.toarray() if sp.issparse(M) else M
+        np.testing.assert_allclose(phi, phi0, rtol=1e-13, atol=1e-13 * np.max(np.abs(phi0)))
+        np.testing.assert_allclose(dense(J), dense(J0), rtol=1e-13, atol=1e-13 * np.max(np.abs(W)))
+        assert np.array_equal(pb.newton_system(p, jacobian=False)[0], phi)
+
+
+def test_compiled_refinement_large_sparse():
+    """Above the dense limit the refinement keeps the sparse NumPy path (same answer as dense)."""
+    rng = np.random.default_rng(5)
+    dims = [2] * 40
+    n = 40 + 80
+    L = sp.diags([np.full(n, 2.5), np.full(n - 1, -0.6), np.full(n - 1, -0.6)], [0, -1, 1], format="csr")
+    W = (L @ L.T).tocsr()
+    mu = rng.uniform(0.1, 0.6, 40)
+    q, p, modes = constructed(W.toarray(), mu, dims, rng)
+    a = ConeContactProblem(W, q, mu, dims)
+    b = ConeContactProblem(W.toarray(), q, mu, dims)
+    p_noisy = p + 1e-11 * rng.normal(size=n)
+    p_noisy[:40][modes == OPEN] = 0.0
+    pa, ma = a.refine_modes(p_noisy)
+    pb_, mb = b.refine_modes(p_noisy)
+    np.testing.assert_allclose(pa, pb_, atol=1e-13 * max(a.scale, np.max(np.abs(p))))
+    assert np.array_equal(ma, mb) and np.array_equal(ma, modes)
+
+
+@given(seed=st.integers(0, 2**32 - 1))
+def test_solve3_matches_lapack(seed):
+    from lcp.cone_nsgs import _solve3
+
+    rng = np.random.default_rng(seed)
+    W = spd(rng, 3, cond=100.0) + rng.normal(size=(3, 3)) * 0.1
+    b = rng.normal(size=3)
+    x = np.linalg.solve(W, b)
+    for fn in (_solve3, getattr(_solve3, "py_func", _solve3)):
+        x0, x1, x2, ok = fn(W, *b)
+        assert ok
+        np.testing.assert_allclose([x0, x1, x2], x, rtol=1e-10, atol=1e-12 * np.max(np.abs(x)))
+    assert not _solve3(np.ones((3, 3)), 1.0, 2.0, 3.0)[3]

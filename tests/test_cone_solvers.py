@@ -236,3 +236,24 @@ def test_sliding_chain_sparse_mixed():
     assert sp.issparse(pb.W)
     for name in EXACT:
         check_exact(make_cone_solver(name).solve(pb), pb)
+
+
+@pytest.mark.parametrize("name", ["local", "nsgs", "newton", "tresca", "auto"])
+def test_refined_solutions_report_their_modes(name):
+    """A polished solver returns the modes of its refined impulse (callers need not refine again)."""
+    rng = np.random.default_rng(8)
+    dims = [2] if name == "local" else [2, 1, 2, 2]
+    k = len(dims)
+    n = k + sum(dims)
+    W, mu = spd(rng, n), rng.uniform(0.2, 0.8, k)
+    q, p, modes = constructed(W, mu, dims, rng)
+    pb = ConeContactProblem(W, q, mu, dims)
+    sol = make_cone_solver(name).solve(pb)
+    check_exact(sol, pb)
+    assert sol.modes is not None and np.array_equal(sol.modes, np.asarray(pb.modes(sol.p)))
+    assert np.array_equal(sol.modes, modes)
+    # the loop's refinement of an already refined impulse changes nothing beyond rounding
+    np.testing.assert_allclose(pb.refine(sol.p), sol.p, atol=1e-14 * max(pb.scale, np.max(np.abs(p))))
+    if name == "local":
+        raw = make_cone_solver("local", polish=False).solve(pb)
+        assert raw.modes is None and raw.status == 0
