@@ -4,6 +4,12 @@ the planar cost of the same problems with one tangent.
 Run: ``python benchmarks/spatial_one_step.py [--quick] [--out DIR]``. Prints a table and writes
 ``spatial_one_step.csv`` into ``benchmarks/out/`` (untracked) or ``DIR``.
 
+A companion block times the whole Moreau-Jean loop (``lcp.simulate``, Python loop) per step with one
+spatial contact (``plane_slide``, ``jean_pratt_spatial`` launched obliquely) next to one planar
+contact (``jean_pratt`` with ``fast=False``); its rows have ``tangent`` = "loop spatial" /
+"loop planar", ``solver`` = "scene:solver" and ``median_ms`` the cost per step (best of the
+interleaved repeats: the loops alternate, so both see the same load).
+
 Scene: a row of boxes (translational 3-D point masses, m in [0.5, 2]) standing on a horizontal floor
 and pressed against their neighbours: every box has a floor contact (normal z, tangents x, y) and
 the first ones a contact with the next box (normal x, tangents y, z). W = H M^-1 H' is sparse
@@ -85,6 +91,35 @@ def measure(solver, pb, budget_s: float, max_repeats: int):
     return statistics.median(times), len(times), sol, sol.residual / scale
 
 
+def loop_rows(repeats: int, t_end: float = 1.0, h: float = 1e-3):
+    """Per-step cost of the Moreau-Jean loop with one spatial contact vs one planar contact."""
+    import lcp
+    from lcp.spatial_scenes import jean_pratt_spatial, plane_slide
+
+    cases = [("loop spatial", "plane_slide:local", plane_slide(), {"solver": "local"}),
+             ("loop spatial", "plane_slide:auto", plane_slide(), {"solver": "auto"}),
+             ("loop spatial", "jean_pratt_spatial:auto", jean_pratt_spatial(v0=(1.0, 0.5)), {"solver": "auto"}),
+             ("loop planar", "jean_pratt:auto", lcp.scenes.jean_pratt(), {"fast": False})]
+    best = {c[1]: np.inf for c in cases}
+    last = {}
+    for c in cases:  # warm-up: compilation, CasADi functions
+        lcp.simulate(c[2], 0.01, h=h, **c[3])
+    for _ in range(repeats):
+        for _tangent, name, scene, kw in cases:
+            t0 = time.perf_counter()
+            res = lcp.simulate(scene, t_end, h=h, **kw)
+            best[name] = min(best[name], (time.perf_counter() - t0) / res.stats.steps)
+            last[name] = res
+    rows = []
+    for tangent, name, _scene, _kw in cases:
+        res = last[name]
+        counts = " ".join(f"{v}{k}" for k, v in res.stats.mode_counts.items() if v)
+        rows.append({"k": 1, "tangent": tangent, "solver": name, "median_ms": 1e3 * best[name], "repeats": repeats,
+                     "status": res.status, "residual_rel": res.stats.max_residual, "iterations": res.stats.steps,
+                     "modes": counts})
+    return rows
+
+
 def mode_counts(pb, sol) -> str:
     """'3OPEN 62SLIDE ...' for a successful solution."""
     if not sol.success:
@@ -121,6 +156,7 @@ def main(argv=None):
             t, n, sol, rel = measure(make_solver(name), pbp, budget, max_rep)
             rows.append({"k": k, "tangent": "planar", "solver": name, "median_ms": 1e3 * t, "repeats": n,
                          "status": sol.status, "residual_rel": rel, "iterations": sol.iterations, "modes": ""})
+    rows += loop_rows(3 if args.quick else 7)
     load1 = os.getloadavg()
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "spatial_one_step.csv"
@@ -133,6 +169,10 @@ def main(argv=None):
     for r in rows:
         print(f"{r['k']:4d} {r['tangent']:8s} {r['solver']:8s} {r['median_ms']:9.3f} {r['repeats']:5d} "
               f"{r['status']:6d} {r['residual_rel']:9.1e} {r['iterations']:6d}  {r['modes']}")
+    loop = {r["solver"]: r["median_ms"] for r in rows if r["tangent"].startswith("loop")}
+    for name in ("plane_slide:local", "plane_slide:auto", "jean_pratt_spatial:auto"):
+        print(f"loop per step, {name} / planar jean_pratt (Python loop): "
+              f"{loop[name] / loop['jean_pratt:auto']:.2f}")
     for k in (1, 10, 100):
         for tangent in ("spatial", "planar"):
             ok = [r for r in rows if r["k"] == k and r["tangent"] == tangent and r["status"] == 0]
