@@ -141,14 +141,18 @@ def _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, 
         raise ValueError(f"unknown method {method!r}; known methods: {sorted(METHODS)}")
     if not isinstance(t_end, (int, float, np.floating)) or not np.isfinite(t_end) or t_end <= 0:
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
-    opts = MoreauJeanOptions(h=h, theta=theta, solver=solver, solver_options=solver_options,
-                             fallback=fallback, save_every=save_every, fast=fast, projection=projection,
-                             projection_tol=projection_tol)
+    if method == "event" and _plain_moreau_jean_options(h, theta, solver, solver_options, save_every, projection,
+                                                        projection_tol):
+        opts = None  # valid, and unused by the event method: no need to build them
+    else:
+        opts = MoreauJeanOptions(h=h, theta=theta, solver=solver, solver_options=solver_options,
+                                 fallback=fallback, save_every=save_every, fast=fast, projection=projection,
+                                 projection_tol=projection_tol)
     q0, v0 = _check_state(model, q0, v0)
     if method == "event":
-        from .events.single_contact import event_options, single_contact_run
+        from .events.single_contact import run_with_options
 
-        return single_contact_run(model, q0, v0, float(t_end), event_options(method_options))
+        return run_with_options(model, q0, v0, float(t_end), method_options)
     if method_options:
         raise ValueError(f"unknown options for method 'moreau-jean': {sorted(method_options)}")
     if h > t_end and not allow_large_step:
@@ -160,6 +164,16 @@ def _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, 
     from .timestepping import moreau_jean_from_model
 
     return moreau_jean_from_model(model, q0, v0, float(t_end), opts)
+
+
+def _plain_moreau_jean_options(h, theta, solver, solver_options, save_every, projection, projection_tol) -> bool:
+    """Whether the Moreau-Jean options are plain values that :class:`MoreauJeanOptions` accepts (a
+    few comparisons; anything else, valid or not, is left to its full validation)."""
+    return (type(h) is float and 0.0 < h < math.inf and type(theta) is float and 0.5 <= theta <= 1.0
+            and type(solver) is str and solver == "auto" and solver_options is None and type(save_every) is int
+            and save_every >= 1 and (projection is True or projection is False
+                                     or (type(projection) is str and projection == "auto"))
+            and type(projection_tol) is float and 1e-15 <= projection_tol < 1)
 
 
 def _check_state(model, q0, v0):

@@ -10,7 +10,7 @@ import numpy as np
 from ..result import STATUS_MESSAGES
 from ..solvers import make_solver
 
-__all__ = ["EVENT_STATUS_MESSAGES", "SmoothIntegrator", "ModeSolver", "EventOptions"]
+__all__ = ["EVENT_STATUS_MESSAGES", "EventOptions", "ModeSolver", "SmoothIntegrator", "checked_times", "times_inside"]
 
 #: status codes of the event integrator (the package's one table, :data:`lcp.result.STATUS_MESSAGES`)
 EVENT_STATUS_MESSAGES = STATUS_MESSAGES
@@ -116,14 +116,7 @@ class EventOptions:
             if isinstance(self.impact_solver, str):
                 _VALID_SOLVER_NAMES.add(self.impact_solver)
         if self.t_eval is not None:
-            te = np.array(self.t_eval, dtype=float).ravel()
-            # strictly increasing with finite ends: all finite (a NaN fails every comparison)
-            ok = (te.size and math.isfinite(te[0]) and math.isfinite(te[-1])
-                  and (te.size == 1 or (te[1:] > te[:-1]).all()))
-            if not ok and (te.size == 0 or not np.isfinite(te).all()):
-                raise ValueError("t_eval must be a non-empty array of finite times")
-            if not ok or te[0] < 0:
-                raise ValueError("t_eval must be strictly increasing and >= 0")
+            te = checked_times(self.t_eval)
             te.setflags(write=False)
             set_(self, "t_eval", te)
 
@@ -140,9 +133,34 @@ class EventOptions:
     def output_times(self, t_end: float) -> np.ndarray:
         if self.t_eval is None:
             return np.linspace(0.0, t_end, self.n_eval)
-        if self.t_eval[-1] > t_end:
-            raise ValueError(f"t_eval must lie inside [0, t_end = {t_end!r}], got a last time {self.t_eval[-1]!r}")
-        return np.array(self.t_eval)
+        return np.array(times_inside(self.t_eval, t_end))
+
+
+def checked_times(t_eval) -> np.ndarray:
+    """A new float array of the output times ``t_eval`` (flattened), checked: non-empty, finite,
+    strictly increasing and >= 0 (ValueError naming ``t_eval`` otherwise).
+
+    Examples
+    --------
+    >>> checked_times([0.0, 0.5, 1.0])
+    array([0. , 0.5, 1. ])
+    """
+    te = np.array(t_eval, dtype=float).ravel()
+    # strictly increasing with finite ends: all finite (a NaN fails every comparison)
+    ok = (te.size and math.isfinite(te[0]) and math.isfinite(te[-1])
+          and (te.size == 1 or (te[1:] > te[:-1]).all()))
+    if not ok and (te.size == 0 or not np.isfinite(te).all()):
+        raise ValueError("t_eval must be a non-empty array of finite times")
+    if not ok or te[0] < 0:
+        raise ValueError("t_eval must be strictly increasing and >= 0")
+    return te
+
+
+def times_inside(te: np.ndarray, t_end: float) -> np.ndarray:
+    """``te`` (checked output times) if its last time is <= t_end, else ValueError."""
+    if te[-1] > t_end:
+        raise ValueError(f"t_eval must lie inside [0, t_end = {t_end!r}], got a last time {te[-1]!r}")
+    return te
 
 
 _OPTION_NAMES = frozenset(f.name for f in fields(EventOptions))

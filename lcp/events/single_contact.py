@@ -26,10 +26,10 @@ import numpy as np
 from ..contact_problem import MODE_NAMES, SLIDE_NEG, SLIDE_POS, STICK
 from ..result import STATUS_MESSAGES, SolverStats
 from .event_location import first_stop
-from .options import EventOptions
-from .records import Event, EventResult, Phase
+from .options import EventOptions, checked_times, times_inside
+from .records import Event, EventResult, Phase, make_record, new_event_result
 
-__all__ = ["applicable", "event_options", "single_contact_run"]
+__all__ = ["applicable", "event_options", "run_with_options", "single_contact_run"]
 
 _DEFAULT = EventOptions()
 _EPS = float(np.finfo(float).eps)
@@ -38,6 +38,17 @@ _EPS = float(np.finfo(float).eps)
 def event_options(options: dict) -> EventOptions:
     """``EventOptions.from_kwargs(**options)`` (validated), the defaults shared when none are given."""
     return EventOptions.from_kwargs(**options) if options else _DEFAULT
+
+
+def run_with_options(model, q0, v0, t_end: float, options: dict) -> EventResult | None:
+    """``single_contact_run(model, q0, v0, t_end, event_options(options))``, the same result.
+
+    Where ``t_eval`` is the only option given (what a sweep passes), only it is checked, and the
+    checked copy is the result's ``t``: the other options are the defaults, valid by construction.
+    """
+    if len(options) == 1 and "t_eval" in options and options["t_eval"] is not None:
+        return _run(model, q0, v0, t_end, _DEFAULT, checked_times(options["t_eval"]))
+    return _run(model, q0, v0, t_end, event_options(options), None)
 
 
 def applicable(model, opts: EventOptions) -> bool:
@@ -93,6 +104,18 @@ def _output():
     return _OUTPUT[0]
 
 
+try:  # LAPACK's solve without np.linalg.solve's wrapper (a third of its cost on a 2x2 system)
+    from numpy.linalg._linalg import _raise_linalgerror_singular
+    from numpy.linalg._umath_linalg import solve as _solve_gufunc
+
+    # the error handling np.linalg.solve sets around the same call: a singular matrix raises LinAlgError
+    @np.errstate(call=_raise_linalgerror_singular, invalid="call", over="ignore", divide="ignore", under="ignore")
+    def _solve(A, B):
+        return _solve_gufunc(A, B, signature="dd->d")
+except ImportError:  # pragma: no cover - a NumPy without these internals
+    _solve = np.linalg.solve
+
+
 def _dot(a, b) -> float:
     s = 0.0
     for x, y in zip(a, b):
@@ -104,17 +127,6 @@ def _coordinate(row) -> int:
     """The index of the only nonzero entry of a Jacobian row, or -1."""
     nz = [i for i, x in enumerate(row) if x != 0.0]
     return nz[0] if len(nz) == 1 else -1
-
-
-class _Piece:
-    """One closed-form phase: start time and state (lists of floats), accelerations, forces, mode."""
-
-    __slots__ = ("t0", "t1", "q0", "v0", "P0", "qdd", "N", "f", "mode")
-
-    def __init__(self, t0, q0, v0, P0, qdd, N, f, mode):
-        self.t0, self.q0, self.v0, self.P0, self.qdd = t0, q0, v0, P0, qdd
-        self.N, self.f, self.mode = N, f, mode
-        self.t1 = math.inf
 
 
 def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> EventResult | None:
@@ -133,6 +145,12 @@ def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> Event
     -------
     EventResult or None
     """
+    return _run(model, q0, v0, t_end, opts, None)
+
+
+def _run(model, q0, v0, t_end, opts, t_out):
+    """:func:`single_contact_run` with the output times checked already (``t_out``), or None to
+    take them from ``opts``."""
     if not applicable(model, opts):
         return None
     n = model.n
@@ -151,20 +169,38 @@ def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> Event
     rhs[:, 2] = model.F0
     rhs[:, 3] = H[0] - mu * H[1]
     rhs[:, 4] = H[0] + mu * H[1]
-    X = np.linalg.solve(A, rhs)
-    (W00, W01, bN), (W10, W11, bT) = (H @ X[:, :3]).tolist()  # W = H A^-1 H', b = H A^-1 F0
-    cN, cT, qdd_free = X[:, :3].T.tolist()
-    cN_np, qdd_free_np = X[:, 0], X[:, 2]
-    bN_np = float(H[0] @ qdd_free_np)
-    free_size = max(map(abs, qdd_free))
+    X = _solve(A, rhs)
     # a row that fixes one coordinate lets its condition be imposed exactly on that coordinate
     coord_N = _coordinate(HN)
     coord_T = _coordinate(HT)
-    pieces: list[_Piece] = []
-    events: list[Event] = []
+    # (cN, cT, qdd_free, d+, d-) = A^-1 (H_N', H_T', F0, d+, d-), as lists of floats
+    cN, cT, qdd_free, SDp, SDm = map(list, zip(*X.tolist()))
+    if coord_N >= 0 and coord_T >= 0:
+        # rows with one nonzero entry: each product H_i x of the NumPy path is the one term
+        # c x[i] (the other terms are exact zeros), so floats give the same bits
+        kN, kT = HN[coord_N], HT[coord_T]
+
+        def rowN(x):
+            return 0.0 + kN * x[coord_N]
+
+        W00, W01, bN = rowN(cN), rowN(cT), rowN(qdd_free)
+        W10, W11, bT = 0.0 + kT * cN[coord_T], 0.0 + kT * cT[coord_T], 0.0 + kT * qdd_free[coord_T]
+        bN_np = bN
+        sd_views = None
+    else:
+        (W00, W01, bN), (W10, W11, bT) = (H @ X[:, :3]).tolist()  # W = H A^-1 H', b = H A^-1 F0
+        bN_np = float(H[0] @ X[:, 2])
+        sd_views = (X[:, 3], X[:, 4])  # the sliding directions' products on the arrays of the NumPy path
+
+        def rowN(x):
+            return float(H[0] @ np.asarray(x))
+
+    free_size = max(map(abs, qdd_free))
+    iterations = 0
+    pieces = []  # (t0, t1, q0, v0, P0, qdd, N, f, mode) per closed-form phase
+    t_events = []
     t = 0.0
     PN = PT = 0.0
-    iterations = 0
     for _ in range(4):  # slide, stop, stick or slide back: at most three pieces under constant data
         uT = _dot(HT, v)
         s = 1.0 if uT > 0 else -1.0
@@ -173,8 +209,8 @@ def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> Event
             # friction folded into the normal direction d = H_N - s mu H_T, so that the two paths
             # agree to the last bit on the event times they compute
             iterations += 1
-            SDc = X[:, 3] if s > 0 else X[:, 4]
-            a_coef = float(H[0] @ SDc)
+            SD = SDp if s > 0 else SDm
+            a_coef = rowN(SD) if sd_views is None else float(H[0] @ sd_views[s < 0])
             if not a_coef > 0.0:
                 return None  # Painleve: no or several consistent sliding modes, general path decides
             N = -bN_np / a_coef
@@ -182,9 +218,10 @@ def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> Event
                 return None  # the contact would open: a flight phase
             f = -s * mu * N
             mode = SLIDE_POS if s > 0 else SLIDE_NEG
-            qdd = qdd_free_np + SDc * N
-            acc_size = free_size + abs(N) * float(np.abs(SDc).max())
-            qdd = (qdd - cN_np * (float(H[0] @ qdd) / W00)).tolist()  # normal acceleration: zero
+            qdd = [a + x * N for a, x in zip(qdd_free, SD)]
+            acc_size = free_size + abs(N) * max(map(abs, SD))
+            r = rowN(qdd) / W00
+            qdd = [a - x * r for a, x in zip(qdd, cN)]  # normal acceleration: zero
         else:
             decided = _at_rest(W00, W01, W10, W11, bN, bT, mu)
             iterations += 3
@@ -205,17 +242,16 @@ def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> Event
                 qdd = [a - r * x for a, x in zip(qdd, cN)]
         if coord_N >= 0:
             qdd[coord_N] = 0.0
-        piece = _Piece(t, q, v, [PN, PT], qdd, float(N), float(f), int(mode))
-        pieces.append(piece)
+        N, f, mode = float(N), float(f), int(mode)
         aT = _dot(HT, qdd)
         if abs(aT) <= 16 * _EPS * acc_size:
             aT = 0.0  # a deceleration at the rounding level of its terms (no friction, balanced loads)
         # signs compared, not the product (which underflows for tiny speeds and decelerations)
         t_stop = t + first_stop(uT, aT, 1.0 if mode == SLIDE_POS else -1.0) if mode != STICK else math.inf
         if not t_stop < t_end:
-            piece.t1 = t_end
+            pieces.append((t, t_end, q, v, [PN, PT], qdd, N, f, mode))
             break
-        piece.t1 = t_stop
+        pieces.append((t, t_stop, q, v, [PN, PT], qdd, N, f, mode))
         dt = t_stop - t
         hdt2 = 0.5 * dt * dt
         q = [x + dt * y + hdt2 * z for x, y, z in zip(q, v, qdd)]
@@ -230,27 +266,30 @@ def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> Event
             if i >= 0:
                 v[i] = 0.0
         PN, PT = PN + dt * N, PT + dt * f
-        events.append(Event(t_stop, "stop", 0))
+        t_events.append(t_stop)
         t = t_stop
     else:  # pragma: no cover - constant data allow no fourth piece
         return None
-    t_out = opts.output_times(t_end)
+    t_out = opts.output_times(t_end) if t_out is None else times_inside(t_out, t_end)
     # rows (q, v, cumulative impulses) over the output times: c0 + dt c1 + dt^2/2 c2 per piece
     # (the general integrator's closed-form output, same operations), written in one call
     zeros = [0.0] * (n + 2)
-    P = np.array([[p.t0, p.t1, p.N, p.f, p.mode] for p in pieces])
-    C = np.array([[p.q0 + p.v0 + p.P0 for p in pieces], [p.v0 + p.qdd + [p.N, p.f] for p in pieces],
-                  [p.qdd + zeros for p in pieces]])
+    P = np.array([[p[0], p[1], p[6], p[7], p[8]] for p in pieces])
+    C = np.array([[p[2] + p[3] + p[4] for p in pieces], [p[3] + p[5] + [p[6], p[7]] for p in pieces],
+                  [p[5] + zeros for p in pieces]])
     Q, V, dPN, dPT, FN, FT, MD = _output()(t_out, P, C, n)
     k = len(pieces)
     stats = SolverStats()
     stats.steps = stats.solver_calls = k
     stats.iterations, stats.max_iterations = iterations, 4
+    counts = stats.mode_counts
+    phases = []
     for p in pieces:
-        stats.mode_counts[MODE_NAMES[p.mode]] += 1
-    phases = [Phase(p.t0, p.t1, (MODE_NAMES[p.mode],), "closed-form") for p in pieces]
-    return EventResult(t=t_out, q=Q, v=V, p_N=dPN, p_T=dPT, modes=MD[:-1],
-                       status=0, message=STATUS_MESSAGES[0], stats=stats, method="event",
-                       solver="enumerate", t_events=[ev.t for ev in events], force_N=FN, force_T=FT,
-                       events=events, impulses=[], phases=phases, impacts=[], accumulations=[],
-                       nonunique_forces=0)
+        name = MODE_NAMES[p[8]]
+        counts[name] += 1
+        phases.append(make_record(Phase, p[0], p[1], (name,), "closed-form", 0, True))
+    return new_event_result(t=t_out, q=Q, v=V, p_N=dPN, p_T=dPT, modes=MD[:-1], status=0,
+                            message=STATUS_MESSAGES[0], stats=stats, method="event", solver="enumerate",
+                            t_events=t_events, force_N=FN, force_T=FT,
+                            events=[make_record(Event, te, "stop", 0) for te in t_events], impulses=[],
+                            phases=phases, impacts=[], accumulations=[], nonunique_forces=0)
