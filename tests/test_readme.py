@@ -79,3 +79,203 @@ def test_readme_per_step_timings_are_the_recorded_run():
         m = re.search(pattern, text)
         assert m, pattern
         assert float(m.group(1)) == pytest.approx(rec[path], rel=0.02), path
+
+
+# ----------------------------------------------------------------------------- every stated number
+# Each number the README states is either recomputed here or read from the file a benchmark or
+# study writes (benchmarks/recorded/*.csv are the recorded runs behind benchmarks/README.md).
+RECORDED = README.parent / "benchmarks" / "recorded"
+
+
+def _text():
+    return " ".join(README.read_text().split())  # one line: statements wrap across lines
+
+
+NUMBER = r"([0-9]+(?:\.[0-9]+)?(?:e[+-]?[0-9]+)?)"  # what {N} stands for in the patterns below
+
+
+def _stated(pattern):
+    """The numbers a README pattern captures ({N}: one number; each group a float)."""
+    m = re.search(pattern.replace("{N}", NUMBER), _text())
+    assert m, f"the README no longer states {pattern!r}"
+    return [float(g) for g in m.groups()]
+
+
+def _rows(name):
+    import csv
+    with open(RECORDED / name) as fh:
+        return list(csv.DictReader(line for line in fh if not line.startswith("#") and line.strip()))
+
+
+def test_readme_error_table_every_column():
+    scene = lcp.scenes.jean_pratt()
+    for line in README.read_text().splitlines():
+        m = re.match(r"\|\s*(1e-\d)\s*" + r"\|\s*([0-9.e+-]+)\s*" * 4 + r"\|", line)
+        if not m:
+            continue
+        h, err, bound, y, resid = map(float, m.groups())
+        res = lcp.simulate(scene, 0.3, h=h)
+        assert float(np.max(np.abs(res.q[:, 0] - scene.exact(res.t)["x"]))) == pytest.approx(err, rel=5e-3), h
+        assert scene.B * h * h / 8 == pytest.approx(bound, rel=5e-3), h
+        # rounding-level columns: 0 means exactly 0; otherwise the stated magnitude (two digits)
+        for got, stated in ((float(np.max(np.abs(res.q[:, 1]))), y), (res.stats.max_residual, resid)):
+            assert (got == 0) if stated == 0 else got == pytest.approx(stated, rel=0.05), (h, got, stated)
+
+
+def test_readme_mean_normal_forces():
+    n0, stick = _stated(r"in sliding \(N0 = {N} N\) and in stick \(\(m\+M\) g = {N} N\)")
+    scene = lcp.scenes.jean_pratt()
+    res = lcp.simulate(scene, 0.3, h=1e-3)
+    n_mean = res.p_N[:, 0] / 1e-3
+    exact = scene.exact(res.t[1:] - 5e-4)["N"]  # midpoints of the steps
+    away = np.abs(res.t[1:] - scene.tau0) > 2e-3  # the stopping step mixes both forces
+    assert np.max(np.abs(n_mean[away] - exact[away]) / exact[away]) < 1e-12
+    assert scene.N0 == pytest.approx(n0, abs=0.005) and 2 * 9.81 == pytest.approx(stick, abs=0.005)
+
+
+def test_readme_observed_orders(tmp_path):
+    from studies import paper_figures
+    o_half, o_one = _stated(r"{N} for theta = 1/2 .*? and {N} for theta = 1\.")
+    scene = lcp.scenes.jean_pratt(m=2.0, M=0.7, alpha=0.9, R=0.35, v0=1.7)
+    orders, _ = paper_figures.convergence(scene, np.array([1e-2, 1e-3, 1e-4, 1e-5]) * (1 + 1 / 7), tmp_path)
+    assert orders[0.5] == pytest.approx(o_half, abs=0.005) and orders[1.0] == pytest.approx(o_one, abs=0.005)
+
+
+def test_readme_errata_numbers():
+    from studies import paper_figures
+    printed, true, series, model, stick = _stated(
+        r"q\(tau0\) = {N} v0²/B is {N} v0²/B \(the printed five-term series gives 169/150 = {N}, "
+        r"its own model \(3.9\) {N}\).*?N = \(m\+M\) g = {N} N")
+    rows = paper_figures.errata(lcp.scenes.jean_pratt(), lcp.scenes.jean_pratt(v0=-1.0))
+    q_row = next(r for r in rows if r["claim"].startswith("q(tau0)"))
+    assert float(q_row["printed"]) == printed
+    computed = [float(x) for x in re.findall(r"([0-9.]+) \(", q_row["computed"])]
+    assert computed[0] == true and computed[1] == pytest.approx(169 / 150, abs=1e-5)
+    assert 169 / 150 == pytest.approx(series, abs=5e-4) and computed[2] == pytest.approx(model, abs=5e-4)
+    assert 2 * 9.81 == pytest.approx(stick, abs=0.005)
+
+
+def test_readme_event_errors():
+    default, reverse, loaded = _stated(r"max \|x − exact\| = {N} / {N} at 1000 times.*?"
+                                       r"Loaded stick, slip and reversal: ≤ {N}")
+    for scene, bound in ((lcp.scenes.jean_pratt(), default), (lcp.scenes.jean_pratt(v0=-1.0), reverse),
+                         (lcp.scenes.jean_pratt(phi=5.0, v0=-1.0), loaded), (lcp.scenes.jean_pratt(phi=-12.0), loaded),
+                         (lcp.scenes.jean_pratt(phi=12.0), loaded)):
+        res = lcp.simulate(scene, scene.t_end, method="event", n_eval=1000)
+        assert np.max(np.abs(res.q[:, 0] - scene.exact(res.t)["x"])) <= bound * 1.05
+
+
+def test_readme_million_steps():
+    err, bound, y = _stated(r"\|x − exact\| = {N} \(below B h²/8 = {N}\) and \|y\| ≤ {N}")
+    scene = lcp.scenes.jean_pratt()
+    h = 0.3 / 1e6
+    res = lcp.simulate(scene, 0.3, h=h, save_every=1000)
+    assert len(res.t) == 1001
+    assert float(np.max(np.abs(res.q[:, 0] - scene.exact(res.t)["x"]))) <= err * 1.05
+    assert scene.B * h * h / 8 == pytest.approx(bound, rel=0.02)
+    assert float(np.max(np.abs(res.q[:, 1]))) <= y * 1.05
+
+
+def test_readme_lem_numbers():
+    import warnings
+    from fractions import Fraction
+    from scipy.integrate import solve_ivp
+    import lem
+    from lem.series import tanh_ode_true_coefficients
+
+    (at_61,) = _stated(r"\({N} at N = 61\)")
+    rec = next(r for r in _rows("lem_dimension.csv") if r["kind"] == "odd (needed)" and r["N"] == "61")
+    assert float(rec["error"]) == pytest.approx(at_61, rel=0.02)
+    (restarted,) = _stated(r"restarted \(degree 20, `restart=\"auto\"`\) it is accurate to {N}")
+    f = lambda t, y: np.array([y[1], np.tanh(y[0])])  # noqa: E731
+    ref = solve_ivp(f, (0, 2), [0, 1], method="DOP853", rtol=1e-14, atol=1e-16).y[0, -1]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        plain = lem.solve(f, (0.0, 2.0), [0.0, 1.0], degree=61)
+        r = lem.solve(f, (0.0, 2.0), [0.0, 1.0], degree=20, restart="auto")
+    assert plain.status == -1 and r.status >= 0 and abs(r.y[0, -1] - ref) <= restarted
+    stated = re.search(r"0, 1, 0, 1/6, 0, −1/120, 0, −1/1008 for z0 = 1", _text())
+    assert stated and tanh_ode_true_coefficients(1, 8)[:8] == [Fraction(x) for x in
+                                                               ("0", "1", "0", "1/6", "0", "-1/120", "0", "-1/1008")]
+    (slide,) = _stated(r"The qdd = −1 slide is exact \(≤ {N}\) at every N")
+    te = np.linspace(0.0, 1.0, 11)
+    for N in (3, 11, 31, 61):
+        s = lem.solve(lambda t, y: np.array([y[1], -1.0 + 0.0 * y[0]]), (0.0, 1.0), [0.0, 1.0], degree=N, t_eval=te)
+        assert np.max(np.abs(s.y[0] - (te - te * te / 2))) <= slide, N
+    lo, hi = _stated(r"dimension ~2700 is built and solved in {N}–{N} s")
+    big = [float(r["total_s"]) for r in _rows("lem_dimension.csv") if 2600 <= int(r["dimension"]) <= 2800]
+    assert big and min(big) == pytest.approx(lo, abs=0.005) and max(big) == pytest.approx(hi, abs=0.005)
+
+
+def test_readme_work_precision_numbers_are_the_recorded_run():
+    summary = {r["scene"]: r for r in _rows("work_precision_summary.csv")}
+    lo, hi = _stated(r"at every accuracy below 1e-6, {N}–{N}× faster")
+    speedups = [float(r["min_speedup"]) for r in summary.values()]
+    assert min(speedups) == pytest.approx(lo, abs=0.5) and max(speedups) == pytest.approx(hi, abs=0.5)
+    assert all(r["package_ahead_below_1e-6"] == "True" for r in summary.values())
+    best_lo, best_hi, base_lo, base_hi, base_loaded = _stated(
+        r"reaching {N}–{N} where the baseline stops at {N}–{N} \({N} on")
+    best = [float(r["best_package_e_max"]) for r in summary.values()]
+    assert max(best) <= best_lo * 3 and min(best) == pytest.approx(best_hi, rel=0.5)
+    base = [float(summary[k]["best_baseline_e_max"]) for k in ("default", "reverse", "near_shock")]
+    assert min(base) == pytest.approx(base_lo, rel=0.1) and max(base) == pytest.approx(base_hi, rel=0.1)
+    assert float(summary["loaded_stick"]["best_baseline_e_max"]) == pytest.approx(base_loaded, rel=0.02)
+    assert [summary[k]["moreau_jean_ahead_below_1e-6"] for k in ("default", "reverse", "near_shock")] == ["False"] * 3
+    rate, after = _stated(r"creeps at {N}·eps m/s \({N} m after 100 s at eps = 1e-6\)")
+    assert np.arctanh(5.0 / (0.5 * 2 * 9.81)) == pytest.approx(rate, abs=0.005)
+    last = [float(r["drift"]) for r in _rows("work_precision_creep.csv")
+            if r["method"].startswith("tanh") and r["eps"] == "1e-06" and float(r["t"]) == 100.0]
+    assert last and all(d == pytest.approx(after, rel=0.01) for d in last)
+
+
+def test_readme_speed_numbers_are_the_recorded_runs():
+    rec = {r["path"]: float(r["us_per_step"]) for r in _rows("per_step.csv")}
+    (save_every,) = _stated(r"\({N} µs with `save_every=1000`")
+    lean, enum, lemke = _stated(r"shows {N} µs is possible\), the Python enum loop {N} µs, "
+                                r"the Python Lemke loop {N} µs")
+    assert rec["compiled, save_every=1000"] == pytest.approx(save_every, rel=0.02)
+    assert rec["osqp lean loop (prototype, not package code)"] == pytest.approx(lean, rel=0.02)
+    assert rec["enum, Python loop (fast=False)"] == pytest.approx(enum, rel=0.02)
+    assert rec["lemke, Python loop (fast=False)"] == pytest.approx(lemke, rel=0.02)
+    osqp_target = _stated(r"target ≤ {N} µs: \*\*not met\*\*")[0]
+    assert rec["osqp (general path)"] > osqp_target  # the README says the target is not met
+    batch = {r["path"]: float(r["scene_steps_per_s"]) for r in _rows("batch_throughput.csv")}
+    rate, ratio = _stated(r"{N} scene-steps/s for 1e5 Jean–Pratt scenes on 2 cores \(target 3e7\), {N}×")
+    compiled = batch["compiled (C + OpenMP, all threads)"]
+    assert compiled == pytest.approx(rate, rel=0.02) and compiled > 3e7
+    assert compiled / batch["numpy (plain loop over steps, arrays of scenes)"] == pytest.approx(ratio, rel=0.05)
+    faster, lsoda_best = _stated(r"The event integrator is {N}× faster than LSODA on tanh friction at "
+                                 r"LSODA's best error \(which is {N}")
+    ev = next(r for r in _rows("event_vs_lsoda.csv") if r["method"].startswith("event") and "phi = 0" in r["scene"])
+    ls = next(r for r in _rows("event_vs_lsoda.csv") if r["method"].startswith("LSODA") and "phi = 0" in r["scene"])
+    assert float(ev["speedup"]) == pytest.approx(faster, abs=0.05)
+    assert float(ls["max_x_error"]) == pytest.approx(lsoda_best, rel=0.1)
+
+
+def test_readme_optimal_control_numbers_are_the_recorded_run():
+    rows = {(r["problem"], r["method"], int(r["N"])): r for r in _rows("ocp.csv")}
+    free = "free steps, constant hold"
+    value, ref, gap, gap_all, miss = _stated(r"free steps {N} s against the bang-bang optimum {N} s "
+                                    r"\(gap {N}; ≤ {N} for N = 10 … 80\), replay miss {N} m")
+    r = rows[("min_time", free, 40)]
+    assert float(r["value"]) == pytest.approx(value, abs=1e-10)
+    assert float(r["reference"]) == pytest.approx(ref, abs=1e-10)
+    assert float(r["rel_gap"]) == pytest.approx(gap, rel=0.05) and float(r["final_miss"]) <= miss * 1.25
+    gaps = [float(v["rel_gap"]) for k, v in rows.items() if k[0] == "min_time" and k[1] == free]
+    assert len(gaps) >= 4 and max(gaps) == pytest.approx(gap_all, rel=0.05)
+    eff, eff_ref, eff_gap = _stated(r"minimum effort {N} against {N} \(gap {N},")
+    r = rows[("min_effort", free, 40)]
+    assert float(r["value"]) == pytest.approx(eff, abs=5e-4)
+    assert float(r["reference"]) == pytest.approx(eff_ref, abs=5e-4)
+    assert float(r["rel_gap"]) == pytest.approx(eff_gap, rel=0.05)
+    hold, hold_ref, n, hold_gap = _stated(r"return by 1.2 s: {N} against the closed form {N} at N = (\d+) "
+                                          r"\(gap {N}\)")
+    r = rows[("hold", free, int(n))]
+    assert float(r["value"]) == pytest.approx(hold, abs=5e-3)
+    assert float(r["reference"]) == pytest.approx(hold_ref, abs=5e-4)
+    assert float(r["rel_gap"]) == pytest.approx(hold_gap, rel=0.05)
+    lin_lo, lin_hi = _stated(r"The former linear hold missed by {N} m \(min time\) to {N} m \(hold\)")
+    assert float(rows[("min_time", "uniform, linear hold", 40)]["final_miss"]) == pytest.approx(lin_lo, rel=0.05)
+    assert float(rows[("hold", "uniform, linear hold", int(n))]["final_miss"]) == pytest.approx(lin_hi, rel=0.05)
+    lo, hi = _stated(r"from ([0-9]+)–([0-9]+) N uncontrolled")  # the sliding normal force (m+M) g / (1 - kappa)
+    assert 2 * 9.81 / 0.05 == pytest.approx(lo, abs=0.5) and 2 * 9.81 / 0.01 == pytest.approx(hi, abs=0.5)
