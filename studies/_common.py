@@ -86,7 +86,7 @@ def floored(ax, x, y, floor: float, fmt: str = "o-", label: str | None = None, *
 
     Values >= floor are drawn as usual. Non-zero values below the floor are drawn at the floor as
     downward triangles ("below <floor>"), exact zeros at the floor as crosses ("exactly 0"), without
-    a line through them, and a note says so once per axes.
+    a line through them, and a legend entry says so once per axes (call :func:`legend`).
     """
     import numpy as np
 
@@ -103,7 +103,8 @@ def floored(ax, x, y, floor: float, fmt: str = "o-", label: str | None = None, *
         ax.plot(x[zero], np.full(zero.sum(), floor), "x", color=color, ms=7,
                 label=f"{label}: exactly 0" if label else None)
     if (tiny.any() or zero.any()) and not getattr(ax, "_floor_noted", False):
-        ax.text(0.01, 0.02, f"markers at {floor:g}: ▽ below {floor:g}, × exactly 0", fontsize=7,
-                color="0.35", transform=ax.transAxes)
+        # the note is a legend entry (a proxy without data, which legend() keeps), so that it sits
+        # beside the axes and never over the markers it explains
+        ax.plot([], [], " ", label=f"markers at {floor:g}: ▽ below {floor:g}, × exactly 0")
         ax._floor_noted = True
     return line
