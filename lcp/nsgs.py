@@ -11,7 +11,9 @@ solved in closed form by case analysis (open, stick, slide+, slide-, as
 of :meth:`lcp.contact_problem.ContactProblem.residual`, impulse units, rho = 1/W_ii) is below the
 tolerance.
 
-The sweep and the local solve are compiled with numba when it is installed (``pip install
+The small per-contact kernels (the local solve, a CSR row times a vector, one contact's natural
+map) are inlined into their callers at numba's level: a call per contact would cost more than the
+work. The sweep and the local solve are compiled with numba when it is installed (``pip install
 lcp-lem[fast]``); otherwise the same functions run as plain Python, correct but slow (one
 interpreted step per nonzero). :data:`HAVE_NUMBA` says which.
 
@@ -41,7 +43,7 @@ __all__ = ["HAVE_NUMBA", "local_planar", "nsgs", "nsgs_sweeps", "residual_interl
 _OPEN, _STICK, _SLIDE_POS, _SLIDE_NEG = 0, 1, 2, 3
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def local_planar(W00, W01, W10, W11, qN, qT, mu):
     """Exact solution (pN, pT, mode) of one planar contact u = W r + q (mode -1: none admissible)."""
     scale = max(abs(qN) / W00, abs(qT) / W11 if W11 > 0 else 0.0, 1e-300)
@@ -69,7 +71,7 @@ def local_planar(W00, W01, W10, W11, qN, qT, mu):
     return np.nan, np.nan, -1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _row_dot(indptr, indices, data, x, i):
     s = 0.0
     for p in range(indptr[i], indptr[i + 1]):
@@ -77,7 +79,7 @@ def _row_dot(indptr, indices, data, x, i):
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _contact_residual(pN, pT, uN, uT, mu, rhoN, rhoT):
     """The natural map of one planar contact, max(|min(p_N, rho_N u_N)|, |p_T - proj(p_T - rho_T u_T)|)."""
     s = mu * max(pN, 0.0)

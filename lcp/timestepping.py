@@ -228,6 +228,13 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     proj = _projector(system, options)
     if options.fast and proj is None and solver.name in ("auto", "enum") and compiled.applicable(system):
         return _moreau_jean_compiled(asm, q0, v0, n_steps, every, solver.name)
+    if options.fast and proj is None and not spatial and system.n_contacts >= 2 and system.is_constant:
+        # imported here: numba loads only where the compiled loop may run
+        from . import compiled_loop
+
+        if compiled_loop.applicable(asm, solver, options):
+            return compiled_loop.moreau_jean_loop(asm, q0, v0, n_steps, every, solver, options.fallback,
+                                                  (CLOSE_ULPS, OPEN_ULPS), _fallback_for, _ambiguity_note)
     if n_steps // every > 50_000_000:
         raise ValueError(f"{n_steps // every} saved states would not fit in memory: raise save_every")
     m, n = system.n_contacts, system.n
