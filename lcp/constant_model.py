@@ -108,9 +108,9 @@ class ConstantModel:
         bilateral constraints. The checks cost more than the rest of a scene."""
         obj = object.__new__(cls)
         n, m = A.shape[0], mu.size
+        zn, z0n, z0 = _zeros(n)
         obj.__dict__.update(A=A, F0=F0, H=H, gap0=gap0, mu=mu, e=e, names=names, contact_names=contact_names,
-                            Kq=np.zeros((n, n)), Cv=np.zeros((n, n)), G=np.zeros((0, n)), phi_t=np.zeros(0),
-                            _constant_forces=True)
+                            Kq=zn, Cv=zn, G=z0n, phi_t=z0, _constant_forces=True)
         assert H.shape == (2 * m, n) and F0.shape == (n,)  # builder bugs, not user input
         return obj
 
@@ -151,6 +151,20 @@ class ConstantModel:
         if not self.m or not Q.size:
             return 0.0
         return float(max(0.0, -np.min(self.gap0[None, :] + Q @ self.H[: self.m].T)))
+
+
+_ZEROS: dict = {}
+
+
+def _zeros(n: int) -> tuple:
+    """Read-only zeros (n, n), (0, n) and (0,), shared by the trusted models of n coordinates (the
+    absent springs, dampers and constraints: nothing writes into a model's arrays)."""
+    z = _ZEROS.get(n)
+    if z is None:
+        z = _ZEROS[n] = (np.zeros((n, n)), np.zeros((0, n)), np.zeros(0))
+        for a in z:
+            a.setflags(write=False)
+    return z
 
 
 class NumericAssembly:

@@ -14,7 +14,7 @@ kappa = R M t / A is the shock number.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 import math
 
 import numpy as np
@@ -36,6 +36,17 @@ class Segment:
     mode: str  # "slide+", "slide-" or "stick"
     N: float
     f: float
+
+
+_SEGMENT_FIELDS = tuple(f.name for f in fields(Segment))
+
+
+def _segment(*values) -> Segment:
+    """``Segment(*values)`` without the frozen dataclass's per-field ``object.__setattr__`` (a scene
+    builds its exact solution every time, and a sweep builds a scene per parameter set)."""
+    obj = object.__new__(Segment)
+    obj.__dict__.update(zip(_SEGMENT_FIELDS, values))
+    return obj
 
 
 @dataclass
@@ -139,15 +150,15 @@ class JeanPrattExact:
                 a, N, f = sl
                 if s * a < 0:
                     tau = -vc / a
-                    self.segments.append(Segment(tc, tc + tau, xc, vc, a, "slide+" if s > 0 else "slide-", N, f))
+                    self.segments.append(_segment(tc, tc + tau, xc, vc, a, "slide+" if s > 0 else "slide-", N, f))
                     xc += vc * tau / 2  # exact for constant deceleration to rest
                     tc += tau
                     vc = 0.0
                     continue
-                self.segments.append(Segment(tc, math.inf, xc, vc, a, "slide+" if s > 0 else "slide-", N, f))
+                self.segments.append(_segment(tc, math.inf, xc, vc, a, "slide+" if s > 0 else "slide-", N, f))
                 return
             if abs(self.phi) <= self.R * self.N_stick:
-                self.segments.append(Segment(tc, math.inf, xc, 0.0, 0.0, "stick", self.N_stick, -self.phi))
+                self.segments.append(_segment(tc, math.inf, xc, 0.0, 0.0, "stick", self.N_stick, -self.phi))
                 return
             s = math.copysign(1.0, self.phi)
             sl = self._slide(s)
@@ -158,7 +169,7 @@ class JeanPrattExact:
                                  "(kappa >= 1 in the loaded direction): this regime (an open contact) has no "
                                  "exact solution here")
             a, N, f = sl
-            self.segments.append(Segment(tc, math.inf, xc, 0.0, a, "slide+" if s > 0 else "slide-", N, f))
+            self.segments.append(_segment(tc, math.inf, xc, 0.0, a, "slide+" if s > 0 else "slide-", N, f))
             return
 
     # ------------------------------------------------------------------ evaluation

@@ -94,6 +94,8 @@ class Scene:
 
 def _check_params(**kw):
     for k, val in kw.items():
+        if type(val) is float and math.isfinite(val):
+            continue  # the common case, without NumPy's scalar call
         if not isinstance(val, (int, float, np.floating, np.integer)) or not np.isfinite(val):
             raise ValueError(f"{k} must be a finite number, got {val!r}")
 

@@ -29,7 +29,7 @@ def tan_alpha(alpha):
     the wrong side of the shock limit; the angles with an exact rational tangent (0, +-pi/4) are
     returned exactly. Scalars give a float, arrays an array of the same shape.
     """
-    if np.ndim(alpha) == 0:
+    if type(alpha) is float or np.ndim(alpha) == 0:  # (a float first: np.ndim costs more than the rest)
         alpha = float(alpha)
         if alpha == 0.0:
             return 0.0
