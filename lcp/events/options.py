@@ -148,7 +148,7 @@ def checked_times(t_eval) -> np.ndarray:
     te = np.array(t_eval, dtype=float).ravel()
     # strictly increasing with finite ends: all finite (a NaN fails every comparison)
     ok = (te.size and math.isfinite(te[0]) and math.isfinite(te[-1])
-          and (te.size == 1 or (te[1:] > te[:-1]).all()))
+          and np.count_nonzero(te[1:] > te[:-1]) == te.size - 1)
     if not ok and (te.size == 0 or not np.isfinite(te).all()):
         raise ValueError("t_eval must be a non-empty array of finite times")
     if not ok or te[0] < 0:
