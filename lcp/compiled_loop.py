@@ -453,6 +453,7 @@ def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, ma
                         istate[9] += 1
             else:
                 res = np.inf
+                change = np.inf
                 for sweep in range(1, max_sweeps + 1):
                     its = sweep
                     change = 0.0
@@ -496,6 +497,17 @@ def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, ma
                                                              rho[2 * j], rho[2 * j + 1]))
                         if res <= tol:
                             break
+                if not (res <= tol) and change > tol and not blockdiag:
+                    # the sweeps ran out: the residual of the last one decides (as lcp.nsgs.nsgs_sweeps)
+                    res = 0.0
+                    for t in range(na):
+                        j = act[t]
+                        uN = qi[2 * j] + _row_dot(Wp, Wi, Wx, r, 2 * j)
+                        uT = _row_dot(Wp, Wi, Wx, r, 2 * j + 1)
+                        uTs[t] = uT
+                        uT = qi[2 * j + 1] + uT
+                        res = max(res, _contact_residual(r[2 * j], r[2 * j + 1], uN, uT, mu[j],
+                                                         rho[2 * j], rho[2 * j + 1]))
                 if not (res <= tol):
                     ok = False
             if ok and not (forced and k == k0):
