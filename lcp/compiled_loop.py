@@ -85,7 +85,11 @@ def _csr(A):
         indptr = np.zeros(A.shape[0] + 1, dtype=np.int64)
         np.cumsum(np.bincount(rows, minlength=A.shape[0]), out=indptr[1:])
         return indptr, cols.astype(np.int64), A[rows, cols]
-    M = A.tocsr().astype(float)
+    import scipy.sparse as sp
+
+    A = A.tocsr()
+    # a plain CSR copy built from the arrays (A may be a csr_matrix subclass whose copy() fails)
+    M = sp.csr_matrix((np.array(A.data, dtype=float), A.indices.copy(), A.indptr.copy()), shape=A.shape)
     M.eliminate_zeros()
     M.sort_indices()
     return M.indptr.astype(np.int64), M.indices.astype(np.int64), M.data

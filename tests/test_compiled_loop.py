@@ -88,6 +88,14 @@ def test_block_chain_equals_python_loop(K, h):
     assert fast.stats.mode_counts["stick"] > 0 and fast.stats.mode_counts["slide+"] > 0
 
 
+@pytest.mark.parametrize("make", [lambda: block_chain(110), lambda: jean_pratt_copies(110)])
+def test_sparse_assembly_equals_python_loop(make):
+    """>= 200 contact rows: the sparse assembly (free velocity through the factors of W_h)."""
+    sc = make()
+    fast, slow = run_both(sc, 0.03, h=1e-3)
+    assert_same(fast, slow)
+
+
 @pytest.mark.parametrize("solver", ["auto", "nsgs"])
 def test_jean_pratt_copies_equal_python_loop_and_stop(solver):
     sc = jean_pratt_copies(6)
