@@ -81,6 +81,10 @@ def compare(sc, hs, repeats: int) -> list[dict]:
     t_end = sc.t_end
     rows = []
     t_grid = np.linspace(0.0, t_end, 201)
+    # warm-up (not timed): numba kernels compile, and the LEM engine builds its structures, on first use
+    lcp.simulate(sc, 0.05, method="event")
+    lcp.simulate(sc, 0.05, h=1e-3)
+    _lem(sc, np.array([0.0, 0.05]))
     ex = sc.exact(t_grid)
     res, dt = _timed(lambda: lcp.simulate(sc, t_end, method="event", t_eval=t_grid), repeats)
     rows.append(dict(method="event", h=0.0, error=_error(res.q[:, 0], res.q[:, 1], ex) if res.success else math.nan,
