@@ -16,6 +16,42 @@ SPARSE_MIN_CONTACT_ROWS = 200
 SPARSE_DROP_TOL = 1e-18
 
 
+#: largest diagonal block of W_h inverted densely by :func:`_block_inverse`
+BLOCK_INVERSE_MAX = 32
+
+
+def _block_inverse(Wh):
+    """W_h^-1 as a sparse block-diagonal matrix when W_h is block diagonal (up to a permutation)
+    with blocks of at most ``BLOCK_INVERSE_MAX`` rows, else None.
+
+    The blocks are the connected components of W_h's graph (bodies coupled by nothing but their
+    contacts); blocks of one size are inverted together (one batched LAPACK call per size).
+    """
+    from scipy.sparse.csgraph import connected_components
+
+    n = Wh.shape[0]
+    if n == 0:
+        return None
+    n_comp, label = connected_components(Wh, directed=False)
+    sizes = np.bincount(label, minlength=n_comp)
+    if sizes.max() > BLOCK_INVERSE_MAX:
+        return None
+    order = np.argsort(label, kind="stable")  # the members of each block, block by block
+    starts = np.concatenate([[0], np.cumsum(sizes)])
+    rows, cols, vals = [], [], []
+    csr = Wh.tocsr()
+    for size in np.unique(sizes).tolist():
+        comps = np.flatnonzero(sizes == size)
+        idx = order[starts[comps][:, None] + np.arange(size)[None, :]]  # (n_blocks, size): block members
+        r = np.repeat(idx, size, axis=1).ravel()  # entry (b, i, j) of the stacked blocks is W_h[idx_bi, idx_bj]
+        c = np.tile(idx, (1, size)).ravel()
+        B = np.asarray(csr[r, c], dtype=float).reshape(comps.size, size, size)
+        rows.append(r)
+        cols.append(c)
+        vals.append(np.linalg.inv(B).ravel())
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+
+
 class StepAssembly:
     """The data of one Moreau-Jean step, built once when it is constant.
 
@@ -120,13 +156,20 @@ class StepAssembly:
         self.S = LinearOperator((n, n), matvec=lu.solve, dtype=float)
         self.T = np.zeros((n, 0))
         Ht = H.T.tocsc()
-        cols = []
-        for a in range(0, self.rows, 512):  # column blocks keep the dense intermediate small
-            X = lu.solve(Ht[:, a:a + 512].toarray())
-            big = np.max(np.abs(X)) if X.size else 0.0
-            X[np.abs(X) <= SPARSE_DROP_TOL * big] = 0.0
-            cols.append(sp.csc_matrix(X))
-        SHt = sp.hstack(cols).tocsr() if cols else sp.csr_matrix((n, 0))
+        Sblk = _block_inverse(Wh)
+        if Sblk is not None:
+            # independent bodies (small diagonal blocks of W_h): S itself is block diagonal and
+            # sparse, and S H' a sparse product; SuperLU's dense-column solves cost 0.4 ms a column
+            SHt = (Sblk @ Ht).tocsr()
+            SHt.eliminate_zeros()
+        else:
+            cols = []
+            for a in range(0, self.rows, 512):  # column blocks keep the dense intermediate small
+                X = lu.solve(Ht[:, a:a + 512].toarray())
+                big = np.max(np.abs(X)) if X.size else 0.0
+                X[np.abs(X) <= SPARSE_DROP_TOL * big] = 0.0
+                cols.append(sp.csc_matrix(X))
+            SHt = sp.hstack(cols).tocsr() if cols else sp.csr_matrix((n, 0))
         if not np.all(np.isfinite(SHt.data)):
             raise FloatingPointError("singular iteration matrix: the mass matrix is singular")
         self.SHt, self.H = SHt, _LeadingRows(H.tocsr(), m)
