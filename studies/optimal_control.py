@@ -72,9 +72,22 @@ SHOCK_SWEEP_R = (1.8, 1.9, 1.98)  # kappa = 0.9, 0.95, 0.99
 #: transcriptions compared: label -> OptimalControlProblem options
 METHODS = {"uniform, linear hold": {"hold": "linear", "steps": "uniform"},
            "uniform, constant hold": {"hold": "constant", "steps": "uniform"},
-           "free steps, constant hold": {"hold": "constant", "steps": "free"}}
+           "free steps, constant hold": {"hold": "constant", "steps": "free"},
+           "free steps, affine hold": {"hold": "affine", "steps": "free"}}
 #: the replay tolerance that success requires
 REPLAY_TOL = 1e-6
+#: output samples per control interval of the event replays kept for figures and the hold check
+EVENT_SAMPLES = 100
+
+
+def AFFINE_STARTS(ocp, uniform_solution):
+    """The multi-start of the free-step, affine-hold transcription: from the uniform-step,
+    constant-hold solution (sigma0 = 1e-4 and 1e-2) and from the u = 0 simulation (sigma0 = 1e-2);
+    sigma falls by 100 per stage. From sigma0 = 1 IPOPT needs more than 500 iterations at N = 40."""
+    opts = {"factor": 1e-2, "max_iter": 3000}
+    return [("uniform-step solution, sigma0 = 1e-4", uniform_solution, {"sigma0": 1e-4, **opts}),
+            ("uniform-step solution, sigma0 = 1e-2", uniform_solution, {"sigma0": 1e-2, **opts}),
+            ("u = 0, sigma0 = 1e-2", ocp.guess(u=0.0), {"sigma0": 1e-2, **opts})]
 
 
 # ---------------------------------------------------------------------------------------- references
@@ -221,23 +234,32 @@ def _event_available() -> bool:
     return "event" in lcp.METHODS
 
 
-def solve_and_verify(ocp: OptimalControlProblem, h_fine: float, multistart: bool = False, guess=None) -> dict:
-    """Solve from ``guess`` (default: the u = 0 simulation; or all multi-start guesses); replay by
-    Moreau-Jean at the same h (uniform steps), at about h_fine, and by the event integrator."""
+def solve(ocp: OptimalControlProblem, multistart: bool = False, guess=None):
+    """The study's solve of ``ocp`` (its replay check included, no further replays): from ``guess``
+    (default: the u = 0 simulation), or the multi-start (free steps: from rest and from the
+    uniform-step solution ``guess``; :data:`AFFINE_STARTS` for the affine hold)."""
+    if multistart and guess is not None and ocp.hold == "affine":
+        return ocp.solve_multistart(guesses=AFFINE_STARTS(ocp, guess))
     if multistart and guess is not None:  # free steps: from rest, and from the uniform-step solution
-        res = ocp.solve_multistart(guesses=[("u = 0", ocp.guess(u=0.0)), ("uniform-step solution", guess),
-                                            ("uniform-step solution, sigma0 = 1e-2", guess,
-                                             {"sigma0": 1e-2, "max_iter": 3000}),
-                                            ("uniform-step solution, sigma0 = 1e-4", guess, {"sigma0": 1e-4})])
-    elif multistart:
-        res = ocp.solve_multistart()
-    else:
-        res = ocp.solve(ocp.guess(u=0.0) if guess is None else guess)
+        return ocp.solve_multistart(guesses=[("u = 0", ocp.guess(u=0.0)), ("uniform-step solution", guess),
+                                             ("uniform-step solution, sigma0 = 1e-2", guess,
+                                              {"sigma0": 1e-2, "max_iter": 3000}),
+                                             ("uniform-step solution, sigma0 = 1e-4", guess, {"sigma0": 1e-4})])
+    if multistart:
+        return ocp.solve_multistart()
+    return ocp.solve(ocp.guess(u=0.0) if guess is None else guess)
+
+
+def solve_and_verify(ocp: OptimalControlProblem, h_fine: float, multistart: bool = False, guess=None) -> dict:
+    """:func:`solve`, then replay by Moreau-Jean at the same h (uniform steps), at about h_fine,
+    and by the event integrator."""
+    res = solve(ocp, multistart, guess)
     out = {"result": res}
     out["same_h"] = replay(res, refine=1) if ocp.steps == "uniform" else None
     refine = max(1, int(math.ceil(res.h / h_fine - 1e-9)))
     out["mj"] = replay(res, refine=refine)
-    out["event"] = replay(res, method="event") if _event_available() and res.hold == "constant" else None
+    out["event"] = (replay(res, method="event", n_eval=EVENT_SAMPLES)
+                    if _event_available() and res.hold in ("constant", "affine") else None)
     return out
 
 
@@ -305,6 +327,8 @@ def _step_u(ax, res, **kw):
     """The control as held: stairs for the constant hold, lines between nodes for the linear hold."""
     if res.hold == "constant":
         ax.stairs(res.u[:, 0], res.t, baseline=None, **kw)
+    elif res.hold == "affine":  # one segment per step, jumps at the nodes
+        ax.plot(np.repeat(res.t, 2)[1:-1], res.u[:, 0], **kw)
     else:
         ax.plot(res.t, res.u[:, 0], **kw)
 
@@ -380,7 +404,8 @@ def _fig_shock(v, unc, path):
 
 
 _METHOD_STYLE = {"uniform, linear hold": ("tab:red", "o", "-"), "uniform, constant hold": ("tab:blue", "s", "-"),
-                 "free steps, constant hold": ("tab:green", "^", "-")}
+                 "free steps, constant hold": ("tab:green", "^", "-"),
+                 "free steps, affine hold": ("tab:purple", "D", "-")}
 _PROBLEMS = {"min_time": "minimum time", "min_effort": "minimum effort", "hold": "move and hold"}
 FLOOR = 1e-16
 
@@ -531,7 +556,7 @@ def run(out=None, quick: bool = False) -> dict:
     for (prob, meth), v in keep.items():
         res, mj = v["result"], v["mj"]
         tag = f"{prob}_{meth.replace(', ', '_').replace(' ', '_')}"
-        u_nodes = res.control(res.t[:-1])[:, 0] if res.hold == "constant" else res.u[:-1, 0]
+        u_nodes = res.control(res.t[:-1])[:, 0]
         files.append(write_csv(path / f"trajectory_{tag}.csv",
                                ["t_start", "t_end", "u_start", "x_end", "xdot_end", "N_step", "mode"],
                                [[float(res.t[k]), float(res.t[k + 1]), float(u_nodes[k]), float(res.q[k + 1, 0]),

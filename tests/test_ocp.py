@@ -12,6 +12,8 @@ import math
 import casadi as ca
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 import lcp
 from lcp.control import ControlSchedule
@@ -26,6 +28,8 @@ from lcp.ocp import (
     replay,
     tangential_push,
 )
+from lcp.ocp.guess import resample
+from lcp.ocp.schedule import AffineSchedule
 
 G = 9.81
 D_TARGET, U_MAX = 0.5, 20.0
@@ -459,3 +463,89 @@ def test_control_schedule_impulses_are_exact():
 def test_control_schedule_bad_input(args, name):
     with pytest.raises(ValueError, match=name):
         ControlSchedule(*args)
+
+
+# ---------------------------------------------------------------------------------------- the affine hold
+def _affine_pieces(seed):
+    rng = np.random.default_rng(seed)
+    t = np.cumsum(rng.uniform(0.1, 1.0, 7))
+    return t, rng.normal(size=(12, 2))
+
+
+@given(seed=st.integers(0, 2 ** 31))
+def test_affine_schedule_integrates_exactly(seed):
+    t, u = _affine_pieces(seed)
+    s = AffineSchedule(t, u)
+    a = np.random.default_rng(seed).uniform(t[0] - 0.5, t[-1] + 0.5, 2)
+    a, b = a.min(), a.max()
+    # Simpson's rule is exact on each affine piece (and on the constant ends outside [t0, tK])
+    cuts = np.unique(np.clip(np.concatenate([[a, b], t]), a, b))
+    ref = sum((y - x) / 6 * (s(x) + 4 * s(0.5 * (x + y)) + s.left(y)) for x, y in zip(cuts[:-1], cuts[1:]))
+    assert np.allclose(s.impulse(a, b), ref, rtol=1e-12, atol=1e-12)
+    k = 3  # right-continuous at the nodes, the left limit is the previous piece's end value
+    assert np.array_equal(s(t[k]), u[2 * k]) and np.allclose(s.left(t[k]), u[2 * k - 1], rtol=1e-14)
+    assert s.breakpoints.tolist() == t[1:-1].tolist()
+    ts = ca.SX.sym("t")
+    f = ca.Function("u", [ts], [s.expression(ts)])
+    for x in (t[0] - 1.0, t[0], t[2], 0.3 * t[4] + 0.7 * t[5], t[-1], t[-1] + 1.0):
+        assert np.allclose(np.array(f(x)).ravel(), s(x), rtol=1e-12, atol=1e-12)
+
+
+def test_affine_schedule_continuous_pieces_are_no_breakpoints_and_bad_input():
+    s = AffineSchedule([0.0, 1.0, 2.0, 3.0], [0.0, 1.0, 1.0, 2.0, 0.0, 0.0])  # one ramp, then a jump to 0
+    assert s.breakpoints.tolist() == [2.0]
+    for args, name in ((([0.0, 1.0], [1.0]), "values"), (([1.0, 0.0], [1.0, 2.0]), "times"),
+                       (([0.0, 1.0], [1.0, np.nan]), "finite")):
+        with pytest.raises(ValueError, match=name):
+            AffineSchedule(*args)
+    with pytest.raises(ValueError, match="hold"):
+        AffineSchedule([0.0, 1.0], [1.0, 2.0], hold="linear")
+    # lcp.simulate takes it: the impulse of each Moreau-Jean step is exact (a free mass, v = int u / m)
+    q, v, u = ca.SX.sym("q", 1), ca.SX.sym("v", 1), ca.SX.sym("u", 1)
+    sys = lcp.System(q, v, mass=2.0, force=u, control=u, control_bounds=(-5, 5))
+    r = lcp.simulate(sys, 3.0, h=0.3, q0=[0.0], v0=[0.0], control=s)
+    assert np.allclose(r.v[:, 0], s.integral(r.t)[:, 0] / 2.0, rtol=0, atol=1e-14)
+
+
+def _affine_effort(N):
+    uniform = rest_problem(N, "effort").solve()
+    pb = rest_problem(N, "effort", hold="affine", steps="free")
+    return pb, pb.solve(uniform, sigma0=1e-4, factor=1e-2, max_iter=3000)
+
+
+def test_affine_hold_min_effort_is_exact():
+    """Free steps with the affine hold represent the optimum (a ramp 2c -> 0 over the slide, 0 while
+    sticking) exactly and integrate it exactly: the continuous optimum at N = 10, replayed to round-off."""
+    pb, res = _affine_effort(10)
+    assert res.success and res.status == 0
+    assert res.hold == "affine" and res.u.shape == (20, 1) and isinstance(res.control, AffineSchedule)
+    assert abs(res.cost - j_star()) <= 1e-9 * j_star()
+    assert res.replay.method == "event" and res.replay.final_miss <= 1e-10 and res.replay.node_miss <= 1e-10
+    c, _ = _consts(R_REST)
+    slide = np.flatnonzero(res.modes[:, 0] == lcp.contact_problem.SLIDE_POS)
+    k0 = slide[0]
+    assert res.u[2 * k0, 0] == pytest.approx(2 * c, rel=1e-7)  # the ramp starts at 2c
+    assert np.all(np.abs(res.u[:2 * k0, 0]) <= 1e-8)  # no control (nor ringing) while it sticks first
+    stop = k0 + 1 + np.flatnonzero(np.abs(res.v[k0 + 1:, 0]) <= 1e-12)[0]  # the block stops on a node
+    L = res.t[stop] - res.t[k0]  # one slide of the optimal length L*, u back at 0 when it stops
+    assert res.u[2 * stop - 1, 0] == pytest.approx(0.0, abs=1e-7)
+    assert L == pytest.approx((36 * 1.5 ** 2 * D_TARGET ** 2 / c ** 2) ** 0.25, rel=1e-7)
+    # resampled onto other grids and holds, a guess keeps the control
+    for hold, rows in (("constant", 16), ("linear", 17), ("affine", 32)):
+        gs = resample(res, 16, hold)
+        assert gs.u.shape == (rows, 1) and np.max(gs.u) <= 2 * c + 1e-6
+    gs = pb.guess(u=lambda t: 3.0 * t)
+    assert gs.u.shape == (20, 1) and gs.u[1, 0] == pytest.approx(0.3)  # both ends of each step
+
+
+def test_affine_hold_needs_the_trapezoid():
+    with pytest.raises(ValueError, match="theta"):
+        rest_problem(4, "effort", hold="affine", theta=1.0)
+    with pytest.raises(ValueError, match="hold"):
+        rest_problem(4, "effort", hold="cubic")
+
+
+@pytest.mark.slow
+def test_affine_hold_min_effort_at_N40():
+    _, res = _affine_effort(40)
+    assert res.success and abs(res.cost - j_star()) <= 1e-8 * j_star() and res.replay.final_miss <= 1e-10

@@ -6,8 +6,10 @@ control_bounds=...)``, the force affine in u); :class:`OptimalControlProblem` op
 
 - :mod:`~lcp.ocp.problem`: :class:`OptimalControlProblem` (costs, constraints, guesses, solve,
   deterministic multi-start);
-- :mod:`~lcp.ocp.transcription`: the NLP (uniform or free steps, piecewise-constant or linear
-  control hold, the cross complementarity that puts switches on nodes);
+- :mod:`~lcp.ocp.transcription`: the NLP (uniform or free steps, piecewise-constant, linear or
+  affine control hold, the cross complementarity that puts switches on nodes);
+- :mod:`~lcp.ocp.schedule`: :class:`AffineSchedule`, the control of the affine hold (affine on each
+  step, jumps at the nodes);
 - :mod:`~lcp.ocp.complementarity`: the Scholtes homotopy, polishing and the independent checks;
 - :mod:`~lcp.ocp.replay`: open-loop replay and the replay miss every result carries;
 - :mod:`~lcp.ocp.results`, :mod:`~lcp.ocp.options`, :mod:`~lcp.ocp.model` (``tangential_push``,
@@ -24,7 +26,7 @@ optimal control of nonsmooth systems, Numer. Math. 156 (2024) 1115-1162.
 from ..contact_problem import MODE_NAMES
 from .model import add_control, controlled_system, tangential_push
 from .options import OCP_STATUS_MESSAGES, HomotopyOptions
-from .problem import OptimalControlProblem
+from .problem import OCP_HOLDS, OptimalControlProblem
 from .replay import replay, replay_check
 from .results import (
            HomotopyStage,
@@ -35,10 +37,13 @@ from .results import (
            Step,
            effort,
 )
+from .schedule import AffineSchedule
 
 __all__ = [
            "MODE_NAMES",
+           "OCP_HOLDS",
            "OCP_STATUS_MESSAGES",
+           "AffineSchedule",
            "HomotopyOptions",
            "HomotopyStage",
            "OCPGuess",

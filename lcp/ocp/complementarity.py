@@ -113,6 +113,10 @@ def _polish(tr, x, lam_x, lam_g, P, solver):
         a_small = x[ia] <= x[iw]
         ubx[ia[a_small]] = 0.0
         ubx[iw[~a_small]] = 0.0
+    for ia, iw in _rate_pairs(tr):  # a >= 0 against a signed rate: the smaller (in magnitude) is zero
+        a_small = x[ia] <= np.abs(x[iw])
+        ubx[ia[a_small]] = 0.0
+        lbx[iw[~a_small]] = ubx[iw[~a_small]] = 0.0
     t0 = time.perf_counter()
     sol = solver(x0=np.clip(x, lbx, ubx), lam_x0=lam_x, lam_g0=lam_g, lbx=lbx, ubx=ubx, lbg=tr.lbg,
                  ubg=tr.ubg, p=P)
@@ -121,16 +125,23 @@ def _polish(tr, x, lam_x, lam_g, P, solver):
     return xs, float(sol["f"]), diagnose(tr, xs), solver.stats(), dt
 
 
+def _rate_pairs(tr):
+    """(index of a >= 0, index of its signed rate) of the affine hold's rate complementarity."""
+    if "sN" not in tr.ix:
+        return []
+    return [(tr.ix["pN"].reshape(-1), tr.ix["sN"].reshape(-1)), (tr.ix["wl"].reshape(-1), tr.ix["sT"].reshape(-1))]
+
+
 def diagnose(tr, x) -> dict:
     """Coulomb residual (ContactProblem.residual), dynamics residual and modes per step, in NumPy."""
     pb = tr.pb
     _, hs, q, v, u, pN, pT = tr.unpack(x)
     N, n, m, nb = pb.N, pb.system.n, pb.system.n_contacts, pb.system.n_bilateral
     th, mu, e = pb.theta, pb.system.mu, pb.system.e
-    ua = u[:N]
-    ubar = ua if pb.hold == "constant" else 0.5 * (u[:-1] + u[1:])
+    ua, ub = {"constant": (u, u), "linear": (u[:-1], u[1:]), "affine": (u[0::2], u[1::2])}[pb.hold]
+    ubar = 0.5 * (ua + ub)
     tk = np.concatenate([[0.0], np.cumsum(hs)])[:-1]
-    out = tr.step.map(N)(tk[None, :], hs[None, :], q[:-1].T, v[:-1].T, ua.T, ubar.T)
+    out = tr.step.map(N)(tk[None, :], hs[None, :], q[:-1].T, v[:-1].T, ua.T, ubar.T, (ub - ua).T)
 
     def blocks(a, r, c):  # (r, c N) -> (N, r, c)
         return np.array(a, dtype=float).reshape(r, N, c).transpose(1, 0, 2)
@@ -169,6 +180,8 @@ def diagnose(tr, x) -> dict:
         lcp_res = float(np.max(np.abs(np.minimum(a, w))))
         n_own = N * m * len(PAIRS)  # the cross pairs follow the steps' own pairs
         cross = float(np.max(np.abs(np.minimum(a[n_own:], w[n_own:])), initial=0.0))
+        for ia, iw in _rate_pairs(tr):  # the affine hold's rate pairs count as cross pairs
+            cross = max(cross, float(np.max(np.minimum(x[ia], np.abs(x[iw])), initial=0.0)))
     else:
         vplus = vfree
         max_product = lcp_res = cross = 0.0

@@ -15,11 +15,23 @@ def _interp(a, told, tnew):
     return np.stack([np.interp(tnew, told, a[:, j]) for j in range(a.shape[1])], axis=1)
 
 
+def _old_schedule(res, t_old, M):
+    """The control of a solution or guess as a schedule on its own grid (its hold from its rows)."""
+    from ..control import ControlSchedule
+    from .schedule import AffineSchedule
+
+    u = np.asarray(res.u, dtype=float)
+    hold = getattr(res, "hold", None)
+    if hold is None:
+        hold = {M: "constant", M + 1: "linear", 2 * M: "affine"}.get(len(u), "constant")
+    return AffineSchedule(t_old, u) if hold == "affine" else ControlSchedule(t_old, u, hold=hold)
+
+
 def resample(res, N: int, hold: str) -> OCPGuess:
     """Interpolate a solution or guess onto N uniform steps (impulses as forces, rescaled by h).
 
-    The control is sampled at interval midpoints (constant hold) or nodes (linear hold) of the
-    new grid, from its own hold on the old one.
+    The control is sampled, from its own hold on the old grid, at interval midpoints (constant
+    hold), at nodes (linear hold), or at both ends of each interval (affine hold).
     """
     T = float(res.T)
     M = res.q.shape[0] - 1
@@ -30,12 +42,13 @@ def resample(res, N: int, hold: str) -> OCPGuess:
     t_new = np.linspace(0.0, T, N + 1)
     h_old = np.diff(t_old)[:, None]
     tm_old, tm_new = 0.5 * (t_old[1:] + t_old[:-1]), 0.5 * (t_new[1:] + t_new[:-1])
-    u = np.asarray(res.u, dtype=float)
-    if len(u) == M:  # constant hold on the old grid
-        k = np.clip(np.searchsorted(t_old, tm_new if hold == "constant" else t_new, side="right") - 1, 0, M - 1)
-        u_new = u[k]
+    sched = _old_schedule(res, t_old, M)
+    if hold == "constant":
+        u_new = sched(tm_new)
+    elif hold == "linear":
+        u_new = sched(t_new)
     else:
-        u_new = _interp(u, t_old, tm_new if hold == "constant" else t_new)
+        u_new = np.stack([sched(t_new[:-1]), sched.left(t_new[1:])], axis=1).reshape(2 * N, -1)
     return OCPGuess(T=T, q=_interp(res.q, t_old, t_new), v=_interp(res.v, t_old, t_new), u=u_new,
                     p_N=_interp(res.p_N / h_old, tm_old, tm_new) * (T / N),
                     p_T=_interp(res.p_T / h_old, tm_old, tm_new) * (T / N), source="resampled")
@@ -80,9 +93,10 @@ def simulate_guess(pb, u, T: float, solver: str = "auto") -> OCPGuess:
     from ..simulation import simulate
 
     t = np.linspace(0.0, T, pb.N + 1)
-    rows = pb.N if pb.hold == "constant" else pb.N + 1
+    rows = pb.control_rows
     if callable(u):
-        un = np.array([np.broadcast_to(np.asarray(u(tk), dtype=float), (pb.nu,)) for tk in t[:rows]])
+        ts = np.repeat(t, 2)[1:-1] if pb.hold == "affine" else t[:rows]  # affine: both ends of each step
+        un = np.array([np.broadcast_to(np.asarray(u(tk), dtype=float), (pb.nu,)) for tk in ts])
     else:
         ua = np.asarray(u, dtype=float)
         un = (np.repeat(np.broadcast_to(ua, (pb.nu,))[None, :], rows, 0) if ua.size == pb.nu

@@ -14,9 +14,14 @@ from .model import add_control
 from .options import OCP_STATUS_MESSAGES, HomotopyOptions, positive
 from .replay import replay_check
 from .results import OCPGuess, OCPResult, Step
+from .schedule import AffineSchedule
 from .transcription import Transcription
 
-__all__ = ["OptimalControlProblem"]
+__all__ = ["OCP_HOLDS", "OptimalControlProblem"]
+
+#: control holds of the transcription: those of :class:`lcp.control.ControlSchedule` and the
+#: discontinuous piecewise-affine hold (:class:`lcp.ocp.schedule.AffineSchedule`)
+OCP_HOLDS = HOLDS + ("affine",)
 
 
 class OptimalControlProblem:
@@ -52,9 +57,14 @@ class OptimalControlProblem:
         Initial state (the scene's by default).
     theta : float
         Theta of the Moreau-Jean step, in [1/2, 1].
-    hold : {"constant", "linear"}
-        The control between nodes: piecewise constant (one value per step, the default) or
-        piecewise linear (one value per node); either is integrated exactly by the step.
+    hold : {"constant", "linear", "affine"}
+        The control between nodes: piecewise constant (one value per step, the default), piecewise
+        linear and continuous (one value per node), or affine on each step and free to jump at the
+        nodes (a start and an end value per step, :class:`~lcp.ocp.schedule.AffineSchedule`). The
+        control's impulse is integrated exactly by every hold; the affine hold also corrects the
+        trapezoidal position update for forces affine in t (theta = 1/2 only), so that with free
+        steps a smooth optimal control within a contact phase is represented and integrated
+        exactly (:mod:`lcp.ocp.transcription`).
     steps : {"uniform", "free"}
         Uniform steps T / N, or step lengths as unknowns (within ``step_bounds`` times T / N) with
         the cross complementarity that puts every switch on a node (module
@@ -143,8 +153,14 @@ class OptimalControlProblem:
         self.T_bounds = _pair("T_bounds", T_bounds)
         if self.free_time and not self.T_bounds[0] <= self.T <= self.T_bounds[1]:
             raise ValueError(f"T (the initial guess) must lie within T_bounds {T_bounds!r}, got {T!r}")
-        if hold not in HOLDS:
-            raise ValueError(f"hold must be one of {HOLDS}, got {hold!r}")
+        if hold not in OCP_HOLDS:
+            raise ValueError(f"hold must be one of {OCP_HOLDS}, got {hold!r}")
+        if hold == "affine" and self.theta != 0.5:
+            raise ValueError(f"theta must be 1/2 with hold='affine' (its position update is the corrected "
+                             f"trapezoid), got {theta!r}")
+        if hold == "affine" and system.n_bilateral:
+            raise ValueError("hold='affine' does not support bilateral constraints (their force rates are not "
+                             "modelled)")
         if steps not in ("uniform", "free"):
             raise ValueError(f"steps must be 'uniform' or 'free', got {steps!r}")
         self.hold, self.steps = hold, steps
@@ -197,7 +213,14 @@ class OptimalControlProblem:
 
     def schedule(self, t, u) -> ControlSchedule:
         """The ControlSchedule of node times t and control values u under this problem's hold."""
+        if self.hold == "affine":
+            return AffineSchedule(t, u)
         return ControlSchedule(t, u, hold=self.hold)
+
+    @property
+    def control_rows(self) -> int:
+        """Rows of the control values: N (constant hold), N + 1 (linear), 2 N (affine: start, end)."""
+        return {"constant": self.N, "linear": self.N + 1, "affine": 2 * self.N}[self.hold]
 
     # ------------------------------------------------------------------ guesses
     def guess(self, u=0.0, T: float | None = None, solver: str = "auto") -> OCPGuess:
@@ -220,7 +243,7 @@ class OptimalControlProblem:
                            np.clip(0.0, self.u_min, self.u_max))
             return self.guess(u=mid)
         if isinstance(guess, (OCPResult, OCPGuess)):
-            rows = self.N if self.hold == "constant" else self.N + 1
+            rows = self.control_rows
             if guess.q.shape != (self.N + 1, self.system.n) or guess.u.shape != (rows, self.nu):
                 return resample(guess, self.N, self.hold)
             return guess

@@ -54,6 +54,8 @@ def _replay_event_pieces(result: OCPResult, **options):
         h = t[k + 1] - t[k]
         if sched.hold == "constant":
             piece = ControlSchedule([0.0, h], sched.values[k:k + 1])
+        elif sched.hold == "affine":
+            piece = ControlSchedule([0.0, h], sched.values[2 * k:2 * k + 2], hold="linear")
         else:
             piece = ControlSchedule([0.0, h], sched.values[k:k + 2], hold="linear")
         sim = simulate(sysc, h, method="event", control=piece, q0=q[-1], v0=v[-1], **options)
@@ -131,16 +133,16 @@ def replay_check(result: OCPResult, tol: float, refine: int = 50) -> ReplayCheck
     """The replay miss of a solution: final state and path constraints, replayed open loop.
 
     The event-driven replay (exact, restarted at the control's nodes) for a piecewise-constant
-    control when the event integrator is available and the drift does not depend on time;
-    otherwise (linear hold) Moreau-Jean at T / (N refine), which reports its method and step.
+    or piecewise-affine control when the event integrator is available and the drift does not depend on time;
+    otherwise (continuous linear hold) Moreau-Jean at T / (N refine), which reports its method and step.
     Path constraints (the largest value) and path equalities (the largest magnitude) are
     evaluated on the replayed states at the nodes (with the optimizer's impulses and controls).
     """
     pb = result.problem
-    # the event replay is exact for the constant hold (closed-form phases); a linear hold makes
-    # every phase an ODE with a time-varying force, which the Moreau-Jean replay handles faster
-    if result.hold == "constant" and _event_available() and not pb.system.force_depends_on_t:
-        rp = replay(result, method="event")
+    # the event replay is exact for the constant and the affine hold (polynomial phases in closed
+    # form); for the linear hold the Moreau-Jean replay is kept as before (a pinned, cheaper check)
+    if result.hold in ("constant", "affine") and _event_available() and not pb.system.force_depends_on_t:
+        rp = replay(result, method="event", n_eval=2)  # the nodes only: no dense output to evaluate
         method = "event"
     else:
         rp = replay(result, refine=refine)
@@ -151,8 +153,8 @@ def replay_check(result: OCPResult, tol: float, refine: int = 50) -> ReplayCheck
     if pb.path_constraints is not None or pb.path_equalities is not None:
         u = result.u
         for k in range(len(result.t) - 1):
-            ua = u[k]
-            ub = u[k] if result.hold == "constant" else u[k + 1]
+            j = 2 * k if result.hold == "affine" else k
+            ua, ub = u[j], u[j] if result.hold == "constant" else u[j + 1]
             st = pb.make_step(k, result.t[k], result.steps[k], rp.q[k], rp.q[k + 1], rp.v[k], rp.v[k + 1],
                               ua, ub, result.p_N[k], result.p_T[k])
             for fn, absolute in ((pb.path_constraints, False), (pb.path_equalities, True)):

@@ -39,6 +39,32 @@ i.e. a block still sliding at node k keeps its friction at the bound, in the sam
 step k: it can stop only at a node. Within a step the forces are then those of one mode, and for
 forces constant over the step the theta = 1/2 step is exact, so switches (stick/slip/stop and the
 control's own switches) become decision variables and the transcription exact between them.
+
+The affine hold: smooth controls within a phase
+-----------------------------------------------
+A piecewise-constant control approximates a control that is smooth within a contact phase (the
+minimum-effort ramp during a slide) by a staircase; over n equal steps its cost exceeds the ramp's
+by J / (4 n^2), so the objective converges only as N^-2 however exactly the steps are integrated.
+``hold="affine"`` gives each step a start and an end value u_k+, u_{k+1}- (affine in between, free
+to jump at the nodes: at a switch the optimal control often does). Within a step of one mode the
+forces are then affine in t, the velocity quadratic, and the trapezoid misses the position by
+h^2 (a_0 - a_1) / 12. The step keeps the exact impulse (h times the mean force) and corrects the
+position exactly,
+
+    q_{k+1} = q_k + h_k (v_k + v_{k+1}) / 2 - h_k^2 da_k / 12,
+    M da_k = dF_k + H' dlambda_k,   dF_k = F0(t_k + h_k) - F0(t_k) + B (u_{k+1}- - u_k+),
+
+with the change dlambda = (dN, dbeta+ - dbeta-) of the contact forces over the step as unknowns.
+The mode fixes it: the forces at both ends of the step stay admissible (N, beta+, beta-,
+mu N - beta+ - beta- >= 0 at t_k and t_{k+1}, so a multiplier that is zero on average, or a friction
+at its bound, keeps its rate zero), and the rate complementarity
+
+    N perp (H_N da) = 0,      (mu N - beta+ - beta-) perp (H_T da) = 0
+
+keeps a closed contact closed and a sticking contact stuck over the whole step (pairs of a
+multiplier >= 0 and a signed rate, relaxed as |a s| <= sigma with the other pairs). Exact for a
+constant mass matrix and contact Jacobian and forces affine in t (the Jean-Pratt block);
+otherwise second order like the theta = 1/2 step. theta = 1/2 only, no bilateral constraints.
 """
 from __future__ import annotations
 
@@ -71,7 +97,8 @@ class Transcription:
         Indices of each block of variables in ``x``.
     lbx, ubx, lbg, ubg : ndarray
     step : casadi.Function
-        ``(t, h, q, v, u_start, u_mean) -> (W_h, r, H, G, phi_t(t + h), gap)``.
+        ``(t, h, q, v, u_start, u_mean, u_end - u_start) -> (W_h, r, H, G, phi_t(t + h), gap, M, dF)``,
+        dF the change of the contact-free force over the step (affine hold).
     cross : bool
         Whether the cross complementarity (free steps) is imposed.
     """
@@ -92,7 +119,7 @@ class Transcription:
         sys, th = pb.system, pb.theta
         t, q, v = sys.t_sym, sys.q_sym, sys.v_sym
         h = ca.SX.sym("h")
-        us, ubar = ca.SX.sym("us", pb.nu), ca.SX.sym("ubar", pb.nu)
+        us, ubar, du = ca.SX.sym("us", pb.nu), ca.SX.sym("ubar", pb.nu), ca.SX.sym("du", pb.nu)
         B = sys.control_matrix_expr
         F0 = sys.force_expr
         Fs = F0 + ca.mtimes(B, us)
@@ -102,7 +129,9 @@ class Transcription:
         r = h * ((1 - th) * F0 + th * F1) + h * ca.mtimes(B, ubar) - h * h * th * ca.mtimes(K, v)
         G = ca.jacobian(sys.constraints_expr, q)
         phi_t1 = ca.substitute(ca.jacobian(sys.constraints_expr, t), t, t + h)
-        return ca.Function("mj_step", [t, h, q, v, us, ubar], [Wh, r, sys.H_expr, G, phi_t1, sys.gap_expr])
+        dF = F1 - F0 + ca.mtimes(B, du)
+        return ca.Function("mj_step", [t, h, q, v, us, ubar, du],
+                           [Wh, r, sys.H_expr, G, phi_t1, sys.gap_expr, sys.mass_expr, dF])
 
     # ------------------------------------------------------------------ NLP bookkeeping
     def _var(self, name, size, lb, ub, key=None):
@@ -139,7 +168,8 @@ class Transcription:
             self._constrain(ca.sum1(ca.vertcat(*hs)) - Tv, 0.0, 0.0)
         else:
             hs = [Tv / N] * N
-        n_u = N if pb.hold == "constant" else N + 1
+        affine = pb.hold == "affine"
+        n_u = {"constant": N, "linear": N + 1, "affine": 2 * N}[pb.hold]
         us = [self._var(f"u{k}", nu, pb.u_min, pb.u_max, key="u") for k in range(n_u)]
         qs, vs = [q0p], [v0p]
         for k in range(1, N + 1):
@@ -162,10 +192,9 @@ class Transcription:
             h = hs[k]
             blk = {nm: self._var(f"{nm}{k}", m, 0.0, np.inf, key=nm) for a_w in PAIRS for nm in a_w}
             lamb = self._var(f"lb{k}", nb, -np.inf, np.inf, key="lb")
-            ua = us[k]
-            ub = us[k] if pb.hold == "constant" else us[k + 1]
+            ua, ub = self.control_pair(us, k)
             qa, qb, va, vb = qs[k], qs[k + 1], vs[k], vs[k + 1]
-            Wh, r, H, G, phi_t1, _ = self.step(tk[k], h, qa, va, ua, 0.5 * (ua + ub))
+            Wh, r, H, G, phi_t1, _, Mq, dF = self.step(tk[k], h, qa, va, ua, 0.5 * (ua + ub), ub - ua)
             pN, pT = h * blk["pN"], h * (blk["bp"] - blk["bm"])
             dyn = ca.mtimes(Wh, vb - va) - r
             if m:
@@ -174,7 +203,11 @@ class Transcription:
                 dyn = dyn - ca.mtimes(G.T, lamb)
                 self._constrain(ca.mtimes(G, vb) + phi_t1, 0.0, 0.0)
             self._constrain(dyn, 0.0, 0.0)
-            self._constrain(qb - qa - h * ((1 - th) * va + th * vb), 0.0, 0.0)
+            if affine:  # the trapezoid plus its exact correction for forces affine in t over the step
+                da = self._rates(k, blk, H, Mq, dF, m, mu, sigma)
+                self._constrain(qb - qa - 0.5 * h * (va + vb) + h * h / 12 * da, 0.0, 0.0)
+            else:
+                self._constrain(qb - qa - h * ((1 - th) * va + th * vb), 0.0, 0.0)
             if m:
                 HN, HT = H[:m, :], H[m:, :]
                 uN, uT = ca.mtimes(HN, vb), ca.mtimes(HT, vb)
@@ -193,7 +226,9 @@ class Transcription:
             st = pb.make_step(k, tk[k], h, qa, qb, va, vb, ua, ub, pN, pT)
             if pb.stage_cost is not None:
                 J = J + h * _scalar(pb.stage_cost(st), "stage_cost")
-            if pb.control_rate_weight and k + 1 < len(us):
+            if pb.control_rate_weight and affine:
+                J = J + pb.control_rate_weight * ca.sumsqr(ub - ua) / h
+            elif pb.control_rate_weight and k + 1 < len(us):
                 J = J + pb.control_rate_weight * ca.sumsqr(us[k + 1] - us[k]) / h
             if pb.path_constraints is not None:
                 self._constrain(ca.vec(ca.SX(pb.path_constraints(st))), -np.inf, 0.0)
@@ -214,6 +249,32 @@ class Transcription:
         self.lbg = np.concatenate(self._lbg) if self._lbg else np.zeros(0)
         self.ubg = np.concatenate(self._ubg) if self._ubg else np.zeros(0)
         del self._x, self._g, self._lbx, self._ubx, self._lbg, self._ubg
+
+    def control_pair(self, us, k):
+        """The control at the start and at the end of step k (lists of per-row symbols or arrays)."""
+        hold = self.pb.hold
+        if hold == "constant":
+            return us[k], us[k]
+        if hold == "linear":
+            return us[k], us[k + 1]
+        return us[2 * k], us[2 * k + 1]
+
+    def _rates(self, k, blk, H, Mq, dF, m, mu, sigma):
+        """Acceleration change da over step k under the affine hold (module docstring), with its
+        contact-force changes as unknowns, their endpoint bounds and rate complementarity."""
+        if not m:
+            return ca.solve(Mq, dF)
+        d = {nm: self._var(f"{nm}{k}", m, -np.inf, np.inf, key=nm) for nm in ("dN", "dbp", "dbm")}
+        s = {nm: self._var(f"{nm}{k}", m, -np.inf, np.inf, key=nm) for nm in ("sN", "sT")}
+        da = ca.solve(Mq, dF + ca.mtimes(H.T, ca.vertcat(d["dN"], d["dbp"] - d["dbm"])))
+        self._constrain(ca.vertcat(s["sN"], s["sT"]) - ca.mtimes(H, da), 0.0, 0.0)
+        dwl = mu * d["dN"] - d["dbp"] - d["dbm"]
+        for mean, rate in ((blk["pN"], d["dN"]), (blk["bp"], d["dbp"]), (blk["bm"], d["dbm"]), (blk["wl"], dwl)):
+            self._constrain(ca.vertcat(mean - 0.5 * rate, mean + 0.5 * rate), 0.0, np.inf)  # >= 0 at both ends
+        prod = ca.vertcat(blk["pN"] * s["sN"], blk["wl"] * s["sT"])
+        self._constrain(prod - sigma, -np.inf, 0.0)
+        self._constrain(prod + sigma, 0.0, np.inf)
+        return da
 
     # ------------------------------------------------------------------ numbers out of x
     def unpack(self, x):
