@@ -1,24 +1,31 @@
 """Friction-contact problem files: FCLib's HDF5 format and Siconos's ``.dat`` text format.
 
-Both store a planar (``spacedim`` 2) problem contact by contact, ``r = (r_N,1, r_T,1, ...)``, in
-one of two forms:
+Both store a planar (``spacedim`` 2) or spatial (``spacedim`` 3) problem contact by contact,
+``r = (r_N,1, r_T,1, ...)`` (one tangent entry per planar contact, two per spatial one), in one of
+two forms:
 
-- local: u = W r + q, Coulomb's law between r and u (W of size 2k);
+- local: u = W r + q, Coulomb's law between r and u (W of size d k, d the dimension);
 - global: M v = H r + f, u = H' v + w (FCLib's names; Siconos writes q for f and b for w), reduced
   here to the local form W = H' M^-1 H, q = H' M^-1 f + w with a sparse factorization of M.
 
-:func:`read_problem` returns a :class:`ContactFile` whose :meth:`ContactFile.problem` is a
-:class:`~lcp.contact_problem.ContactProblem` (impulses ordered normals first, the package's
-order; :func:`lcp.friction_contact.interleave` maps between the two). Matrices stay sparse.
+:func:`read_problem` returns a :class:`ContactFile` whose ``dim`` is the file's dimension and whose
+:meth:`ContactFile.problem` is a :class:`~lcp.contact_problem.ContactProblem` for a planar file or a
+:class:`~lcp.cone_problem.ConeContactProblem` (the Coulomb disk) for a spatial one, impulses
+ordered normals first, the package's order (:func:`lcp.friction_contact.interleave` and
+:attr:`ConeContactProblem.perm <lcp.cone_problem.ConeContactProblem>` map between the two).
+Matrices stay sparse.
 
 Siconos ``.dat`` layout (whitespace-separated): dimension, number of contacts, then the matrix
 (storage 0 dense column-major, 1 sparse-block, 2 CSparse triplet/CSC/CSR), then q and mu for the
-local form; for the global form M, H, then q, b and mu. FCLib HDF5 layout: groups ``/fclib_local``
+local form (:func:`write_dat` writes d x d blocks for sparse-block storage); for the global form M, H, then q, b and mu. FCLib HDF5 layout: groups ``/fclib_local``
 (``spacedim``, ``W``, ``vectors/q``, ``vectors/mu``, optional ``info``) or ``/fclib_global``
 (``M``, ``H``, ``vectors/f``, ``vectors/w``, ``vectors/mu``); each matrix has ``m``, ``n``,
 ``nz`` (triplet count, -1 CSC, -2 CSR), ``nzmax``, ``p``, ``i``, ``x`` as CSparse stores them.
 
-A malformed or truncated file raises ``ValueError`` naming the file and where reading stopped.
+A malformed or truncated file raises ``ValueError`` naming the file and where reading stopped
+(line of a ``.dat`` file, dataset of an HDF5 file); :meth:`ContactFile.check` reports sizes that
+disagree, negative or non-finite friction coefficients, non-finite entries (with the first one's
+place) and an unsymmetric or indefinite W before any solve.
 
 Examples
 --------
@@ -29,8 +36,20 @@ Examples
 >>> path = os.path.join(tempfile.mkdtemp(), "one.hdf5")
 >>> write_hdf5(path, cf)
 >>> back = read_problem(path)
->>> np.allclose(back.W.toarray(), W), back.form, back.n_contacts
-(True, 'local', 1)
+>>> np.allclose(back.W.toarray(), W), back.form, back.n_contacts, back.dim
+(True, 'local', 1, 2)
+
+A spatial contact (dimension 3): a unit block pressed at 1 m/s and pushed sideways at 2 m/s,
+friction 0.5, read back as the Coulomb-disk problem and solved.
+
+>>> from lcp.cone_solvers import make_cone_solver
+>>> cf3 = ContactFile(np.eye(3), np.array([-1.0, 0.0, 2.0]), [0.5], dim=3)
+>>> path3 = os.path.join(tempfile.mkdtemp(), "one3.dat")
+>>> write_dat(path3, cf3, storage="sparse-block")
+>>> pb = read_problem(path3).problem(); type(pb).__name__
+'ConeContactProblem'
+>>> make_cone_solver("auto").solve(pb).p
+array([ 1. ,  0. , -0.5])
 """
 from __future__ import annotations
 
@@ -40,27 +59,34 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from .cone_problem import ConeContactProblem
 from .contact_problem import ContactProblem
 from .friction_contact import blocked, check_problem
+
+#: dimensions (``spacedim``) the files may have: planar and spatial contacts
+DIMENSIONS = (2, 3)
 
 __all__ = ["ContactFile", "read_dat", "read_hdf5", "read_problem", "write_dat", "write_hdf5"]
 
 
 @dataclass
 class ContactFile:
-    """A planar friction-contact problem as stored in a file (contact-by-contact order).
+    """A friction-contact problem as stored in a file (contact-by-contact order).
 
     Attributes
     ----------
-    W : scipy.sparse matrix, shape (2k, 2k)
+    W : scipy.sparse matrix, shape (d k, d k)
         Local Delassus operator (the reduced one for a global problem).
-    q : ndarray, shape (2k,)
+    q : ndarray, shape (d k,)
     mu : ndarray, shape (k,)
     form : {"local", "global"}
     M, H, f, w : global data when ``form == "global"`` (else None)
     name : str
     storage : str
         How the file stored its matrix ("dense", "sparse-block", "csparse-triplet", "csc", ...).
+    dim : {2, 3}
+        The file's dimension (``spacedim``): 2 planar contacts (one tangent direction), 3 spatial
+        contacts (two).
     """
 
     W: object
@@ -74,8 +100,12 @@ class ContactFile:
     name: str = ""
     storage: str = ""
     info: dict = field(default_factory=dict)
+    dim: int = 2
 
     def __post_init__(self):
+        if self.dim not in DIMENSIONS:
+            raise ValueError(f"dim must be 2 (planar) or 3 (spatial), got {self.dim!r}")
+        self.dim = int(self.dim)
         self.W = sp.csr_matrix(self.W, dtype=float)
         self.q = np.asarray(self.q, dtype=float)
         self.mu = np.atleast_1d(np.asarray(self.mu, dtype=float))
@@ -84,16 +114,43 @@ class ContactFile:
     def n_contacts(self) -> int:
         return self.mu.size
 
-    def check(self):
-        """Sizes, signs, finiteness, symmetry and PSD-ness (:func:`lcp.friction_contact.check_problem`)."""
-        return check_problem(self.W, self.q, self.mu, name=self.name or "problem")
+    @property
+    def dims(self) -> np.ndarray:
+        """Tangent dimension of each contact (``dim - 1``), the layout of a ConeContactProblem."""
+        return np.full(self.n_contacts, self.dim - 1, dtype=np.int64)
 
-    def problem(self, check: bool = True) -> ContactProblem:
-        """The problem as a :class:`ContactProblem` (normals first); raises ValueError on errors."""
+    def check(self):
+        """Sizes, signs, finiteness, symmetry and PSD-ness (:func:`lcp.friction_contact.check_problem`).
+
+        A non-finite entry of W or q is reported with the place of the first one (file order).
+        """
+        name = self.name or "problem"
+        rep = check_problem(self.W, self.q, self.mu, name=name, dims=None if self.dim == 2 else self.dims)
+        for i, msg in enumerate(rep.errors):
+            if msg == f"{name}: W has non-finite entries":
+                Wc = sp.coo_matrix(self.W)
+                bad = np.flatnonzero(~np.isfinite(Wc.data))[0]
+                rep.errors[i] = f"{msg} (first: W[{Wc.row[bad]}, {Wc.col[bad]}] = {Wc.data[bad]})"
+            elif msg == f"{name}: q has non-finite entries":
+                bad = np.flatnonzero(~np.isfinite(self.q))[0]
+                rep.errors[i] = f"{msg} (first: q[{bad}] = {self.q[bad]})"
+            elif msg.startswith(f"{name}: friction coefficients must be"):
+                bad = np.flatnonzero(~(self.mu >= 0))[0]  # NaN included
+                rep.errors[i] = f"{msg} (first: mu[{bad}] = {self.mu[bad]}, contact {bad})"
+        return rep
+
+    def problem(self, check: bool = True) -> ContactProblem | ConeContactProblem:
+        """The problem in the package's order (normals first); raises ValueError on errors.
+
+        A planar file gives a :class:`ContactProblem`, a spatial one a
+        :class:`~lcp.cone_problem.ConeContactProblem` (every contact with a 2-D tangent).
+        """
         if check:
             rep = self.check()
             if rep.errors:
                 raise ValueError("; ".join(rep.errors))
+        if self.dim == 3:
+            return ConeContactProblem.from_interleaved(self.W, self.q, self.mu, self.dims)
         k = self.n_contacts
         back = blocked(k)
         return ContactProblem(self.W[back][:, back], self.q[back], self.mu)
@@ -269,10 +326,11 @@ def _read_csparse(tk, what, n0, n1):
 
 
 def read_dat(path) -> ContactFile:
-    """Read a Siconos ``.dat`` friction-contact problem (local or global form); see the module doc.
+    """Read a Siconos ``.dat`` friction-contact problem (local or global form, dimension 2 or 3);
+    see the module doc.
 
-    The form is the one the file's first matrix implies: square with 2k rows is local; otherwise
-    (or when a second matrix follows) global.
+    The form is the one the file's content implies: a second matrix after the first one makes it
+    global; otherwise the first matrix must be square of size d k (local).
     """
     path = os.fspath(path)
     name = os.path.basename(path)
@@ -283,24 +341,29 @@ def read_dat(path) -> ContactFile:
         raise ValueError(f"{path}: not a text file") from None
     tk = _Tokens(path, text)
     dim = tk.int("dimension", low=1)
-    if dim != 2:
-        raise ValueError(f"{path}: line 1: only planar problems (dimension 2) are supported, got {dim}")
+    if dim not in DIMENSIONS:
+        raise ValueError(f"{path}: line 1: only planar and spatial problems (dimension 2 or 3) are supported, "
+                         f"got {dim}")
     k = tk.int("number of contacts")
+    n = dim * k
     A, storage = _read_matrix(tk, "first matrix")
-    if A.shape == (2 * k, 2 * k) and not _global_follows(tk, A):
-        q = tk.floats(2 * k, "q")
+    if not _global_follows(tk, A):
+        if A.shape != (n, n):
+            raise ValueError(f"{path}: line {tk.line}: sizes disagree: W is {A.shape[0]}x{A.shape[1]} for {k} "
+                             f"contacts of dimension {dim} (expected {n}x{n})")
+        q = tk.floats(n, "q")
         mu = tk.floats(k, "mu")
-        return ContactFile(A, q, mu, "local", name=name, storage=storage)
+        return ContactFile(A, q, mu, "local", name=name, storage=storage, dim=dim)
     M = A
     H, _ = _read_matrix(tk, "H")
     nv = M.shape[0]
-    if M.shape != (nv, nv) or H.shape != (nv, 2 * k):
+    if M.shape != (nv, nv) or H.shape != (nv, n):
         raise ValueError(f"{path}: line {tk.line}: global sizes disagree: M {M.shape}, H {H.shape} "
-                         f"for {k} contacts")
+                         f"for {k} contacts of dimension {dim}")
     f = tk.floats(nv, "q (global)")
-    w = tk.floats(2 * k, "b")
+    w = tk.floats(n, "b")
     mu = tk.floats(k, "mu")
-    return _from_global(M, H, f, w, mu, name, storage)
+    return _from_global(M, H, f, w, mu, name, storage, dim)
 
 
 def _global_follows(tk, A):
@@ -321,10 +384,18 @@ def _global_follows(tk, A):
         tk.line, tk.words, tk.pos = save
 
 
-def _from_global(M, H, f, w, mu, name, storage):
+def _from_global(M, H, f, w, mu, name, storage, dim=2):
     from scipy.sparse.linalg import splu
 
-    k = mu.size
+    n = dim * mu.size
+    # non-finite data would reach W only as a NaN of the reduction: name its place in the file
+    for what, x in (("M", M), ("H", H), ("q (global)", f), ("b", w)):
+        data = x.tocoo() if sp.issparse(x) else np.asarray(x)
+        vals = data.data if sp.issparse(x) else data
+        if not np.all(np.isfinite(vals)):
+            bad = np.flatnonzero(~np.isfinite(vals))[0]
+            where = f"[{data.row[bad]}, {data.col[bad]}]" if sp.issparse(x) else f"[{bad}]"
+            raise ValueError(f"{name}: {what} has non-finite entries (first: {what}{where} = {vals[bad]})")
     M = sp.csc_matrix(M)
     try:
         lu = splu(M)
@@ -332,10 +403,10 @@ def _from_global(M, H, f, w, mu, name, storage):
         raise ValueError(f"{name}: the global mass matrix M is singular: {exc}") from None
     Hd = sp.csc_matrix(H)
     # M^-1 H column block by column block keeps the dense intermediate small
-    X = lu.solve(Hd.toarray()) if 2 * k <= 4096 else None
+    X = lu.solve(Hd.toarray()) if n <= 4096 else None
     if X is None:
         cols = []
-        for a in range(0, 2 * k, 1024):
+        for a in range(0, n, 1024):
             cols.append(sp.csc_matrix(lu.solve(Hd[:, a:a + 1024].toarray())))
         MinvH = sp.hstack(cols).tocsr()
     else:
@@ -343,53 +414,119 @@ def _from_global(M, H, f, w, mu, name, storage):
     W = (Hd.T @ MinvH).tocsr()
     q = Hd.T @ lu.solve(np.asarray(f, dtype=float)) + w
     return ContactFile(W, q, mu, "global", M=sp.csr_matrix(M), H=sp.csr_matrix(H), f=f, w=w, name=name,
-                       storage=storage)
+                       storage=storage, dim=dim)
 
 
-def write_dat(path, cf: ContactFile, storage: str = "csparse") -> None:
-    """Write the local form of a problem in Siconos's ``.dat`` layout.
+def write_dat(path, cf: ContactFile, storage: str = "csparse", form: str = "local") -> None:
+    """Write a problem in Siconos's ``.dat`` layout (the layout its ``newFromFile`` readers take).
 
-    ``storage``: ``"csparse"`` (triplets), ``"sparse-block"`` (2 x 2 blocks, the storage Siconos's
-    fc2d solvers take sparse) or ``"dense"`` (column-major).
+    ``storage``: ``"csparse"`` (triplets), ``"sparse-block"`` (d x d blocks for W, the storage
+    Siconos's fc2d/fc3d solvers take sparse) or ``"dense"`` (column-major). ``form``: ``"local"``
+    (W, q, mu; also for a problem read in the global form) or ``"global"`` (M, H, f, w, mu; in
+    sparse-block storage M's blocks are its diagonal blocks, H's the same rows by d columns).
     """
     if storage not in ("csparse", "sparse-block", "dense"):
         raise ValueError(f"storage must be 'csparse', 'sparse-block' or 'dense', got {storage!r}")
-    k = cf.n_contacts
-    n = 2 * k
-    lines = [f"2\n{k}\n"]
-    if storage == "dense":
-        lines.append(f"0\n{n}\n{n}\n{n}\t{n}\n")
-        Wd = cf.W.toarray()
-        for j in range(n):  # one column per line
-            lines.append(" ".join(f"{x:.17e}" for x in Wd[:, j]) + "\n")
-    elif storage == "sparse-block":
-        B = sp.bsr_matrix(cf.W, blocksize=(2, 2))
-        B.sort_indices()
-        nb = B.indices.size
-        sizes = " ".join(str(2 * (i + 1)) for i in range(k))
-        lines.append(f"1\n{n}\n{n}\n{nb}\n{k}\n{k}\n{sizes}\n{sizes}\n{k + 1}\n{nb}\n")
-        lines.append(" ".join(map(str, B.indptr)) + "\n")
-        lines.append(" ".join(map(str, B.indices)) + "\n")
-        for b in range(nb):
-            lines.append(f"{b}\n" + " ".join(f"{x:.17e}" for x in B.data[b].ravel(order="F")) + "\n")
+    if form not in ("local", "global"):
+        raise ValueError(f"form must be 'local' or 'global', got {form!r}")
+    if form == "global" and cf.M is None:
+        raise ValueError("form='global' needs M, H, f and w")
+    k, d = cf.n_contacts, cf.dim
+    lines = [f"{d}\n{k}\n"]
+    if form == "local":
+        _write_dat_matrix(lines, cf.W, storage, d, d)
+        vectors = (cf.q, cf.mu)
     else:
-        W = sp.coo_matrix(cf.W)
-        lines.append(f"2\n{n}\n{n}\n1\nCSparse Version 3.1.9 (written by lcp.fclib)\n"
-                     f"triplet: {n}-by-{n}, nzmax: {W.nnz} nnz: {W.nnz}\n")
-        lines.extend(f"    {i} {j} : {x:.17g}\n" for i, j, x in zip(W.row, W.col, W.data))
-    lines.append(" ".join(f"{x:.17g}" for x in cf.q) + "\n")
-    lines.append(" ".join(f"{x:.17g}" for x in cf.mu) + "\n")
+        rows = _diagonal_blocks(cf.M) if storage == "sparse-block" else None
+        _write_dat_matrix(lines, cf.M, storage, rows, rows)
+        _write_dat_matrix(lines, cf.H, storage, rows, d)
+        vectors = (np.asarray(cf.f, float), np.asarray(cf.w, float), cf.mu)
+    lines.extend(" ".join(f"{x:.17g}" for x in v) + "\n" for v in vectors)
     with open(path, "w") as fh:
         fh.writelines(lines)
 
 
+def _diagonal_blocks(A) -> np.ndarray:
+    """Ends of the finest contiguous diagonal blocks of a square A (no entry couples two blocks)."""
+    A = sp.coo_matrix(A)
+    n = A.shape[0]
+    # a block ends after row i when no entry joins a row/column <= i to one > i
+    reach = np.arange(n)
+    np.maximum.at(reach, np.minimum(A.row, A.col), np.maximum(A.row, A.col))
+    ends = np.flatnonzero(np.maximum.accumulate(reach) == np.arange(n)) + 1
+    return ends
+
+
+def _write_dat_matrix(lines, A, storage, rows, cols):
+    """Append one matrix in Siconos's NumericsMatrix text layout. ``rows``, ``cols``: block size
+    (int) or block ends (array) of the sparse-block storage."""
+    n0, n1 = A.shape
+    if storage == "dense":
+        lines.append(f"0\n{n0}\n{n1}\n{n0}\t{n1}\n")
+        Ad = A.toarray()
+        for j in range(n1):  # one column per line
+            lines.append(" ".join(f"{x:.17e}" for x in Ad[:, j]) + "\n")
+    elif storage == "sparse-block":
+        lines.append(_sbm_text(A, rows, cols))
+    else:
+        Ac = sp.coo_matrix(A)
+        lines.append(f"2\n{n0}\n{n1}\n1\nCSparse Version 3.1.9 (written by lcp.fclib)\n"
+                     f"triplet: {n0}-by-{n1}, nzmax: {Ac.nnz} nnz: {Ac.nnz}\n")
+        lines.extend(f"    {i} {j} : {x:.17g}\n" for i, j, x in zip(Ac.row, Ac.col, Ac.data))
+
+
+def _sbm_text(A, rows, cols) -> str:
+    """Sparse-block storage of A (blocks stored column-major, block rows in order)."""
+    n0, n1 = A.shape
+    ends0 = np.arange(rows, n0 + 1, rows) if np.isscalar(rows) else np.asarray(rows)
+    ends1 = np.arange(cols, n1 + 1, cols) if np.isscalar(cols) else np.asarray(cols)
+    if np.isscalar(rows) and np.isscalar(cols):
+        B = sp.bsr_matrix(A, blocksize=(rows, cols))
+        B.sort_indices()
+        indptr, indices = B.indptr, B.indices
+        blocks = [B.data[b].ravel(order="F") for b in range(indices.size)]
+    else:
+        Ac = sp.coo_matrix(A)
+        start0, start1 = np.concatenate([[0], ends0[:-1]]), np.concatenate([[0], ends1[:-1]])
+        bi, bj = np.searchsorted(ends0, Ac.row, side="right"), np.searchsorted(ends1, Ac.col, side="right")
+        pairs = np.unique(np.stack([bi, bj], axis=1), axis=0).reshape(-1, 2)  # sorted by (row, column)
+        indptr = np.searchsorted(pairs[:, 0], np.arange(ends0.size + 1))
+        indices = pairs[:, 1]
+        Ad = sp.csr_matrix(A)
+        blocks = [Ad[start0[i]:ends0[i], start1[j]:ends1[j]].toarray().ravel(order="F") for i, j in pairs]
+    nb = indices.size
+    if nb == 0:  # Siconos writes the block count alone
+        return f"1\n{n0}\n{n1}\n0\n"
+    out = [(f"1\n{n0}\n{n1}\n{nb}\n{ends0.size}\n{ends1.size}\n{' '.join(map(str, ends0))}\n"
+            f"{' '.join(map(str, ends1))}\n{ends0.size + 1}\n{nb}\n"),
+           " ".join(map(str, indptr)) + "\n", " ".join(map(str, indices)) + "\n"]
+    out.extend(f"{b}\n" + " ".join(f"{x:.17e}" for x in v) + "\n" for b, v in enumerate(blocks))
+    return "".join(out)
+
+
 # --------------------------------------------------------------------------- FCLib (HDF5)
-def _h5_matrix(grp, what, path):
+def _h5_read(grp, key, path, what, dtype=float):
+    """One dataset of an FCLib group; a missing or unreadable one names the file and the dataset."""
+    where = f"{grp.name.rstrip('/')}/{key}"
     try:
-        m, n, nz = int(grp["m"][0]), int(grp["n"][0]), int(grp["nz"][0])
-        p, i, x = np.asarray(grp["p"][:]), np.asarray(grp["i"][:]), np.asarray(grp["x"][:], dtype=float)
-    except KeyError as exc:
-        raise ValueError(f"{path}: {what}: missing dataset {exc}") from None
+        return np.asarray(grp[key][()], dtype=dtype).ravel()
+    except KeyError:
+        raise ValueError(f"{path}: {what}: missing dataset {where}") from None
+    except (OSError, TypeError, ValueError) as exc:  # a truncated or corrupt file fails here
+        raise ValueError(f"{path}: {what}: cannot read dataset {where}: {exc}") from None
+
+
+def _h5_int(grp, key, path, what):
+    x = _h5_read(grp, key, path, what, dtype=np.int64)
+    if x.size != 1:
+        raise ValueError(f"{path}: {what}: {grp.name.rstrip('/')}/{key} must hold one integer, got {x.size}")
+    return int(x[0])
+
+
+def _h5_matrix(grp, what, path):
+    m, n, nz = (_h5_int(grp, key, path, what) for key in ("m", "n", "nz"))
+    p, i = _h5_read(grp, "p", path, what, np.int64), _h5_read(grp, "i", path, what, np.int64)
+    x = _h5_read(grp, "x", path, what)
     try:
         if nz >= 0:  # triplet, CSparse convention: i rows, p columns
             mat = sp.coo_matrix((x[:nz], (i[:nz], p[:nz])), shape=(m, n))
@@ -415,7 +552,7 @@ def _h5py():
 
 
 def read_hdf5(path) -> ContactFile:
-    """Read an FCLib HDF5 problem (``/fclib_local`` or ``/fclib_global``, planar)."""
+    """Read an FCLib HDF5 problem (``/fclib_local`` or ``/fclib_global``, ``spacedim`` 2 or 3)."""
     h5py = _h5py()
 
     path = os.fspath(path)
@@ -426,36 +563,46 @@ def read_hdf5(path) -> ContactFile:
         raise ValueError(f"{path}: not a readable HDF5 file: {exc}") from None
     with fh:
         try:
-            if "fclib_local" in fh:
-                g = fh["fclib_local"]
-                dim = int(g["spacedim"][0])
-                if dim != 2:
-                    raise ValueError(f"{path}: only planar problems (spacedim 2) are supported, got {dim}")
-                W = _h5_matrix(g["W"], "/fclib_local/W", path)
-                q, mu = np.asarray(g["vectors/q"][:], float), np.asarray(g["vectors/mu"][:], float)
+            form = "local" if "fclib_local" in fh else ("global" if "fclib_global" in fh else None)
+        except (OSError, RuntimeError) as exc:
+            raise ValueError(f"{path}: cannot read the root group: {exc}") from None
+        if form is None:
+            raise ValueError(f"{path}: neither /fclib_local nor /fclib_global found")
+        try:
+            g = fh[f"fclib_{form}"]
+            dim = _h5_int(g, "spacedim", path, "dimension")
+            if dim not in DIMENSIONS:
+                raise ValueError(f"{path}: /fclib_{form}/spacedim: only planar and spatial problems "
+                                 f"(spacedim 2 or 3) are supported, got {dim}")
+            if form == "local":
                 if "R" in g or "V" in g:
                     raise ValueError(f"{path}: mixed problems (V, R) are not supported")
-                if q.size != W.shape[0] or 2 * mu.size != q.size:
-                    raise ValueError(f"{path}: sizes disagree: W {W.shape}, q {q.shape}, mu {mu.shape}")
-                return ContactFile(W, q, mu, "local", name=name, storage="fclib")
-            if "fclib_global" in fh:
-                g = fh["fclib_global"]
-                dim = int(g["spacedim"][0])
-                if dim != 2:
-                    raise ValueError(f"{path}: only planar problems (spacedim 2) are supported, got {dim}")
-                if "G" in g:
-                    raise ValueError(f"{path}: global problems with bilateral constraints (G) are not supported")
-                M = _h5_matrix(g["M"], "/fclib_global/M", path)
-                H = _h5_matrix(g["H"], "/fclib_global/H", path)
-                f, w = np.asarray(g["vectors/f"][:], float), np.asarray(g["vectors/w"][:], float)
-                mu = np.asarray(g["vectors/mu"][:], float)
-                if M.shape != (f.size, f.size) or H.shape != (f.size, w.size) or w.size != 2 * mu.size:
-                    raise ValueError(f"{path}: global sizes disagree: M {M.shape}, H {H.shape}, f {f.shape}, "
-                                     f"w {w.shape}, mu {mu.shape}")
-                return _from_global(M, H, f, w, mu, name, "fclib")
-        except KeyError as exc:
-            raise ValueError(f"{path}: missing FCLib item {exc}") from None
-    raise ValueError(f"{path}: neither /fclib_local nor /fclib_global found")
+                W = _h5_matrix(_h5_group(g, "W", path), "/fclib_local/W", path)
+                q = _h5_read(g, "vectors/q", path, "q")
+                mu = _h5_read(g, "vectors/mu", path, "mu")
+                if q.size != W.shape[0] or W.shape[0] != W.shape[1] or dim * mu.size != q.size:
+                    raise ValueError(f"{path}: sizes disagree: W {W.shape}, q {q.shape}, mu {mu.shape} "
+                                     f"(spacedim {dim})")
+                return ContactFile(W, q, mu, "local", name=name, storage="fclib", dim=dim)
+            if "G" in g:
+                raise ValueError(f"{path}: global problems with bilateral constraints (G) are not supported")
+            M = _h5_matrix(_h5_group(g, "M", path), "/fclib_global/M", path)
+            H = _h5_matrix(_h5_group(g, "H", path), "/fclib_global/H", path)
+            f, w = _h5_read(g, "vectors/f", path, "f"), _h5_read(g, "vectors/w", path, "w")
+            mu = _h5_read(g, "vectors/mu", path, "mu")
+            if M.shape != (f.size, f.size) or H.shape != (f.size, w.size) or w.size != dim * mu.size:
+                raise ValueError(f"{path}: global sizes disagree: M {M.shape}, H {H.shape}, f {f.shape}, "
+                                 f"w {w.shape}, mu {mu.shape} (spacedim {dim})")
+            return _from_global(M, H, f, w, mu, name, "fclib", dim)
+        except (OSError, RuntimeError) as exc:  # HDF5 trouble below the datasets' level
+            raise ValueError(f"{path}: /fclib_{form}: cannot read: {exc}") from None
+
+
+def _h5_group(g, key, path):
+    try:
+        return g[key]
+    except KeyError:
+        raise ValueError(f"{path}: missing FCLib item {g.name}/{key}") from None
 
 
 def _h5_write_matrix(g, A):
@@ -477,7 +624,7 @@ def write_hdf5(path, cf: ContactFile, form: str | None = None) -> None:
         raise ValueError("form='global' needs M, H, f and w")
     with h5py.File(path, "w") as fh:
         g = fh.create_group(f"fclib_{form}")
-        g["spacedim"] = np.array([2], np.int32)
+        g["spacedim"] = np.array([cf.dim], np.int32)
         v = g.create_group("vectors")
         if form == "local":
             _h5_write_matrix(g.create_group("W"), cf.W)
@@ -490,7 +637,8 @@ def write_hdf5(path, cf: ContactFile, form: str | None = None) -> None:
         info = g.create_group("info")
         # fixed-length ASCII strings, as FCLib's C library writes and reads them
         info["title"] = np.bytes_(cf.name or "problem")
-        info["description"] = np.bytes_(f"{cf.n_contacts} planar contacts, written by lcp.fclib")
+        kind = "planar" if cf.dim == 2 else "spatial"
+        info["description"] = np.bytes_(f"{cf.n_contacts} {kind} contacts, written by lcp.fclib")
 
 
 def read_problem(path) -> ContactFile:
