@@ -152,9 +152,13 @@ class ConstantLoadSlide:
         b, a = self.accel, self.decel
         self.f = float(math.hypot(*b))
         self.s0 = float(math.hypot(*self.v0))
+        if 0 < self.f <= 1e-18 * a:
+            # a load below rounding against friction (k > 1e18, overflowing for subnormal loads)
+            # changes nothing in the slide: treat it as none (the block sticks at the end anyway)
+            self.f = 0.0
         s0, f = self.s0, self.f
         if f > 0:
-            self.e1 = b / f
+            self.e1 = b / math.hypot(*b)
         elif s0 > 0:
             self.e1 = self.v0 / s0   # no load: the frame follows the launch
         else:
