@@ -17,10 +17,11 @@ Matrices stay sparse.
 
 Siconos ``.dat`` layout (whitespace-separated): dimension, number of contacts, then the matrix
 (storage 0 dense column-major, 1 sparse-block, 2 CSparse triplet/CSC/CSR), then q and mu for the
-local form (:func:`write_dat` writes d x d blocks for sparse-block storage); for the global form M, H, then q, b and mu. FCLib HDF5 layout: groups ``/fclib_local``
-(``spacedim``, ``W``, ``vectors/q``, ``vectors/mu``, optional ``info``) or ``/fclib_global``
-(``M``, ``H``, ``vectors/f``, ``vectors/w``, ``vectors/mu``); each matrix has ``m``, ``n``,
-``nz`` (triplet count, -1 CSC, -2 CSR), ``nzmax``, ``p``, ``i``, ``x`` as CSparse stores them.
+local form (:func:`write_dat` writes d x d blocks for sparse-block storage); for the global form
+M, H, then q, b and mu. FCLib HDF5 layout: groups ``/fclib_local`` (``spacedim``, ``W``,
+``vectors/q``, ``vectors/mu``, optional ``info``) or ``/fclib_global`` (``spacedim``, ``M``, ``H``,
+``vectors/f``, ``vectors/w``, ``vectors/mu``); each matrix has ``m``, ``n``, ``nz`` (triplet
+count, -1 CSC, -2 CSR), ``nzmax``, ``p``, ``i``, ``x`` as CSparse stores them.
 
 A malformed or truncated file raises ``ValueError`` naming the file and where reading stopped
 (line of a ``.dat`` file, dataset of an HDF5 file); :meth:`ContactFile.check` reports sizes that
@@ -109,6 +110,29 @@ class ContactFile:
         self.W = sp.csr_matrix(self.W, dtype=float)
         self.q = np.asarray(self.q, dtype=float)
         self.mu = np.atleast_1d(np.asarray(self.mu, dtype=float))
+
+    @classmethod
+    def from_global(cls, M, H, f, w, mu, dim: int = 2, name: str = "") -> ContactFile:
+        """A global-form problem (M v = H r + f, u = H' v + w) with its reduced local form.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from lcp.fclib import ContactFile
+        >>> cf = ContactFile.from_global(2 * np.eye(3), np.eye(3), np.zeros(3), np.array([-1.0, 0, 0]), [0.5], dim=3)
+        >>> cf.W.toarray().diagonal(), cf.form
+        (array([0.5, 0.5, 0.5]), 'global')
+        """
+        if dim not in DIMENSIONS:
+            raise ValueError(f"dim must be 2 (planar) or 3 (spatial), got {dim!r}")
+        M, H = sp.csr_matrix(M, dtype=float), sp.csr_matrix(H, dtype=float)
+        f, w = np.asarray(f, dtype=float), np.asarray(w, dtype=float)
+        mu = np.atleast_1d(np.asarray(mu, dtype=float))
+        nv = f.size
+        if M.shape != (nv, nv) or H.shape != (nv, dim * mu.size) or w.shape != (dim * mu.size,):
+            raise ValueError(f"global sizes disagree: M {M.shape}, H {H.shape}, f {f.shape}, w {w.shape} for "
+                             f"{mu.size} contacts of dimension {dim}")
+        return _from_global(M, H, f, w, mu, name or "problem", "", dim)
 
     @property
     def n_contacts(self) -> int:
@@ -285,7 +309,8 @@ def _read_csparse(tk, what, n0, n1):
         m, n = (int(x) for x in size.rstrip(",").split("-by-"))
         nnz = int(desc[desc.index("nnz:") + 1].rstrip(","))
     except (ValueError, IndexError):
-        raise ValueError(f"{tk.path}: line {tk.line}: cannot read the CSparse header of {what}: {' '.join(desc)!r}") from None
+        raise ValueError(f"{tk.path}: line {tk.line}: cannot read the CSparse header of {what}: "
+                         f"{' '.join(desc)!r}") from None
     if (m, n) != (n0, n1):
         raise ValueError(f"{tk.path}: line {tk.line}: {what} sizes disagree ({n0}x{n1} then {m}x{n})")
     if kind == "triplet":

@@ -1,20 +1,28 @@
-"""Planar friction-contact problem files solved by every applicable solver, with performance profiles.
+"""Friction-contact problem files solved by every applicable solver, with performance profiles.
 
 ``python -m studies.fc_benchmark DIR [--out OUT] [--quick]`` reads every problem file in DIR
-(FCLib HDF5 or Siconos ``.dat``, local or global form; :mod:`lcp.fclib`), checks it, solves it with
-each applicable one-step solver and writes into OUT (default ``figures/fc_benchmark/``):
+(FCLib HDF5 or Siconos ``.dat``, local or global form, planar or spatial; :mod:`lcp.fclib`), checks
+it, solves it with each applicable one-step solver and writes into OUT (default
+``figures/fc_benchmark/``):
 
-- ``results.csv``: file, contacts, nnz(W), solver, status, time (s), iterations, the independent
-  natural-map error (:func:`lcp.friction_contact.natural_map_error`, normalised as Siconos
-  normalises its fc2d error) and the package's residual;
+- ``results.csv``: file, dimension, contacts, nnz(W), solver, status, time (s), iterations, the
+  independent natural-map error (:func:`lcp.friction_contact.natural_map_error`, normalised as
+  Siconos normalises its fc2d error; the disk cone for spatial files) and the package's residual;
 - ``profile_time.png``, ``profile_accuracy.png``: Dolan-More performance profiles (fraction of
   problems a solver solves within a factor tau of the best time; of the best error), a problem
-  counting as solved at error <= 1e-10.
+  counting as solved at error <= 1e-10 whatever the solver's status.
+
+Planar files (dimension 2) go to :func:`lcp.solvers.make_solver`'s solvers (:data:`SOLVER_LIMITS`),
+spatial files (dimension 3, the Coulomb disk) to :func:`lcp.cone_solvers.make_cone_solver`'s
+(:data:`CONE_SOLVER_LIMITS`). The faceted solver replaces each disk by a polygon: its rows are
+named ``faceted (approx.)``, keep its status 1 ("approximate") and count as solved only where the
+disk law's error meets the threshold.
 
 When Siconos's Python module is installed for the system's own Python (``/usr/bin/python3``, e.g.
-Debian's ``python3-siconos``), its fc2d NSGS and Lemke solve the same files in a subprocess and
-join the table as ``siconos-nsgs`` and ``siconos-lemke``; otherwise a note says they were skipped.
-``--quick`` keeps files of at most 500 contacts and caps iterations.
+Debian's ``python3-siconos``), its NSGS (fc2d and Lemke for planar files, fc3d for spatial ones)
+solves the same files in a subprocess and joins the table as ``siconos-nsgs`` (and
+``siconos-lemke``); otherwise a note says they were skipped. ``--quick`` keeps files of at most
+500 contacts and caps iterations.
 
 Example
 -------
@@ -34,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lcp.cone_solvers import make_cone_solver
 from lcp.fclib import read_problem, write_dat
 from lcp.friction_contact import natural_map_error
 from lcp.solvers import make_solver
@@ -47,18 +56,34 @@ SYSTEM_PYTHON = "/usr/bin/python3"
 
 #: solver name -> largest number of contacts it is tried on (dense Lemke and OSQP grow fast)
 SOLVER_LIMITS = {"auto": None, "newton": None, "nsgs": None, "lemke": 400, "osqp": 250}
+#: spatial files: cone solver name -> largest number of contacts (the local solve takes one contact;
+#: Tresca's SOCP sequence and the faceted dense Lemke grow fast)
+CONE_SOLVER_LIMITS = {"auto": None, "local": 1, "newton": None, "nsgs": None, "tresca": 300, "faceted": 60}
+#: the name of an approximate solver's rows
+APPROXIMATE = {"faceted": "faceted (approx.)"}
+#: a spatial solve shorter than SHORT seconds is repeated (REPEATS runs in all, cold each time) and
+#: timed by its fastest run, ours and Siconos's alike: single sub-millisecond runs are mostly noise
+REPEATS, SHORT = 3, 0.1
 
 _SICONOS_FILES = r'''
 import json, sys, time
 import numpy as np
 import siconos.numerics as sn
 paths, tol, max_iter = json.loads(sys.argv[1])
+REPEATS, SHORT = 3, 0.1
 out = []
+PLANAR = (("siconos-nsgs", sn.SICONOS_FRICTION_2D_NSGS), ("siconos-lemke", sn.SICONOS_FRICTION_2D_LEMKE))
+SPATIAL = (("siconos-nsgs", sn.SICONOS_FRICTION_3D_NSGS),)
 for path in paths:
-    for name, sid in (("siconos-nsgs", sn.SICONOS_FRICTION_2D_NSGS), ("siconos-lemke", sn.SICONOS_FRICTION_2D_LEMKE)):
+    try:
+        dim = sn.frictionContact_new_from_filename(path).dimension
+    except Exception as exc:  # a peer's failure is reported, not fatal
+        out.append(dict(path=path, solver="siconos-nsgs", info=-99, error_text=str(exc)))
+        continue
+    for name, sid in (PLANAR if dim == 2 else SPATIAL):
         try:
             pb = sn.frictionContact_new_from_filename(path)
-            n = 2 * pb.numberOfContacts
+            n = dim * pb.numberOfContacts
             if name == "siconos-lemke" and n > 800:
                 continue
             so = sn.SolverOptions(sid)
@@ -66,8 +91,13 @@ for path in paths:
             so.iparam[sn.SICONOS_IPARAM_MAX_ITER] = max_iter
             r, u = np.zeros(n), np.zeros(n)
             t0 = time.perf_counter()
-            info = sn.fc2d_driver(pb, r, u, so)
+            info = (sn.fc2d_driver if dim == 2 else sn.fc3d_driver)(pb, r, u, so)
             dt = time.perf_counter() - t0
+            for _ in range(REPEATS - 1 if dim == 3 and dt < SHORT else 0):  # short spatial runs: the fastest
+                r2, u2 = np.zeros(n), np.zeros(n)
+                t0 = time.perf_counter()
+                sn.fc3d_driver(pb, r2, u2, so)
+                dt = min(dt, time.perf_counter() - t0)
             out.append(dict(path=path, solver=name, info=int(info), time=dt,
                             iterations=int(so.iparam[sn.SICONOS_IPARAM_ITER_DONE]),
                             siconos_error=float(so.dparam[sn.SICONOS_DPARAM_RESIDU]), r=r.tolist()))
@@ -109,11 +139,15 @@ def problem_files(folder) -> list[Path]:
     return sorted(p for p in folder.iterdir() if p.suffix in (".dat", ".hdf5", ".h5"))
 
 
-def solve_file(path, solvers=("auto", "newton", "nsgs", "lemke", "osqp"), quick: bool = False):
-    """Solve one file with each applicable solver: list of result dicts (see the module doc)."""
+def solve_file(path, solvers=None, quick: bool = False):
+    """Solve one file with each applicable solver: list of result dicts (see the module doc).
+
+    ``solvers``: names to try (None: every solver of :data:`SOLVER_LIMITS` for a planar file, of
+    :data:`CONE_SOLVER_LIMITS` for a spatial one); names of the other family are skipped.
+    """
     cf = read_problem(path)
     rep = cf.check()
-    base = dict(file=Path(path).name, contacts=cf.n_contacts, nnz=int(cf.W.nnz), form=cf.form,
+    base = dict(file=Path(path).name, dim=cf.dim, contacts=cf.n_contacts, nnz=int(cf.W.nnz), form=cf.form,
                 warnings="; ".join(rep.warnings))
     if rep.errors:
         return [dict(base, solver="-", status=-9, message="; ".join(rep.errors), time=np.nan, iterations=0,
@@ -122,23 +156,70 @@ def solve_file(path, solvers=("auto", "newton", "nsgs", "lemke", "osqp"), quick:
         return [dict(base, solver="-", status=0, message="no contacts", time=0.0, iterations=0, error=0.0,
                      residual=0.0)]
     pb = cf.problem(check=False)
+    spatial = cf.dim == 3
+    limits = CONE_SOLVER_LIMITS if spatial else SOLVER_LIMITS
+    if spatial:
+        warm_up_cone_solvers()
+    if solvers is None:
+        solvers = tuple(limits)
     rows = []
     for name in solvers:
-        limit = SOLVER_LIMITS.get(name)
+        if spatial and name not in CONE_SOLVER_LIMITS:
+            continue
+        limit = limits.get(name)
         if limit is not None and cf.n_contacts > limit:
             continue
-        # the iterative solvers also meet Siconos's normalised error (the same tolerance as its run)
-        opts = {"error_tol": SOLVED} if name in ("auto", "newton", "nsgs") else {}
-        if quick and name == "nsgs":
-            opts["max_sweeps"] = 2000
-        solver = make_solver(name, **opts)
+        if spatial:
+            # the cone solvers stop on their own residual (impulse units, tolerance 1e-10 of the
+            # problem's scale); the table's error is measured independently all the same
+            opts = {"max_sweeps": 2000} if quick and name == "nsgs" else {}
+            solver = make_cone_solver(name, **opts)
+            # a fresh problem per solver: none inherits the operators another one cached on it
+            pb = cf.problem(check=False)
+        else:
+            # the iterative solvers also meet Siconos's normalised error (the same tolerance as its run)
+            opts = {"error_tol": SOLVED} if name in ("auto", "newton", "nsgs") else {}
+            if quick and name == "nsgs":
+                opts["max_sweeps"] = 2000
+            solver = make_solver(name, **opts)
         t0 = time.perf_counter()
         sol = solver.solve(pb)
         dt = time.perf_counter() - t0
-        err = natural_map_error(pb.W, pb.q, pb.mu, sol.p)
-        rows.append(dict(base, solver=name, status=sol.status, message=sol.message, time=dt,
-                         iterations=sol.iterations, error=err, residual=sol.residual))
+        for _ in range(REPEATS - 1 if spatial and dt < SHORT else 0):
+            # a fresh solver and problem: no warm start nor cached operator from the first run
+            again, pb_again = make_cone_solver(name, **opts), cf.problem(check=False)
+            t0 = time.perf_counter()
+            again.solve(pb_again)
+            dt = min(dt, time.perf_counter() - t0)
+        err = natural_map_error(pb.W, pb.q, pb.mu, sol.p, dims=pb.dims if spatial else None)
+        rows.append(dict(base, solver=APPROXIMATE.get(name, name) if spatial else name, status=sol.status,
+                         message=sol.message, time=dt, iterations=sol.iterations, error=err,
+                         residual=sol.residual))
     return rows
+
+
+_WARM: list = []
+
+
+def warm_up_cone_solvers():
+    """Solve small spatial problems as the files give them (sparse W: one contact, a few, more than
+    ``auto``'s NSGS limit) with every cone solver once, so that numba's compilation or cache
+    loading is not timed on the first file. Once per process."""
+    if _WARM:
+        return
+    _WARM.append(True)
+    import scipy.sparse as sp
+
+    from lcp.cone_problem import ConeContactProblem
+
+    for k in (1, 4, 50):
+        W = sp.csr_matrix(np.kron(np.eye(k), np.diag([2.0, 1.0, 1.0])) + 0.1 * np.eye(3 * k, k=3))
+        W = W + W.T
+        q = np.tile([-1.0, 0.5, -0.2], k)
+        pb = ConeContactProblem.from_interleaved(W, q, np.full(k, 0.3), np.full(k, 2))
+        for name, limit in CONE_SOLVER_LIMITS.items():
+            if limit is None or k <= limit:
+                make_cone_solver(name).solve(pb)
 
 
 def performance_profile(table: dict, taus: np.ndarray) -> dict:
@@ -164,20 +245,21 @@ def run(folder, out=None, quick: bool = False, siconos: bool = True) -> dict:
                 continue
             rows.extend(solve_file(path, quick=quick))
         except ValueError as exc:  # a bad file is a row of the table, not the end of the study
-            rows.append(dict(file=path.name, contacts=0, nnz=0, form="-", warnings="", solver="-", status=-9,
+            rows.append(dict(file=path.name, dim=0, contacts=0, nnz=0, form="-", warnings="", solver="-", status=-9,
                              message=str(exc), time=np.nan, iterations=0, error=np.nan, residual=np.nan))
     note = ""
     if siconos and siconos_available():
         todo = [p for p in files if any(r["file"] == p.name and r["solver"] != "-" for r in rows)]
         with tempfile.TemporaryDirectory() as tmp:
-            # Siconos's fc2d solvers take dense or sparse-block storage of the local form: other
+            # Siconos's fc2d/fc3d solvers take dense or sparse-block storage of the local form: other
             # files (CSparse storage, global form) are handed over as the same local problem
             # rewritten in sparse-block storage
             given = {}
             for p in todo:
                 cf = read_problem(p)
                 if cf.form == "global" or cf.storage not in ("dense", "sparse-block"):
-                    q = Path(tmp) / p.name
+                    # Siconos takes a file named .hdf5 for FCLib's format: the text copy ends in .dat
+                    q = Path(tmp) / (p.name if p.suffix == ".dat" else p.name + ".dat")
                     write_dat(q, cf, storage="sparse-block")
                     given[str(q)] = p
                 else:
@@ -192,8 +274,9 @@ def run(folder, out=None, quick: bool = False, siconos: bool = True) -> dict:
             rec["path"] = str(given[rec["path"]])
             cf = read_problem(rec["path"])
             r = np.asarray(rec["r"])
-            err = natural_map_error(cf.W, cf.q, cf.mu, r, order="interleaved")
-            rows.append(dict(file=Path(rec["path"]).name, contacts=cf.n_contacts, nnz=int(cf.W.nnz), form=cf.form,
+            err = natural_map_error(cf.W, cf.q, cf.mu, r, order="interleaved", dims=None if cf.dim == 2 else cf.dims)
+            rows.append(dict(file=Path(rec["path"]).name, dim=cf.dim, contacts=cf.n_contacts, nnz=int(cf.W.nnz),
+                             form=cf.form,
                              warnings="", solver=rec["solver"], status=0 if rec["info"] == 0 else -1,
                              message=f"info {rec['info']}, Siconos error {rec['siconos_error']:.3g}",
                              time=rec["time"], iterations=rec["iterations"], error=err, residual=np.nan))
@@ -202,7 +285,7 @@ def run(folder, out=None, quick: bool = False, siconos: bool = True) -> dict:
     res = dict(rows=rows, note=note, files=[])
     if out is not None:
         d = out_dir(out, NAME)
-        header = ["file", "contacts", "nnz", "form", "solver", "status", "time", "iterations", "error",
+        header = ["file", "dim", "contacts", "nnz", "form", "solver", "status", "time", "iterations", "error",
                   "residual", "message", "warnings"]
         res["files"].append(write_csv(d / "results.csv", header, ([r[h] for h in header] for r in rows)))
         res["files"].extend(_profiles(rows, d))
@@ -241,6 +324,14 @@ def _profiles(rows, d):
     return out
 
 
+def print_rows(rows):
+    """The table of :func:`run`'s rows on standard output."""
+    print(f"{'file':44s} {'d':>1s} {'k':>5s} {'solver':17s} {'st':>3s} {'time (s)':>9s} {'iter':>6s} {'error':>9s}")
+    for r in rows:
+        print(f"{r['file'][:44]:44s} {r['dim']:1d} {r['contacts']:5d} {r['solver']:17s} {r['status']:3d} "
+              f"{r['time']:9.4f} {r['iterations']:6d} {r['error']:9.2e}")
+
+
 def main(argv=None):
     def extra(p):
         p.add_argument("folder", type=Path, help="folder of problem files (.dat, .hdf5)")
@@ -248,10 +339,7 @@ def main(argv=None):
 
     args = parse_args(NAME, __doc__.splitlines()[0], argv, extra)
     res = run(args.folder, args.out, args.quick, siconos=not args.no_siconos)
-    print(f"{'file':44s} {'k':>5s} {'solver':14s} {'st':>3s} {'time (s)':>9s} {'iter':>6s} {'error':>9s}")
-    for r in res["rows"]:
-        print(f"{r['file'][:44]:44s} {r['contacts']:5d} {r['solver']:14s} {r['status']:3d} {r['time']:9.4f} "
-              f"{r['iterations']:6d} {r['error']:9.2e}")
+    print_rows(res["rows"])
     if res["note"]:
         print(res["note"])
     print(f"wrote {len(res['files'])} files to {args.out} in {res['seconds']:.1f} s")
