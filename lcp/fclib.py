@@ -442,13 +442,16 @@ def _from_global(M, H, f, w, mu, name, storage, dim=2):
                        storage=storage, dim=dim)
 
 
-def write_dat(path, cf: ContactFile, storage: str = "csparse", form: str = "local") -> None:
+def write_dat(path, cf: ContactFile, storage: str = "csparse", form: str = "local",
+              mass_blocks: int | None = None) -> None:
     """Write a problem in Siconos's ``.dat`` layout (the layout its ``newFromFile`` readers take).
 
     ``storage``: ``"csparse"`` (triplets), ``"sparse-block"`` (d x d blocks for W, the storage
     Siconos's fc2d/fc3d solvers take sparse) or ``"dense"`` (column-major). ``form``: ``"local"``
-    (W, q, mu; also for a problem read in the global form) or ``"global"`` (M, H, f, w, mu; in
-    sparse-block storage M's blocks are its diagonal blocks, H's the same rows by d columns).
+    (W, q, mu; also for a problem read in the global form) or ``"global"`` (M, H, f, w, mu). In
+    sparse-block storage of the global form M's blocks are ``mass_blocks`` x ``mass_blocks`` (e.g.
+    6 for rigid bodies in space: Siconos's global NSGS rejected a diagonal M stored in 1 x 1
+    blocks), by default its finest diagonal blocks; H's block rows are M's, its block columns d wide.
     """
     if storage not in ("csparse", "sparse-block", "dense"):
         raise ValueError(f"storage must be 'csparse', 'sparse-block' or 'dense', got {storage!r}")
@@ -462,7 +465,12 @@ def write_dat(path, cf: ContactFile, storage: str = "csparse", form: str = "loca
         _write_dat_matrix(lines, cf.W, storage, d, d)
         vectors = (cf.q, cf.mu)
     else:
-        rows = _diagonal_blocks(cf.M) if storage == "sparse-block" else None
+        nv = cf.M.shape[0]
+        if mass_blocks is not None and (int(mass_blocks) != mass_blocks or mass_blocks < 1 or nv % mass_blocks):
+            raise ValueError(f"mass_blocks must be a positive divisor of M's size {nv}, got {mass_blocks!r}")
+        rows = None
+        if storage == "sparse-block":
+            rows = _diagonal_blocks(cf.M) if mass_blocks is None else np.arange(mass_blocks, nv + 1, int(mass_blocks))
         _write_dat_matrix(lines, cf.M, storage, rows, rows)
         _write_dat_matrix(lines, cf.H, storage, rows, d)
         vectors = (np.asarray(cf.f, float), np.asarray(cf.w, float), cf.mu)

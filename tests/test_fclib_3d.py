@@ -132,6 +132,14 @@ def test_global_sparse_block_storage_uses_the_diagonal_blocks_of_M(tmp_path):
     words = (tmp_path / "g.dat").read_text().split()
     # dimension, contacts, then M: storage 1, 24 x 24, 24 one-by-one diagonal blocks (M is diagonal)
     assert words[:8] == ["3", "4", "1", "24", "24", "24", "24", "24"]
+    write_dat(tmp_path / "g6.dat", cf, storage="sparse-block", form="global", mass_blocks=6)
+    words = (tmp_path / "g6.dat").read_text().split()
+    assert words[:12] == ["3", "4", "1", "24", "24", "4", "4", "4", "6", "12", "18", "24"]  # one block per ball
+    back = read_problem(tmp_path / "g6.dat")
+    assert_same_sparse(back.M, cf.M)
+    assert_same_sparse(back.H, cf.H)
+    with pytest.raises(ValueError, match="mass_blocks"):
+        write_dat(tmp_path / "g5.dat", cf, storage="sparse-block", form="global", mass_blocks=5)
 
 
 # ----------------------------------------------------------------- closed-form solution
