@@ -15,13 +15,19 @@
 2. Synthetic granular problems: random disks in a box (W = H M^-1 H'), about 2000 and 7000
    contacts (``--quick``: 2000), solved by ``auto``/``newton`` and ``nsgs``; time, error,
    nnz(W) and peak memory of the solve.
-3. ``--files DIR``: every problem file of DIR through ``studies.fc_benchmark``.
+3. ``--files DIR``: every problem file of DIR through ``studies.fc_benchmark`` (planar files by the
+   planar solvers and Siconos's fc2d NSGS/Lemke, spatial ones by the cone solvers and its fc3d
+   NSGS; the faceted approximation's rows are named ``faceted (approx.)``); the table goes to
+   ``many_contacts_files.csv`` (quoted CSV: the messages hold commas) and, with ``--out DIR``,
+   the CSV and performance profiles of ``studies.fc_benchmark`` go to DIR. ``--files-only``
+   skips parts 1 and 2.
 
 Writes CSV files into ``benchmarks/out/`` (untracked).
 """
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 import time
@@ -41,6 +47,7 @@ from lcp.scenes import Scene
 from lcp.solvers import make_solver
 from lcp.system import Contact, System
 from studies import fc_benchmark
+from studies._common import write_csv
 
 RESULTS = Path(__file__).resolve().parent / "out"
 H_STEP, T_END = 1e-3, 1.0
@@ -328,21 +335,28 @@ def main(argv=None):
     ap.add_argument("--files", type=Path, default=None, help="folder of problem files to solve too")
     ap.add_argument("--no-siconos", action="store_true")
     ap.add_argument("--scenes-only", action="store_true", help="skip the synthetic granular problems")
+    ap.add_argument("--files-only", action="store_true", help="only the problem files of --files")
+    ap.add_argument("--out", type=Path, default=None, help="with --files: folder for fc_benchmark's CSV and profiles")
     args = ap.parse_args(argv)
+    if args.files_only and args.files is None:
+        ap.error("--files-only needs --files DIR")
     use_siconos = not args.no_siconos and fc_benchmark.siconos_available()
     if not args.no_siconos and not use_siconos:
         print("note: Siconos's Python module is not importable by the system Python: peer skipped")
     RESULTS.mkdir(exist_ok=True)
     Ks = [1, 10, 100] if args.quick else [1, 10, 100, 1000]
-    write_rows(RESULTS / "many_contacts_scenes.csv", bench_scenes(Ks, use_siconos))
-    if not args.scenes_only:
+    if not args.files_only:
+        write_rows(RESULTS / "many_contacts_scenes.csv", bench_scenes(Ks, use_siconos))
+    if not (args.scenes_only or args.files_only):
         write_rows(RESULTS / "many_contacts_packings.csv", bench_packings([2000] if args.quick else [2000, 7000]))
     if args.files is not None:
-        res = fc_benchmark.run(args.files, out=None, quick=args.quick, siconos=use_siconos)
-        for r in res["rows"]:
-            print(f"{r['file'][:44]:44s} {r['contacts']:5d} {r['solver']:14s} {r['status']:3d} {r['time']:9.4f} "
-                  f"{r['iterations']:6d} {r['error']:9.2e}")
-        write_rows(RESULTS / "many_contacts_files.csv", res["rows"])
+        print(f"problem files of {args.files} (load {os.getloadavg()[0]:.2f})", flush=True)
+        res = fc_benchmark.run(args.files, out=args.out, quick=args.quick, siconos=use_siconos)
+        fc_benchmark.print_rows(res["rows"])
+        if res["note"]:
+            print(res["note"])
+        keys = list(res["rows"][0]) if res["rows"] else []
+        write_csv(RESULTS / "many_contacts_files.csv", keys, ([r[k] for k in keys] for r in res["rows"]))
     return 0
 
 
