@@ -216,7 +216,7 @@ class ConstantLoadSlide:
         lo = np.zeros_like(t)
         hi = np.full_like(t, 1.0 / (k + 1))   # z scales like 1/k: a weak load (k ~ 1e80) needs tiny z
         for _ in range(2200):          # bracket: T(hi) >= t
-            short = T(hi) < t
+            short = (T(hi) < t) & (hi < 1e300)
             if not np.any(short):
                 break
             lo = np.where(short, hi, lo)
@@ -233,7 +233,7 @@ class ConstantLoadSlide:
                 zn = z - g / dT(z)
             bad = ~np.isfinite(zn) | (zn < lo) | (zn > hi)
             zn = np.where(bad, 0.5 * (lo + hi), zn)
-            done = np.abs(zn - z) <= 4e-16 * np.abs(z)   # relative: z ~ 1/k is tiny for a weak load
+            done = unreached | (np.abs(zn - z) <= 4e-16 * np.abs(z))   # relative: z ~ 1/k can be tiny
             z = zn
             if np.all(done):
                 break

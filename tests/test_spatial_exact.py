@@ -188,7 +188,8 @@ def test_state_is_vectorised_and_shaped():
        mu_ratio=st.floats(0.2, 3.0))
 def test_incline_hypothesis(theta, v0, phi0, mu_ratio):
     inc = InclineSlideExact(theta, v0, mu=mu_ratio * math.tan(theta), launch_angle=phi0)
-    T = min(2.0, 10 * v0 / 9.81) if not math.isfinite(inc.t_stop) else 1.5 * inc.t_stop
+    # k within rounding of 1 stops only after ~1e15 s: watch such slides over a bounded time
+    T = 1.5 * inc.t_stop if inc.t_stop < 100 * v0 / 9.81 else min(2.0, 10 * v0 / 9.81)
     t = np.linspace(0, T, 7)
     s = inc.state(t)
     lhs = 0.5 * (s["speed"] ** 2 - v0 ** 2)
