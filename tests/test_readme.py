@@ -279,3 +279,12 @@ def test_readme_optimal_control_numbers_are_the_recorded_run():
     assert float(rows[("hold", "uniform, linear hold", int(n))]["final_miss"]) == pytest.approx(lin_hi, rel=0.05)
     lo, hi = _stated(r"from ([0-9]+)–([0-9]+) N uncontrolled")  # the sliding normal force (m+M) g / (1 - kappa)
     assert 2 * 9.81 / 0.05 == pytest.approx(lo, abs=0.5) and 2 * 9.81 / 0.01 == pytest.approx(hi, abs=0.5)
+
+
+def test_readme_stability_counts_are_the_recorded_full_run():
+    # the full study's summary.csv (figures/stability/, untracked) is recorded in benchmarks/recorded/
+    correct, reported, wrong = _stated(r"{N} correct, {N} reported failures — the cases built to fail — {N} silently wrong")
+    rows = _rows("stability_summary.csv")
+    assert correct == sum(int(r["correct"]) for r in rows)
+    assert reported == sum(int(r["reported failure"]) for r in rows)
+    assert wrong == sum(int(r["silently wrong"]) for r in rows) == 0
