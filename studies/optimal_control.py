@@ -183,9 +183,13 @@ def rest_to_rest_problem(N: int, objective: str = "time", hold: str = "constant"
 
 
 def hold_problem(N: int, hold: str = "constant", steps: str = "uniform") -> OptimalControlProblem:
-    """Problem 2 on N intervals (N a multiple of 6: the hold's ends are nodes of the uniform grid)."""
-    if N % 6:
-        raise ValueError(f"N must be a multiple of 6 (the hold's ends are nodes), got {N}")
+    """Problem 2 on N intervals: with uniform steps N a multiple of 6 (the hold's ends are nodes of
+    the uniform grid); with free steps any N >= 6, nodes round(N t_a / T) and round(N t_b / T) pinned
+    at t_a and t_b."""
+    if steps == "uniform" and N % 6:
+        raise ValueError(f"N must be a multiple of 6 with uniform steps (the hold's ends are nodes), got {N}")
+    if not isinstance(N, int) or N < 6:
+        raise ValueError(f"N must be an integer >= 6, got {N!r}")
     sc, system = controlled_block()
     d, (t_a, t_b), T = HOLD["d"], HOLD["t_hold"], HOLD["T"]
     k_a, k_b = round(N * t_a / T), round(N * t_b / T)
