@@ -292,3 +292,11 @@ def test_readme_stability_counts_are_the_recorded_full_run():
     assert correct == sum(int(r["correct"]) for r in rows)
     assert reported == sum(int(r["reported failure"]) for r in rows)
     assert wrong == sum(int(r["silently wrong"]) for r in rows) == 0
+
+
+def test_readme_shock_avoidance_bound():
+    # the smallest possible peak normal force when stopping by T (the study's closed form)
+    from studies import optimal_control
+
+    (bound,) = _stated(r"normal force down to the bound {N} N")
+    assert optimal_control.peak_bound() == pytest.approx(bound, abs=0.005)
