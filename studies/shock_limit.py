@@ -134,7 +134,8 @@ def plot_sweep(rows, hs, v0, path):
     a.semilogy(x, pos(np.abs([r["x_stop_exact"] for r in sel])), "k--", lw=1.5, label="exact stop distance $|x^*|$ (m)")
     a.semilogy(x, pos(np.abs([r["x_stop_event"] for r in sel])), "s", mfc="none", ms=7, color="C3")
     if shock.any():
-        a.plot(x[shock], np.full(shock.sum(), 3e-16), "kv", ms=9, label="shock at t = 0: $\\tau_0 = x^* = 0$")
+        # true zeros, drawn as crosses at the bottom of the log axis (never as "below a floor")
+        a.plot(x[shock], np.full(shock.sum(), 3e-16), "kx", ms=9, label="× exactly 0 (shock at t = 0: $\\tau_0 = x^* = 0$)")
     a.set_ylabel("stop time $\\tau_0$ (s), stop distance $x^*$ (m)")
     a.set_title("(a) stop time and stop distance")
     _log_only_over_a_decade(a)
