@@ -288,8 +288,10 @@ class PainleveRod:
         m, l, g, mu = self.m, self.l, self.g, self.mu
         s, c = math.sin(th), math.cos(th)
         I = m * l * l / 3
-        uT = xd + l * s * thd
-        sg = math.copysign(1.0, uT)
+        # the sliding branch keeps the direction of the launch: with sign(u_T) of the current state the
+        # right-hand side jumps where u_T = 0 and the integrator chatters there instead of stopping
+        # on the stop event (u_T crosses zero smoothly on the continued branch)
+        sg = math.copysign(1.0, self.u0)
         # unknowns xdd, ydd, thdd, N: Newton-Euler with f = -sg mu N, and yA'' = 0
         HN, HT = np.array([0.0, 1.0, -l * c]), np.array([1.0, 0.0, l * s])
         M = np.diag([m, m, I])
@@ -303,7 +305,8 @@ class PainleveRod:
 
     @property
     def t_valid(self) -> float:
-        """End of the sliding reference: lift-off (N = 0), stop (u_T = 0), the rod lying flat, or the horizon."""
+        """End of the sliding reference: lift-off (N = 0), stop (u_T = 0), the rod lying flat, the approach of
+        a Painleve singularity (sliding coefficient down to 1e-3 of its start), or the horizon."""
         return float(self._sliding().t[-1])
 
     def _sliding(self):
@@ -325,10 +328,20 @@ class PainleveRod:
             def flat(_, z):
                 return z[2]
 
-            for ev in (lift, stop, flat):
+            sg = math.copysign(1.0, self.u0)
+            mu, W00 = self.mu, self.W[0, 0]
+
+            def painleve(_, z):
+                # the sliding coefficient W_NN - sg mu W_NT of the current angle: where it reaches zero
+                # the normal force blows up (Painleve) and the sliding ODE turns infinitely stiff, so
+                # the reference ends a little before, at 1e-3 of its value at the start
+                si, co = math.sin(z[2]), math.cos(z[2])
+                return (1 + 3 * co * co + sg * mu * 3 * si * co) / self.m - 1e-3 * abs(W00)
+
+            for ev in (lift, stop, flat, painleve):
                 ev.terminal = True
             self._ref = solve_ivp(lambda tt, z: self._rhs(tt, z)[0], (0.0, self.horizon), z0, method="DOP853",
-                                  rtol=1e-12, atol=1e-14, dense_output=True, events=(lift, stop, flat))
+                                  rtol=1e-12, atol=1e-14, dense_output=True, events=(lift, stop, flat, painleve))
         return self._ref
 
     def reference(self, t):
