@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["first_landing", "first_stop", "event_functions", "approach_gap"]
+__all__ = ["first_landing", "first_stop", "event_functions", "approach_gap", "first_terminal_event",
+           "too_many_events"]
 
 
 def first_stop(u0: float, a: float, s: float) -> float:
@@ -102,3 +103,23 @@ def approach_gap(model, y, n, j) -> float:
     if gap > 0 or float(model.jac(q)[j] @ y[n:2 * n]) < 0:
         return gap
     return 1.0 + abs(gap)
+
+
+def first_terminal_event(sol, meta):
+    """(t, y, kind, j) of the earliest event of a ``solve_ivp`` solution that stopped on one
+    (``sol.status == 1``); ``meta[i]`` is the (kind, contact) of event function i."""
+    t, i = min((float(te[0]), i) for i, te in enumerate(sol.t_events) if te.size)
+    kind, j = meta[i]
+    return t, sol.y_events[i][0], kind, j
+
+
+def too_many_events(n_events: int, short: int, t: float, max_events: int, status_message: str):
+    """The message that ends an event loop (Zeno behaviour, chattering), or None while it may go on.
+
+    ``short`` counts the consecutive phases of zero length; more than 50 of them, or more than
+    ``max_events`` events, end the run.
+    """
+    if n_events > max_events or short > 50:
+        return (f"{status_message} {n_events} events by t = {t:.10g}"
+                + (f" ({short} consecutive phases of zero length)" if short > 50 else ""))
+    return None

@@ -6,6 +6,7 @@ import numpy as np
 from ..contact_problem import OPEN, STICK
 from ..result import SolverStats
 from .accumulation import BounceSequence, sum_up
+from .event_location import too_many_events
 from .impacts import ImpactLaw
 from .model import EPS, all_finite, system_model, zero_test_scales
 from .modes import ModeSelector
@@ -247,10 +248,9 @@ class Integrator:
             self.events.append(make_record(Event, float(te), kind, int(j)))
             short = short + 1 if te - t <= 64 * EPS * max(1.0, abs(te)) else 0
             t = te
-            if len(self.events) > o.max_events or short > 50:
-                status = -4
-                message = (f"{EVENT_STATUS_MESSAGES[-4]} {len(self.events)} events by t = {t:.10g}"
-                           + (f" ({short} consecutive phases of zero length)" if short > 50 else ""))
+            stop_message = too_many_events(len(self.events), short, t, o.max_events, EVENT_STATUS_MESSAGES[-4])
+            if stop_message:
+                status, message = -4, stop_message
                 break
         self.stats.steps = len(run_phases)
         self.stats.free_steps = sum(1 for ph in run_phases if not ph.idx_t)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..contact_problem import ContactProblem
-from .event_location import event_functions
+from .event_location import event_functions, first_terminal_event
 from .indeterminate import admissibility_rows, branch_forces
 from .model import mass_projection
 from .modes import AccelProblem
@@ -142,10 +142,7 @@ class OdePhase(SmoothPhase):
             raise FloatingPointError(f"solve_ivp ({o.ode_method}) failed at t = {sol.t[-1]:.10g}: {sol.message}")
         self.y1 = sol.y[:, -1]
         if sol.status == 1:
-            first = min((float(te[0]), i) for i, te in enumerate(sol.t_events) if te.size)
-            self.t1 = first[0]
-            self.y1 = sol.y_events[first[1]][0]
-            kind, j = meta[first[1]]
+            self.t1, self.y1, kind, j = first_terminal_event(sol, meta)
             if kind == "force-limit":
                 kind, j = self.binding(self.t1, self.y1)
             return self.t1, kind, j

@@ -47,7 +47,7 @@ import numpy as np
 
 from ..contact_problem import MODE_NAMES, OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, STICK
 from ..result import SolverStats
-from .event_location import approach_gap
+from .event_location import approach_gap, first_terminal_event, too_many_events
 from .model import EPS, coordinate_rows, mass_projection
 from .options import EVENT_STATUS_MESSAGES
 from .records import Event, EventResult, Impact, Impulse, Phase
@@ -265,10 +265,7 @@ class SpatialPhase:
             raise FloatingPointError(f"solve_ivp ({method}) failed at t = {sol.t[-1]:.10g}: {sol.message}")
         self.y1 = sol.y[:, -1]
         if sol.status == 1:
-            first = min((float(te[0]), i) for i, te in enumerate(sol.t_events) if te.size)
-            self.t1 = first[0]
-            self.y1 = sol.y_events[first[1]][0]
-            kind, j = meta[first[1]]
+            self.t1, self.y1, kind, j = first_terminal_event(sol, meta)
             return self.t1, kind, j
         self.t1 = tb
         return None
@@ -524,10 +521,9 @@ class SpatialIntegrator:
             self.events.append(Event(float(te), kind, int(j)))
             short = short + 1 if te - t <= 64 * EPS * max(1.0, abs(te)) else 0
             t = te
-            if len(self.events) > o.max_events or short > 50:
-                status = -4
-                message = (f"{EVENT_STATUS_MESSAGES[-4]} {len(self.events)} events by t = {t:.10g}"
-                           + (f" ({short} consecutive phases of zero length)" if short > 50 else ""))
+            stop_message = too_many_events(len(self.events), short, t, o.max_events, EVENT_STATUS_MESSAGES[-4])
+            if stop_message:
+                status, message = -4, stop_message
                 break
         self.stats.steps = len(run_phases)
         self.stats.free_steps = sum(1 for ph in run_phases if not ph.idx)
