@@ -13,7 +13,7 @@ import weakref
 import casadi as ca
 import numpy as np
 
-__all__ = ["EPS", "StateData", "SystemModel", "system_model", "check_state", "mass_projection",
+__all__ = ["EPS", "ContactKinematics", "StateData", "SystemModel", "system_model", "check_state", "mass_projection",
            "all_finite", "absmax", "accel_function", "coordinate_rows",
            "zero_test_scales"]
 
@@ -92,7 +92,24 @@ class StateData:
         return self._qdd_free
 
 
-class SystemModel:
+class ContactKinematics:
+    """Gaps and contact Jacobian of a model: from the constant ``gap0``, ``HN`` and ``H`` when the
+    model is ``constant``, else evaluated by its System ``sys`` (shared by the planar and spatial
+    event models)."""
+
+    def gaps(self, q) -> np.ndarray:
+        if self.constant:
+            return self.gap0 + self.HN @ q
+        return self.sys.gaps(q)
+
+    def jac(self, q) -> np.ndarray:
+        """H(q): the normal rows, then the tangent rows."""
+        if self.constant:
+            return self.H
+        return self.sys.contact_jacobian(q)
+
+
+class SystemModel(ContactKinematics):
     """Evaluates the system; when it is constant, assembles once and never calls CasADi again.
 
     For a constant system it also keeps what depends on the system only, built on first use and
@@ -151,16 +168,6 @@ class SystemModel:
         return StateData(A.reshape(n, n), F.ravel(), G.reshape(nb, n), zeta.ravel(), H.reshape(2 * m, n),
                      Hdv.ravel(), gap.ravel())
 
-    def gaps(self, q) -> np.ndarray:
-        if self.constant:
-            return self.gap0 + self.HN @ q
-        return self.sys.gaps(q)
-
-    def jac(self, q) -> np.ndarray:
-        """H(q), rows [H_N; H_T]."""
-        if self.constant:
-            return self.H
-        return self.sys.contact_jacobian(q)
 
     def projector(self, key, rows) -> np.ndarray:
         """Constant system: the matrix C with mass_projection(A, J, r) = C r, J = vstack(rows)."""

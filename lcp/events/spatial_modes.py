@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from ..contact_problem import OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, STICK
-from .model import accel_function
+from .model import ContactKinematics, accel_function
 
 __all__ = ["AccelDisk", "DiskSolution", "Frame", "SpatialModel", "impact_impulse"]
 
@@ -45,7 +45,7 @@ class Frame:
         self.H, self.Hdv, self.gap, self.qdd_free, self.SH, self.A = H, Hdv, gap, qdd_free, SH, A
 
 
-class SpatialModel:
+class SpatialModel(ContactKinematics):
     """Evaluates a System with spatial contacts; constant parts are assembled once.
 
     Parameters
@@ -126,16 +126,6 @@ class SpatialModel:
             rhs[n:, -1] = -zeta
         X = np.linalg.solve(K, rhs)[:n]
         return Frame(H, Hdv, gap, X[:, -1], X[:, :-1], A)
-
-    def gaps(self, q) -> np.ndarray:
-        if self.constant:
-            return self.gap0 + self.HN @ q
-        return self.sys.gaps(q)
-
-    def jac(self, q) -> np.ndarray:
-        if self.constant:
-            return self.H
-        return self.sys.contact_jacobian(q)
 
     # ------------------------------------------------------------------ smooth phases
     def columns(self, fr: Frame, idx, stick, dirs):
