@@ -22,7 +22,25 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-__all__ = ["HOLDS", "ControlSchedule"]
+__all__ = ["HOLDS", "ControlSchedule", "set_checked_values"]
+
+
+def set_checked_values(schedule, t: np.ndarray, rows: int, layout: str) -> np.ndarray:
+    """Check a schedule's values against its ``rows`` (``layout`` says what a row is, for the error),
+    then store its times ``t`` and the values as read-only arrays; returns the values, (rows, nu)."""
+    u = np.asarray(schedule.values, dtype=float)
+    if u.ndim == 1 and u.size == rows:
+        u = u.reshape(rows, 1)
+    if u.ndim != 2 or u.shape[0] != rows or u.shape[1] < 1:
+        raise ValueError(f"values must have {rows} rows {layout}, got shape {np.shape(schedule.values)}")
+    if not np.all(np.isfinite(u)):
+        raise ValueError("values must be finite")
+    t.flags.writeable = False
+    u = u.copy()
+    u.flags.writeable = False
+    object.__setattr__(schedule, "times", t)
+    object.__setattr__(schedule, "values", u)
+    return u
 
 #: the holds a schedule knows
 HOLDS = ("constant", "linear")
@@ -63,20 +81,8 @@ class ControlSchedule:
         if self.hold not in HOLDS:
             raise ValueError(f"hold must be one of {HOLDS}, got {self.hold!r}")
         rows = len(t) - 1 if self.hold == "constant" else len(t)
-        u = np.asarray(self.values, dtype=float)
-        if u.ndim == 1 and u.size == rows:
-            u = u.reshape(rows, 1)
-        if u.ndim != 2 or u.shape[0] != rows or u.shape[1] < 1:
-            raise ValueError(f"values must have {rows} rows for the {self.hold} hold on {len(t)} times "
-                             f"(one per {'interval' if self.hold == 'constant' else 'node'}), got shape "
-                             f"{np.shape(self.values)}")
-        if not np.all(np.isfinite(u)):
-            raise ValueError("values must be finite")
-        t.flags.writeable = False
-        u = u.copy()
-        u.flags.writeable = False
-        object.__setattr__(self, "times", t)
-        object.__setattr__(self, "values", u)
+        u = set_checked_values(self, t, rows, f"for the {self.hold} hold on {len(t)} times (one per "
+                                               f"{'interval' if self.hold == 'constant' else 'node'})")
         # cumulative integral at the nodes, for exact impulses over any interval
         dt = np.diff(t)[:, None]
         pieces = u * dt if self.hold == "constant" else 0.5 * (u[:-1] + u[1:]) * dt

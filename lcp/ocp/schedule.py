@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ..control import ControlSchedule
+from ..control import ControlSchedule, set_checked_values
 
 __all__ = ["AffineSchedule"]
 
@@ -56,19 +56,7 @@ class AffineSchedule(ControlSchedule):
         if self.hold != "affine":
             raise ValueError(f"hold must be 'affine' for an AffineSchedule, got {self.hold!r}")
         rows = 2 * (len(t) - 1)
-        u = np.asarray(self.values, dtype=float)
-        if u.ndim == 1 and u.size == rows:
-            u = u.reshape(rows, 1)
-        if u.ndim != 2 or u.shape[0] != rows or u.shape[1] < 1:
-            raise ValueError(f"values must have {rows} rows (start and end of each of the {len(t) - 1} intervals), "
-                             f"got shape {np.shape(self.values)}")
-        if not np.all(np.isfinite(u)):
-            raise ValueError("values must be finite")
-        t.flags.writeable = False
-        u = u.copy()
-        u.flags.writeable = False
-        object.__setattr__(self, "times", t)
-        object.__setattr__(self, "values", u)
+        u = set_checked_values(self, t, rows, f"(start and end of each of the {len(t) - 1} intervals)")
         dt = np.diff(t)[:, None]
         pieces = 0.5 * (u[0::2] + u[1::2]) * dt
         object.__setattr__(self, "_cum", np.vstack([np.zeros((1, u.shape[1])), np.cumsum(pieces, axis=0)]))
