@@ -79,6 +79,8 @@ class ConeSolver(OneStepSolver):
     """
 
     name = "cone-base"
+    #: solves the disk law (the time stepper picks the fallback among the spatial solvers by this)
+    spatial = True
 
     def solve(self, problem: ConeContactProblem) -> StepSolution:
         if not isinstance(problem, ConeContactProblem):

@@ -160,9 +160,9 @@ def _spatial_solver(options):
 
 def _fallback_for(solver, k: int):
     """The other exact solver that retries a step on which ``solver`` failed (k active contacts)."""
-    from .cone_solvers import ConeSolver, make_cone_solver
+    if getattr(solver, "spatial", False):  # a disk-law solver (lcp.cone_solvers, already loaded)
+        from .cone_solvers import make_cone_solver
 
-    if isinstance(solver, ConeSolver):
         return make_cone_solver("nsgs" if solver.name == "newton" else "newton")
     name = {"auto": "osqp", "enum": "lemke", "lemke": "enum" if k == 1 else "osqp",
             "osqp": "enum" if k == 1 else "lemke"}.get(solver.name, "lemke")
