@@ -88,7 +88,8 @@ def jean_pratt_copies(K: int, R: float = 0.5, alpha: float = np.pi / 4, m: float
     n = 2 * K
     q, v = ca.SX.sym("q", n), ca.SX.sym("v", n)
     blk = np.array([[m + M * t * t, -M * t], [-M * t, m + M]])
-    mass = ca.SX(np.kron(np.eye(K), blk))
+    # structurally block diagonal: a dense array would carry (2K)^2 structural entries
+    mass = ca.SX(ca.DM(sp.csc_matrix(sp.kron(sp.eye(K), blk))))
     force = ca.SX(np.tile([0.0, -(m + M) * g], K))
     contacts = [Contact(gap=q[2 * i + 1], tangent=q[2 * i], mu=R, name=f"P{i}") for i in range(K)]
     system = System(q, v, mass, force, contacts=contacts)

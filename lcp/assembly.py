@@ -107,20 +107,41 @@ class StepAssembly:
         if self.sparse:
             self._init_sparse(h, theta)
         elif self.matrices_constant:
-            z = np.zeros(self.n)
-            _, S, T, SHt, W, gap0, H = self._eval(0.0, z, z)
-            self.S, self.T, self.SHt, self.W, self.H = S, T, SHt, W, H
-            self.gap0 = gap0  # gaps are affine here: g(q) = g(0) + H_N q
-            K, C = (np.array(x, dtype=float).reshape(self.n, self.n) for x in system.force_jac_fn(0.0, z, z))
-            self.F0 = system.force(z, z)
-            self.Kq, self.Cv = -K, -C  # F = F0 + Kq q + Cv v (affine, no t)
-            _, G, phi_t = (np.array(x, dtype=float) for x in system.constraints_fn(0.0, z))
-            self.G, self.phi_t = G.reshape(system.n_bilateral, self.n), phi_t.ravel()
+            self._init_constant(h, theta)
             self.force_constant = not system.force_depends_on_state
             # constant forces, no springs, no bilateral constraints: the free velocity increment
             # itself is constant
             self.dv_const = (self.S @ (h * self.F0) if self.constant and self.force_constant
                              and not self.Kq.any() and not self.T.shape[1] else None)
+
+    def _init_constant(self, h, th):
+        """The constant data of a small system: the system's step data at (0, 0, 0), then S, T,
+        S H' and W from :func:`_constant_core` (the operations of :func:`one_step_function`, so the
+        same numbers to the last bit, without building that function for every system). Both
+        evaluations run on NumPy buffers: converting arguments and results to CasADi matrices
+        would cost more than the evaluations."""
+        sys_, n, nb, m = self.sys, self.n, self.sys.n_bilateral, self.m
+        fn = sys_.step_data_fn
+        core, offsets, layout = _constant_core(sys_)
+        # the nonzeros of A, F, K, C, G, phi_t, gap, H, then h and theta: the core's one argument
+        data = np.empty(offsets[-1] + 2)
+        data[-2:] = h, th
+        z = np.zeros(n)
+        _run(fn, [np.zeros(1), z, z], [data[offsets[i]:offsets[i + 1]] for i in range(8)])
+        out = np.empty(layout[-1][0] + layout[-1][1] * layout[-1][2])
+        _run(core, [data], [out])
+        # dense results, column-major as CasADi writes them: transposed copies of (columns, rows)
+        S, T, SHt, W, F, K, C, G, phi_t, gap, H = (out[a:a + nr * nc].reshape(nc, nr).T for a, nr, nc in layout)
+        if not (np.all(np.isfinite(S)) and np.all(np.isfinite(F))):
+            raise FloatingPointError("singular iteration matrix: the mass matrix is singular on the "
+                                     "constraint manifold")
+        self.S, self.T, self.SHt, self.W, self.H = S.copy(), T.copy(), SHt.copy(), W.copy(), H.copy()
+        self.gap0 = gap.reshape(m)  # gaps are affine here: g(q) = g(0) + H_N q
+        self.F0 = F.reshape(n)
+        # F = F0 + Kq q + Cv v (affine, no t); C order, as every array here: NumPy's products of a
+        # transposed view may round differently
+        self.Kq, self.Cv = -np.ascontiguousarray(K), -np.ascontiguousarray(C)
+        self.G, self.phi_t = G.copy(), phi_t.reshape(nb)
 
     def _init_sparse(self, h, th):
         """The constant data of a large system, sparse: W_h = A + h theta C + (h theta)^2 K is
@@ -288,6 +309,68 @@ def kahan_add(s, inc, comp):
     y = inc - comp
     t = s + y
     return t, (t - s) - y
+
+
+#: the core functions of :func:`_constant_core` by size and numbers of nonzeros, each a list of
+#: (sparsity patterns, Function); bounded, so that a sweep over many structures does not grow it
+_CORES: dict = {}
+_CORES_MAX = 64
+
+
+def _constant_core(system):
+    """The function ``d -> out`` of a system with constant matrices, with the offsets of its
+    argument's parts and the layout of its result.
+
+    d stacks the nonzeros of the system's step data (:attr:`lcp.system.System.step_data_fn`: A, F,
+    K, C, G, phi_t, gap, H), then h and theta (``offsets``: where each part starts, and the end);
+    out stacks S, T, S H', W, F, K, C, G, phi_t, gap and H, each dense and column-major (``layout``:
+    offset, rows and columns of each). S, T, S H' and W come out of exactly the operations of
+    :func:`one_step_function` on inputs of the same sparsity patterns (the linear solve depends on
+    them), so that both give the same bits.
+
+    Built once per structure (size and sparsity patterns), not per system: a new system of a known
+    structure costs one evaluation, not the construction of a CasADi Function.
+    """
+    fn = system.step_data_fn
+    n, nb = system.n, system.n_bilateral
+    nnz = [fn.nnz_out(i) for i in range(8)]
+    key = (n, nb, system.n_contact_rows, *nnz)
+    sps = [fn.sparsity_out(i) for i in range(8)]
+    entries = _CORES.setdefault(key, [])
+    for patterns, found in entries:
+        if all(a == b for a, b in zip(patterns, sps)):
+            return found
+    offsets = np.concatenate([[0], np.cumsum(nnz)]).tolist()
+    d = ca.MX.sym("d", offsets[-1] + 2)
+    A, F, K, C, G, phi_t, gap, H = (ca.MX(x, d[offsets[i]:offsets[i + 1]]) for i, x in enumerate(sps))
+    h, th = d[offsets[-1]], d[offsets[-1] + 1]
+    Wh = A + h * th * C + (h * th) ** 2 * K
+    KKT = ca.blockcat([[Wh, G.T], [G, ca.MX(nb, nb)]]) if nb else Wh
+    X = ca.solve(KKT, ca.MX.eye(n + nb))
+    S, T = X[:n, :n], X[:n, n:]
+    SHt = ca.mtimes(S, H.T)
+    outs = [S, T, SHt, ca.mtimes(H, SHt), F, K, C, G, phi_t, gap, H]
+    layout, at = [], 0
+    for x in outs:
+        layout.append((at, x.shape[0], x.shape[1]))
+        at += x.numel()
+    core = ca.Function("constant_core", [d], [ca.vertcat(*(ca.vec(ca.densify(x)) for x in outs))])
+    if sum(map(len, _CORES.values())) >= _CORES_MAX:
+        _CORES.clear()
+        entries = _CORES.setdefault(key, [])
+    found = (core, offsets, layout)
+    entries.append((sps, found))
+    return found
+
+
+def _run(fn: ca.Function, args, results) -> None:
+    """Evaluate ``fn`` on NumPy arrays (the nonzeros of each argument and result, column-major)."""
+    buf, run = fn.buffer()
+    for i, x in enumerate(args):
+        buf.set_arg(i, memoryview(x))
+    for i, x in enumerate(results):
+        buf.set_res(i, memoryview(x))
+    run()
 
 
 def one_step_function(system) -> ca.Function:

@@ -345,6 +345,78 @@ def _bound_chunk(n: int, c: np.ndarray, affine: bool, compiled: bool = True):
     return (lambda: (run(), buf, c)), x, X, info
 
 
+_RUN_DRIVER = """
+CASADI_SYMBOL_EXPORT long {name}(const casadi_real* x0, const casadi_real* c, long steps, casadi_real* X,
+                                 casadi_real* info) {{
+  const casadi_real* arg[{sz_arg}];
+  casadi_real* res[{sz_res}];
+  casadi_int iw[{sz_iw}];
+  casadi_real w[{sz_w}];
+  long k;
+  for (k = 0; k < steps; ++k) {{
+    arg[0] = k ? X + (k - 1) * {nx} : x0;
+    arg[1] = c;
+    res[0] = X + k * {nx};
+    res[1] = info + k * 5;
+    if ({step}(arg, res, iw, w, 0)) return k;
+  }}
+  return steps;
+}}
+"""
+
+
+@functools.lru_cache(maxsize=None)
+def run_library(n: int, affine: bool = True):
+    """Any number of steps of :func:`step_function` in one C call: CasADi's C code of the step,
+    driven by a loop, compiled once per machine.
+
+    Unlike a chunk (a ``mapaccum`` over a fixed number of steps) it runs exactly the steps asked
+    for; the step's arithmetic is the same generated C, so the results are the same bits. Returns a
+    ctypes function ``(x0, c, steps, X, info) -> steps run`` (X: (steps, 4n), info: (steps, 5), C
+    order), or None without a working compiler.
+    """
+    import ctypes
+
+    step = step_function(n, affine)
+    name = f"lcp_mj_run_{n}_{int(affine)}"
+    driver = _RUN_DRIVER.format(name=name, step=step.name(), nx=4 * n, sz_arg=max(1, step.sz_arg()),
+                                sz_res=max(1, step.sz_res()), sz_iw=max(1, step.sz_iw()), sz_w=max(1, step.sz_w()))
+    lib = build_library(name, generate_c(step) + driver.encode())
+    if lib is None:
+        return None
+    fn = getattr(ctypes.CDLL(str(lib)), name)
+    dp = ctypes.POINTER(ctypes.c_double)
+    fn.argtypes = [dp, dp, ctypes.c_long, dp, dp]
+    fn.restype = ctypes.c_long
+    return fn
+
+
+def _chunk_runner(n: int, c: np.ndarray, affine: bool, compiled: bool, n_steps: int):
+    """``run(take)``: ``take`` (<= CHUNK) steps from the state ``x`` into the first rows of ``X``
+    (4n per step) and ``info`` (5 per step); returns (run, x, X, info). The compiled driver
+    (:func:`run_library`) where a C compiler is found, a CasADi chunk otherwise (which always runs
+    CHUNK steps; the caller keeps the first ``take``)."""
+    rows = min(CHUNK, max(n_steps, 1))
+    lib = run_library(n, affine) if compiled else None
+    if lib is None:
+        run_chunk, x, X, info = _bound_chunk(n, c, affine, compiled)
+        return (lambda take: run_chunk()), x, X, info
+    import ctypes
+
+    x = np.zeros(4 * n)
+    c = np.ascontiguousarray(c, dtype=float)
+    X = np.zeros((rows, 4 * n))
+    info = np.zeros((rows, 5))
+    dp = ctypes.POINTER(ctypes.c_double)
+    args = [a.ctypes.data_as(dp) for a in (x, c, X, info)]
+
+    def run(take):
+        lib(args[0], args[1], take, args[2], args[3])
+        return c  # c must outlive the pointers
+
+    return run, x, X, info
+
+
 def simulate_compiled(asm, q0, v0, n_steps: int, save_every: int = 1, compiled: bool = True):
     """Run n_steps compiled steps; returns arrays (Q, V, PN, PT, modes, residuals, n_distinct).
 
@@ -355,7 +427,7 @@ def simulate_compiled(asm, q0, v0, n_steps: int, save_every: int = 1, compiled: 
     n = asm.n
     affine = needs_affine(asm)
     c = pack(asm, affine)
-    run_chunk, x, Xbuf, Ibuf = _bound_chunk(n, c, affine, compiled)
+    run_chunk, x, Xbuf, Ibuf = _chunk_runner(n, c, affine, compiled, n_steps)
     n_saved = n_steps // save_every
     Q = np.empty((n_saved + 1, n))
     V = np.empty((n_saved + 1, n))
@@ -367,28 +439,31 @@ def simulate_compiled(asm, q0, v0, n_steps: int, save_every: int = 1, compiled: 
     done = 0
     fail = None
     while done < n_steps:
-        run_chunk()
-        X, info = Xbuf.T, Ibuf.T  # (4n, CHUNK) and (5, CHUNK) views
         take = min(CHUNK, n_steps - done)
-        X, info = X[:, :take], info[:, :take]
-        bad = np.flatnonzero((info[2] == -1) | ~np.all(np.isfinite(X), axis=0))
-        if bad.size:
-            take = int(bad[0])
-            X, info = X[:, :take], info[:, :take]
+        run_chunk(take)
+        X, info = Xbuf[:take], Ibuf[:take]  # (take, 4n) and (take, 5): one row per step
+        if not (np.isfinite(X).all() and (info[:, 2] != -1).all()):
+            take = int(np.flatnonzero((info[:, 2] == -1) | ~np.all(np.isfinite(X), axis=1))[0])
+            X, info = X[:take], info[:take]
             fail = done + take
         # steps done + 1 .. done + take; keep those whose index is a multiple of save_every
-        idx = np.arange(done + 1, done + take + 1)
-        keep = idx % save_every == 0
-        rows = idx[keep] // save_every
-        Q[rows] = X[:n, keep].T
-        V[rows] = X[n:2 * n, keep].T
-        info_saved[rows - 1] = info[:, keep].T
-        m = info[2].astype(np.int64)
+        if save_every == 1:
+            Q[done + 1:done + take + 1] = X[:, :n]
+            V[done + 1:done + take + 1] = X[:, n:2 * n]
+            info_saved[done:done + take] = info
+        else:
+            idx = np.arange(done + 1, done + take + 1)
+            keep = idx % save_every == 0
+            rows = idx[keep] // save_every
+            Q[rows] = X[keep, :n]
+            V[rows] = X[keep, n:2 * n]
+            info_saved[rows - 1] = info[keep]
+        m = info[:, 2].astype(np.int64)
         modes_count += np.bincount(m + 2, minlength=6)[[0, 2, 3, 4, 5]]
         if take:
-            max_res = max(max_res, float(np.max(info[3])))
-            n_amb += int(np.sum(info[4] > 1))
-            x[:] = X[:, take - 1]
+            max_res = max(max_res, float(np.max(info[:, 3])))
+            n_amb += int(np.count_nonzero(info[:, 4] > 1))
+            x[:] = X[take - 1]
         done += take
         if fail is not None:
             break

@@ -269,7 +269,9 @@ def block_chain(K: int = 3, m=1.0, k_spring: float = 50.0, mu=0.3, g: float = 9.
         tension = k_spring * stretch + damping * rate
         F[2 * i] = F[2 * i] + tension
         F[2 * i + 2] = F[2 * i + 2] - tension
-    mass = ca.SX(np.diag(np.repeat(masses, 2)))
+    # structurally diagonal (not a dense array with zeros): the n^2 structural entries of a dense
+    # mass matrix would dominate every evaluation, check and assembly of a long chain
+    mass = ca.diag(ca.SX(np.repeat(masses, 2)))
     contacts = [Contact(gap=y[i], tangent=x[i], mu=float(mus[i]), name=f"block{i}") for i in range(K)]
     names = [nm for i in range(K) for nm in (f"x{i}", f"y{i}")]
     system = System(q, v, mass, ca.vertcat(*F), contacts=contacts, names=names)

@@ -173,7 +173,9 @@ def _projector(system, options):
     """The position projection of this run, or None (see MoreauJeanOptions.projection)."""
     if options.projection is False or system.n_bilateral + system.n_contacts == 0:
         return None
-    if options.projection == "auto" and not needs_projection(system):
+    # constant kinematics: every constraint and gap is affine in q, which is exactly when
+    # needs_projection says no (decided here without its symbolic Jacobians)
+    if options.projection == "auto" and (system.kinematics_is_constant or not needs_projection(system)):
         return None
     return PositionProjection(system, options.projection_tol)
 
