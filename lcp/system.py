@@ -408,6 +408,10 @@ class System:
             return q0, v0
         if self.n_contacts and not self._contact_rows_checked:
             self._check_contact_rows(q0)  # a constant mass matrix (and constraints) passed the check below once
+        if not self.n_bilateral and self.n > 200 and self.mass_expr.nnz() <= self.n * self.n // 8:
+            self._check_sparse_mass(q0, t0)
+            self._mass_checked_constant = self.mass_is_constant and self.kinematics_is_constant
+            return q0, v0
         A = self.mass(q0, t0)
         if not np.all(np.isfinite(A)):
             raise ValueError("mass matrix is not finite at q0")
@@ -437,6 +441,45 @@ class System:
         # dense factorization or eigenvalue decomposition)
         self._mass_checked_constant = self.mass_is_constant and self.kinematics_is_constant
         return q0, v0
+
+    def _check_sparse_mass(self, q0, t0) -> None:
+        """The test of :meth:`check_state` for a large sparse mass matrix without bilateral
+        constraints, on its nonzeros: where A is block diagonal (up to a permutation) with small
+        blocks, the Cholesky factorization of A - s I is that of each block (batched), so the dense
+        matrix is never formed; otherwise the dense test."""
+        from scipy.sparse import csc_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        n = self.n
+        M = ca.DM(self.mass_fn(t0, q0))
+        rows, cols = M.sparsity().get_triplet()
+        A = csc_matrix((np.array(M.nonzeros(), dtype=float), (rows, cols)), shape=(n, n))
+        if not np.all(np.isfinite(A.data)):
+            raise ValueError("mass matrix is not finite at q0")
+        scale = max(1.0, float(np.max(np.abs(A.data), initial=0.0)))
+        if abs(A - A.T).max() > 1e-12 * scale:
+            raise ValueError("mass matrix must be symmetric")
+        As = (0.5 * (A + A.T)).tocsr()
+        shift = 1e-14 * max(1.0, float(np.max(np.asarray(abs(As).sum(axis=1)))))
+        n_comp, label = connected_components(As, directed=False)
+        sizes = np.bincount(label, minlength=n_comp)
+        if sizes.max() > 32:
+            blocks = [As.toarray()]
+        else:
+            order = np.argsort(label, kind="stable")  # the members of each block, block by block
+            starts = np.concatenate([[0], np.cumsum(sizes)])
+            blocks = []
+            for size in np.unique(sizes).tolist():
+                idx = order[starts[np.flatnonzero(sizes == size)][:, None] + np.arange(size)[None, :]]
+                r = np.repeat(idx, size, axis=1).ravel()
+                c = np.tile(idx, (1, size)).ravel()
+                blocks.append(np.asarray(As[r, c], dtype=float).reshape(idx.shape[0], size, size))
+        for B in blocks:
+            try:
+                np.linalg.cholesky(B - shift * np.eye(B.shape[-1]))
+            except np.linalg.LinAlgError:
+                raise ValueError("mass matrix is singular or not positive definite (on the constraint manifold) "
+                                 f"at q0: an eigenvalue is below {shift:.3g}") from None
 
 
 def _tangent_rows(c: Contact, q, v, t, n: int) -> ca.SX:
