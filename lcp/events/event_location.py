@@ -13,10 +13,11 @@ functions with ``.terminal`` and ``.direction``, located by ``solve_ivp`` on its
 """
 from __future__ import annotations
 
+import itertools
 import math
 
-__all__ = ["first_landing", "first_stop", "event_functions", "approach_gap", "first_terminal_event",
-           "too_many_events"]
+__all__ = ["approach_gap", "event_functions", "first_descent", "first_landing", "first_stop",
+           "first_terminal_event", "too_many_events"]
 
 
 def first_stop(u0: float, a: float, s: float) -> float:
@@ -44,6 +45,79 @@ def first_landing(g0: float, u: float, a: float) -> float:
         roots.append(g0 / qq)
     good = [r for r in roots if r > 0 and u + a * r <= 0]
     return min(good) if good else math.inf
+
+
+def _horner(c, x: float) -> float:
+    s = 0.0
+    for ci in reversed(c):
+        s = s * x + ci
+    return s
+
+
+def _quadratic_roots(c0: float, c1: float, c2: float) -> list:
+    """Real roots of c0 + c1 x + c2 x^2 (c2 may be 0), without cancellation."""
+    if c2 == 0.0:
+        return [-c0 / c1] if c1 != 0.0 else []
+    disc = c1 * c1 - 4.0 * c2 * c0
+    if disc < 0.0:
+        return []
+    qq = -0.5 * (c1 + math.copysign(math.sqrt(disc), c1))
+    if qq == 0.0:
+        return [0.0]
+    return [qq / c2, c0 / qq]
+
+
+def first_descent(c, T: float) -> float:
+    """Smallest dt in (0, T) at which p(dt) = c[0] + c[1] dt + ... (degree <= 3) falls from
+    positive to zero; inf if none.
+
+    [0, T] is cut at the critical points of p (roots of p', without cancellation) into intervals
+    where p is monotone; the root is searched in the first decreasing one that brackets it: by
+    one division for a linear p, by the cancellation-free quadratic formula for a quadratic
+    (the root in the bracket), by bisection to the last bit for a cubic.
+
+    Examples
+    --------
+    >>> first_descent([1.0, -2.0], 10.0), first_descent([1.0, -2.0], 0.3)
+    (0.5, inf)
+    >>> round(first_descent([2.0, 0.0, 0.0, -2.0], 10.0), 15)  # 2 - 2 dt^3
+    1.0
+    """
+    c = [float(x) for x in c]
+    while len(c) > 1 and c[-1] == 0.0:
+        c.pop()
+    deg = len(c) - 1
+    if deg < 1 or not T > 0.0:
+        return math.inf
+    if deg == 1:
+        if c[0] > 0.0 and c[1] < 0.0:
+            dt = -c[0] / c[1]
+            return dt if dt < T else math.inf
+        return math.inf
+    d = [c[1], 2.0 * c[2], 3.0 * c[3] if deg == 3 else 0.0]
+    cuts = sorted(x for x in _quadratic_roots(*d) if 0.0 < x < T)
+    edges = [0.0, *cuts, T]
+    pa = c[0]
+    for a, b in itertools.pairwise(edges):
+        pb = _horner(c, b)
+        if pa > 0.0 >= pb:
+            if deg == 2:
+                inside = [x for x in _quadratic_roots(*c) if a <= x <= b]
+                if inside:
+                    dt = min(inside)
+                    return dt if 0.0 < dt < T else math.inf
+            lo, hi = a, b  # p(lo) > 0 >= p(hi): bisect to adjacent floats
+            while True:
+                mid = 0.5 * (lo + hi)
+                if not lo < mid < hi:
+                    break
+                if _horner(c, mid) > 0.0:
+                    lo = mid
+                else:
+                    hi = mid
+            return hi if hi < T else math.inf
+        pa = pb
+    return math.inf
 
 
 def event_functions(phase, t0, y0, force_tol: float = 0.0):

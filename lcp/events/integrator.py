@@ -6,6 +6,7 @@ import numpy as np
 from ..contact_problem import OPEN, STICK
 from ..result import SolverStats
 from .accumulation import BounceSequence, sum_up
+from .cubic_phase import CubicPhase
 from .event_location import too_many_events
 from .impacts import ImpactLaw
 from .model import EPS, all_finite, system_model, zero_test_scales
@@ -16,7 +17,7 @@ from .phases import ClosedFormPhase
 from .projection import StateProjector, check_initial
 from .records import Event, Impact, Impulse, Phase, make_record
 
-__all__ = ["Integrator", "Inconsistent"]
+__all__ = ["Inconsistent", "Integrator"]
 
 
 class Inconsistent(Exception):
@@ -29,15 +30,21 @@ class Integrator:
     def __init__(self, system, q0, v0, t_end, options: EventOptions):
         self.sys = system
         self.model = system_model(system)
+        if self.model.forcing is not None and not self.model.forcing.covers(0.0, t_end):
+            # beyond the schedule's checked range: the System's own force, evaluated
+            self.model = system_model(system, general=True)
         self.o = options
         self.t_end = t_end
         self.mu, self.e = system.mu, system.e
         n, m = system.n, system.n_contacts
         self.n, self.m = n, m
-        if options.smooth is SmoothIntegrator.CLOSED_FORM and not self.model.polynomial:
+        if options.smooth is SmoothIntegrator.CLOSED_FORM and not (self.model.polynomial or self.model.cubic):
             raise ValueError("smooth='closed-form' needs constant mass, kinematics and forces "
-                             "(System.is_constant and forces independent of q and v)")
+                             "(System.is_constant and forces independent of q and v), or such a system "
+                             "under a piecewise-constant or piecewise-affine control schedule")
         self.closed_form = self.model.polynomial and options.smooth is not SmoothIntegrator.SCIPY
+        #: cubic closed-form phases (a force affine in t between breakpoints, lcp.events.cubic_phase)
+        self.cubic = self.model.cubic and options.smooth is not SmoothIntegrator.SCIPY
         self.stats = SolverStats()
         self.events, self.impulses, self.phases = [], [], []
         model = self.model
@@ -182,8 +189,17 @@ class Integrator:
             modes = sol.modes if sol is not None else ()
             keep = [i for i, md in enumerate(modes) if md != OPEN]
             args = (self.model, t, q, v, P, closed_a[keep], tuple(modes[i] for i in keep), self.mu)
-            ph = OdePhase(*args, options=self.o, scales=self.scales,
-                          indeterminate=sol is not None and sol.nullity > 0)
+            indeterminate = sol is not None and sol.nullity > 0
+            if self.cubic and not indeterminate:
+                if sol is not None:
+                    Nm, fm = np.zeros(m), np.zeros(m)
+                    Nm[closed_a], fm[closed_a] = acc.forces(sol.p)
+                    start = (sol.qdd, Nm[closed_a[keep]], fm[closed_a[keep]])
+                else:
+                    start = None
+                ph = CubicPhase(*args, start=start, force_tol=self.o.tol * self.scales.get("F", 0.0))
+            else:
+                ph = OdePhase(*args, options=self.o, scales=self.scales, indeterminate=indeterminate)
         return ph
 
     def run(self, q0, v0):

@@ -13,9 +13,22 @@ import weakref
 import casadi as ca
 import numpy as np
 
-__all__ = ["EPS", "ContactKinematics", "StateData", "SystemModel", "system_model", "check_state", "mass_projection",
-           "all_finite", "absmax", "accel_function", "coordinate_rows",
-           "zero_test_scales"]
+from .forcing import time_forcing
+
+__all__ = [
+    "EPS",
+    "ContactKinematics",
+    "StateData",
+    "SystemModel",
+    "absmax",
+    "accel_function",
+    "all_finite",
+    "check_state",
+    "coordinate_rows",
+    "mass_projection",
+    "system_model",
+    "zero_test_scales",
+]
 
 EPS = np.finfo(float).eps
 
@@ -123,15 +136,26 @@ class SystemModel(ContactKinematics):
       do not depend on the state at all: ``mode_memo`` keeps their solutions per (closed contacts,
       slide signs, allowed modes, solver), with the solver statistics to replay, and ``phase_memo``
       the per-mode data of a closed-form phase.
+
+    A system that is constant apart from a scheduled control force B u(t), piecewise affine in t
+    (:func:`~lcp.events.forcing.time_forcing`), is constant here too, its force at t being
+    ``forcing.at(t) + Kq q + Cv v`` (no CasADi call); with state-independent forces (``cubic``) its
+    phases are polynomial in t as well (:class:`~lcp.events.cubic_phase.CubicPhase`). ``general=True``
+    ignores the forcing (the integration then evaluates the System, for horizons the schedule's
+    checked range does not cover).
     """
 
-    def __init__(self, system):
+    def __init__(self, system, general: bool = False):
         self.sys = system
         self.n, self.m, self.nb = system.n, system.n_contacts, system.n_bilateral
         self.all_contacts = tuple(range(self.m))
-        self.constant = system.is_constant
+        #: the piecewise-affine time dependence of the force, or None
+        self.forcing = None if general or system.is_constant else time_forcing(system)
+        self.constant = system.is_constant or self.forcing is not None
         # polynomial (quadratic) phases: constant mass, kinematics and forces
-        self.polynomial = self.constant and not system.force_depends_on_state
+        self.polynomial = system.is_constant and not system.force_depends_on_state
+        # cubic phases: as polynomial, plus a force affine in t between the schedule's breakpoints
+        self.cubic = self.forcing is not None and not system.force_depends_on_state
         self.state_checked = False
         if self.constant:
             n, m = self.n, self.m
@@ -160,7 +184,8 @@ class SystemModel(ContactKinematics):
             d = StateData.__new__(StateData)
             d.__dict__.update(self._const_data.__dict__)  # shares the factorization
             d.gap = self.gap0 + self.HN @ q
-            d.F = self.F0 + self.Kq @ q + self.Cv @ v
+            F0 = self.F0 if self.forcing is None else self.forcing.at(t)
+            d.F = F0 + self.Kq @ q + self.Cv @ v
             d._qdd_free = None
             return d
         n, m, nb = self.n, self.m, self.sys.n_bilateral
@@ -181,10 +206,20 @@ class SystemModel(ContactKinematics):
 
 
 MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+GENERAL_MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def system_model(system) -> SystemModel:
-    """The evaluator of a system, built once (a constant system is then assembled only once)."""
+def system_model(system, general: bool = False) -> SystemModel:
+    """The evaluator of a system, built once (a constant system is then assembled only once);
+    ``general``: the one that ignores a piecewise-affine forcing (see :class:`SystemModel`)."""
+    if general:
+        model = MODELS.get(system)
+        if model is not None and model.forcing is None:
+            return model
+        model = GENERAL_MODELS.get(system)
+        if model is None:
+            model = GENERAL_MODELS[system] = SystemModel(system, general=True)
+        return model
     model = MODELS.get(system)
     if model is None:
         model = MODELS[system] = SystemModel(system)

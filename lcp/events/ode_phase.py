@@ -56,9 +56,13 @@ class OdePhase(SmoothPhase):
             Pi[:, i] = p
         rows = np.concatenate([self.idx, m + self.idx])
         Hc = model.H[rows]
-        # qdd_free = S (F0 + Kq q + Cv v): columns by solves
-        Sfree = data.solve_dirs(np.column_stack([model.F0, model.Kq, model.Cv]))
-        s0, Sq, Sv = Sfree[:, 0], Sfree[:, 1:n + 1], Sfree[:, n + 1:]
+        # qdd_free = S (F0 + Kq q + Cv v): columns by solves; under a piecewise-affine forcing
+        # F0 is its value at t0 and its rate the last column (c(t) = c + c1 (t - t0))
+        forcing = model.forcing
+        F0, F1 = (model.F0, None) if forcing is None else forcing.affine(self.t0)
+        cols = [F0, model.Kq, model.Cv] + ([] if F1 is None else [F1])
+        Sfree = data.solve_dirs(np.column_stack(cols))
+        s0, Sq, Sv = Sfree[:, 0], Sfree[:, 1:n + 1], Sfree[:, n + 1:2 * n + 1]
         # p = Pi b, b = Hc qdd_free
         Pq, Pv, p0 = Pi @ Hc @ Sq, Pi @ Hc @ Sv, Pi @ Hc @ s0
         Qq, Qv, q0 = Sq + acc.SD @ Pq, Sv + acc.SD @ Pv, s0 + acc.SD @ p0
@@ -76,6 +80,11 @@ class OdePhase(SmoothPhase):
         L[n:2 * n, :n], L[n:2 * n, n:2 * n], c[n:2 * n] = Qq, Qv, q0
         L[2 * n:, :n], L[2 * n:, n:2 * n], c[2 * n:] = fold @ Pq, fold @ Pv, fold @ p0
         self.L, self.c = L, c
+        self.c1 = None
+        if F1 is not None:
+            s1 = Sfree[:, 2 * n + 1]
+            p1 = Pi @ Hc @ s1
+            self.c1 = np.concatenate([np.zeros(n), s1 + acc.SD @ p1, fold @ p1])
 
     def evaluate(self, t, y):
         """(ydot, N (m), f (m)) at (t, y), cached for the event functions at the same point."""
@@ -85,6 +94,8 @@ class OdePhase(SmoothPhase):
         n, m = self.model.n, self.model.m
         if self.linear:
             yd = self.L @ y + self.c
+            if self.c1 is not None:
+                yd = yd + (min(t, self.t_left) - self.t0) * self.c1
             out = (yd, yd[2 * n:2 * n + m], yd[2 * n + m:])
         else:
             q, v = y[:n], y[n:2 * n]

@@ -6,12 +6,17 @@ problem's own controlled System with it (``System.with_control``), so there is n
 - ``method="moreau-jean"`` at the optimizer's step (``refine=1``, uniform steps) repeats the
   optimizer's steps, the control's impulse over each step integrated exactly, so the mismatch is
   round-off; at ``refine > 1`` it measures the time-discretization error of the transcription.
-- ``method="event"``: the event-driven integrator (:mod:`lcp.events`) restarted at every node of
-  the control, the control's breakpoints thus being events; exact (to round-off) wherever the
-  phases have closed forms (constant forces, as for the Jean-Pratt block under a piecewise-constant
-  control), and it follows the continuous-time response whatever the transcription's steps.
+- ``method="event"``: the event-driven integrator (:mod:`lcp.events`), the control's nodes being
+  ends of phases; exact (to round-off) wherever the phases have closed forms: a constant system
+  (the Jean-Pratt block) under a piecewise-constant, -linear or -affine control, whose phases are
+  polynomial in t (:mod:`lcp.events.cubic_phase`). It follows the continuous-time response
+  whatever the transcription's steps. Such a system is replayed by one integration over the whole
+  schedule (the breakpoints end phases within it), its results then cut at the nodes into the
+  per-interval ``pieces``; any other is restarted at every node with a one-interval schedule.
 """
 from __future__ import annotations
+
+import dataclasses
 
 import casadi as ca
 import numpy as np
@@ -42,10 +47,91 @@ def _lift(system, q, tol=1e-12):
     return q - HN.T @ np.linalg.solve(HN @ HN.T, gap[neg])
 
 
-def _replay_event_pieces(result: OCPResult, **options):
-    """Event-driven replay restarted at every node: (q, v) at the nodes, the piece results."""
+def _closed_form_system(result: OCPResult, options: dict):
+    """The problem's System under the solution's whole control schedule when the event integrator
+    integrates it in closed form over [0, T] (constant system, piecewise-polynomial force) and only
+    ``n_eval`` is asked for; else None."""
+    from ..events.model import system_model
+
+    if set(options) - {"n_eval"} or result.control is None:
+        return None
+    sysw = result.problem.system.with_control(result.control)
+    model = system_model(sysw)
+    T = float(result.t[-1])
+    if model.polynomial or (model.cubic and model.forcing.covers(0.0, T)):
+        return sysw
+    return None
+
+
+def _shifted(records, t0: float, t1: float, last: bool, *names):
+    """The records (frozen dataclasses) with time fields ``names`` in [t0, t1) ([t0, t1] for the
+    last interval), clipped and shifted to start at 0."""
+    out = []
+    for r in records:
+        first = getattr(r, names[0])
+        end = getattr(r, names[-1])
+        if end < t0 or first > t1 or (first == t1 and not last) or (end == t0 and first < t0):
+            continue
+        out.append(dataclasses.replace(r, **{nm: min(max(getattr(r, nm), t0), t1) - t0 for nm in names}))
+    return out
+
+
+def _cut(sim, nodes, counts):
+    """The per-interval views of one event integration whose output times hold the nodes: interval
+    k has ``counts[k]`` output times from node k to node k + 1, its times shifted to start at 0."""
+    from ..events.records import new_event_result
+
+    pieces, i = [], 0
+    K = len(nodes) - 1
+    for k in range(K):
+        a, b = i, i + counts[k]
+        t0, t1 = float(nodes[k]), float(nodes[k + 1])
+        last = k == K - 1
+        ev = _shifted(sim.events, t0, t1, last, "t")
+        pieces.append(new_event_result(
+            t=sim.t[a:b] - t0, q=sim.q[a:b], v=sim.v[a:b], p_N=sim.p_N[a:b - 1], p_T=sim.p_T[a:b - 1],
+            modes=sim.modes[a:b - 1], status=sim.status, message=sim.message, stats=sim.stats, method=sim.method,
+            solver=sim.solver, t_events=[e.t for e in ev], force_N=sim.force_N[a:b], force_T=sim.force_T[a:b],
+            events=ev, impulses=_shifted(sim.impulses, t0, t1, last, "t"),
+            phases=[p for p in _shifted(sim.phases, t0, t1, last, "t0", "t1") if p.t1 > p.t0 or p.t0 == 0.0],
+            impacts=_shifted(sim.impacts, t0, t1, last, "t"),
+            accumulations=_shifted(sim.accumulations, t0, t1, last, "t"), nonunique_forces=sim.nonunique_forces))
+        i = b - 1  # the node is the last time of this interval and the first of the next
+    return pieces
+
+
+def _replay_event_whole(result: OCPResult, sysw, n_eval: int = 1000):
+    """Event-driven replay of the whole schedule in one integration (closed-form phases): (q, v) at
+    the nodes and the per-interval views (``n_eval`` output times per interval, as the restarted
+    replay gives)."""
     from ..simulation import simulate
 
+    if not isinstance(n_eval, (int, np.integer)) or isinstance(n_eval, bool) or n_eval < 2:
+        raise ValueError(f"n_eval must be an integer >= 2, got {n_eval!r}")
+    pb = result.problem
+    t = np.asarray(result.t, dtype=float)
+    grid = [t[:1]]
+    for k in range(len(t) - 1):
+        g = t[k] + np.linspace(0.0, t[k + 1] - t[k], int(n_eval))
+        g[-1] = t[k + 1]
+        grid.append(g[1:])
+    t_eval = np.concatenate(grid)
+    sim = simulate(sysw, float(t[-1]), method="event", q0=pb.q0, v0=pb.v0, t_eval=t_eval)
+    if not sim.success:
+        raise RuntimeError(f"replay failed: {sim.message}")
+    idx = np.arange(len(t)) * (int(n_eval) - 1)
+    return sim.q[idx], sim.v[idx], _cut(sim, t, [int(n_eval)] * (len(t) - 1))
+
+
+def _replay_event_pieces(result: OCPResult, **options):
+    """Event-driven replay: (q, v) at the nodes, the piece results. One integration over the whole
+    schedule when its phases have closed forms (exact, so a restart at the nodes changes nothing
+    but the cost); else restarted at every node with that interval's schedule."""
+    from ..simulation import simulate
+
+    sysw = _closed_form_system(result, options)
+    if sysw is not None:
+        return _replay_event_whole(result, sysw, **options)
     pb = result.problem
     sysc, t, sched = pb.system, result.t, result.control
     q, v = [pb.q0.copy()], [pb.v0.copy()]
