@@ -130,8 +130,9 @@ def _block_mass_system(blocks):
     return System(q, v, ca.SX(ca.DM(A)), ca.SX.zeros(n), contacts=[Contact(gap=q[1], tangent=q[0], mu=0.3)])
 
 
-def test_the_sparse_mass_check_gives_the_dense_verdicts():
-    good = [np.array([[2.0, -1.0], [-1.0, 1.0]])] * 150 + [np.diag([1.0, 2.0, 3.0])] * 10
+@pytest.mark.parametrize("copies", [20, 150])  # the eigenvalue test (n <= 200), the Cholesky test
+def test_the_sparse_mass_check_gives_the_dense_verdicts(copies):
+    good = [np.array([[2.0, -1.0], [-1.0, 1.0]])] * copies + [np.diag([1.0, 2.0, 3.0])] * 10
     s = _block_mass_system(good)
     z = np.zeros(s.n)
     s.check_state(z, z)  # positive definite: accepted
