@@ -30,8 +30,9 @@ __all__ = ["CubicPhase"]
 class CubicPhase(SmoothPhase):
     """q = q0 + v0 dt + qdd0 dt^2/2 + qdd1 dt^3/6 with forces affine in dt; events are polynomial roots.
 
-    ``start`` = (qdd, N, f) of the phase's closed contacts at t0, as the mode decision solved them
-    (solved here when None); ``force_tol``: a force that starts within it of its bound ends the
+    ``start`` = (qdd, N, f) of the phase's closed contacts at t0, when known; by default solved
+    here (the mode decision's solution may come from a look ahead, at a later time, where the
+    forces differ); ``force_tol``: a force that starts within it of its bound ends the
     phase only when it passes the bound by as much (as in :func:`~lcp.events.event_location.event_functions`).
     """
 
@@ -45,16 +46,18 @@ class CubicPhase(SmoothPhase):
         F1 = model.forcing.affine(self.t0)[1]
         data = model.data(self.t0, self.q0, self.v0)
         k = self.idx.size
-        if start is not None:
-            self.qdd, N, f = start
-        elif k:
-            self.qdd, N, f = self.accel(data)
-        else:
-            self.qdd, N, f = data.qdd_free, np.zeros(0), np.zeros(0)
         # the rates: the same branch, with the force's rate as the only load
         s1 = data.solve_dirs(F1[:, None])[:, 0]
         if k:
             acc = AccelProblem(data, self.idx, self.slide, self.mu)
+            if start is not None:
+                self.qdd, N, f = start
+            else:
+                p0 = acc.pb.solve_branch(acc.branch_modes(self.modes))
+                if p0 is None:
+                    raise FloatingPointError("singular contact branch in a smooth phase")
+                N, f = acc.forces(p0)
+                self.qdd = acc.qdd(p0)
             rows = np.concatenate([self.idx, model.m + self.idx])
             pb = ContactProblem(acc.pb.W, model.H[rows] @ s1, acc.pb.mu)
             p1 = pb.solve_branch(acc.branch_modes(self.modes))
@@ -63,6 +66,8 @@ class CubicPhase(SmoothPhase):
             self.qdd1 = s1 + acc.SD @ p1
             N1, f1 = acc.forces(p1)
         else:
+            self.qdd = data.qdd_free if start is None else start[0]
+            N, f = np.zeros(0), np.zeros(0)
             self.qdd1, N1, f1 = s1, np.zeros(0), np.zeros(0)
         # the phase's constraints hold at the acceleration level up to rounding; one mass-metric
         # projection of both coefficients keeps them over long phases (as in ClosedFormPhase)
@@ -103,15 +108,16 @@ class CubicPhase(SmoothPhase):
                 dt = first_descent((s * float(row @ v0), s * float(row @ a0), 0.5 * s * float(row @ a1)), T)
                 if dt < best[0]:
                     best = (dt, "stop", j)
-            dt = self._force_event(float(self.N[j]), float(self.N1[j]), T)
-            if dt < best[0]:
-                best = (dt, "lift-off", j)
+            dt_lift = self._force_event(float(self.N[j]), float(self.N1[j]), T)
+            if dt_lift < best[0]:
+                best = (dt_lift, "lift-off", j)
             if s == 0.0:
                 mu = float(self.mu[j])
                 for sign in (1.0, -1.0):
                     dt = self._force_event(mu * float(self.N[j]) - sign * float(self.f[j]),
                                            mu * float(self.N1[j]) - sign * float(self.f1[j]), T)
-                    if dt < best[0]:
+                    # the friction bound reached with the normal force (both vanish): a lift-off
+                    if dt < best[0] and not math.isclose(dt, dt_lift, rel_tol=1e-12):
                         best = (dt, "slip", j)
         if len(self.open_idx):
             gap = model.gaps(self.q0)

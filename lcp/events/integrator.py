@@ -191,13 +191,9 @@ class Integrator:
             args = (self.model, t, q, v, P, closed_a[keep], tuple(modes[i] for i in keep), self.mu)
             indeterminate = sol is not None and sol.nullity > 0
             if self.cubic and not indeterminate:
-                if sol is not None:
-                    Nm, fm = np.zeros(m), np.zeros(m)
-                    Nm[closed_a], fm[closed_a] = acc.forces(sol.p)
-                    start = (sol.qdd, Nm[closed_a[keep]], fm[closed_a[keep]])
-                else:
-                    start = None
-                ph = CubicPhase(*args, start=start, force_tol=self.o.tol * self.scales.get("F", 0.0))
+                # the accelerations and forces at t are solved again for the chosen modes: a tie
+                # broken by looking ahead gives the solution at a later time, where the forces differ
+                ph = CubicPhase(*args, force_tol=self.o.tol * self.scales.get("F", 0.0))
             else:
                 ph = OdePhase(*args, options=self.o, scales=self.scales, indeterminate=indeterminate)
         return ph
