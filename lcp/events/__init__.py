@@ -7,6 +7,11 @@ Each smooth phase is integrated
   and forces (``System.is_constant`` and no state dependence of the forces). Each mode then has
   constant accelerations, so positions are quadratic in t and every event is the root of a linear
   or quadratic polynomial, computed without cancellation (a stop at ``dt = -u_T / a_T``);
+- in **closed form** as well for such a system under a control schedule (``System.with_control``
+  with a constant control matrix B and a piecewise-constant, -linear or -affine hold): between two
+  breakpoints of the schedule the force is affine in t, so are the accelerations and contact forces
+  of a mode, positions are cubic and every event (stop, lift-off, slip, landing) is the first root
+  of a polynomial of degree at most 3 (:mod:`~lcp.events.forcing`, :mod:`~lcp.events.cubic_phase`);
 - otherwise by SciPy's ``solve_ivp`` (DOP853 by default, rtol 1e-12) with event functions
   (``.terminal``, ``.direction``) located by Brent's method on the dense output.
 
@@ -72,7 +77,9 @@ Modules
 - :mod:`~lcp.events.model`: the system evaluated at a state, and what is kept per system;
 - :mod:`~lcp.events.modes`: mode selection at the acceleration level;
 - :mod:`~lcp.events.indeterminate`: redundant contacts (least-norm admissible forces, force margin);
-- :mod:`~lcp.events.phases`, :mod:`~lcp.events.ode_phase`: smooth phases (closed form, SciPy);
+- :mod:`~lcp.events.forcing`: the piecewise-affine force of a scheduled constant system;
+- :mod:`~lcp.events.phases`, :mod:`~lcp.events.cubic_phase`, :mod:`~lcp.events.ode_phase`: smooth
+  phases (closed form under constant and under piecewise-affine forces, SciPy);
 - :mod:`~lcp.events.event_location`: the events that end a phase;
 - :mod:`~lcp.events.impacts`: the velocity-level impact law;
 - :mod:`~lcp.events.accumulation`: accumulations of impacts and their limit;

@@ -36,7 +36,8 @@ class OdePhase(SmoothPhase):
 
     # --- dynamics
     def _build_linear(self):
-        """For a constant system with affine forces: y' = L y + c, built once per phase.
+        """For a constant system with affine forces: y' = L y + c, built once per phase (under a
+        piecewise-affine forcing, :mod:`lcp.events.forcing`: y' = L y + c + c1 (t - t0)).
 
         The branch solution is linear in the free contact acceleration b; its matrix comes from
         ``solve_branch`` on unit right-hand sides (the Coulomb law is not rewritten here).

@@ -4,7 +4,8 @@ Between events every contact keeps one mode (open, stick, slide+, slide-) and th
 When the phase dynamics is polynomial in t (constant mass matrix, kinematics and forces:
 ``System.is_constant`` and no state dependence of the forces) each mode has constant accelerations,
 so positions are quadratic in t and every event is the root of a linear or quadratic polynomial
-(:mod:`lcp.events.event_location`). Other phases are integrated by SciPy
+(:mod:`lcp.events.event_location`). Under a force affine in t (a control schedule) the phases are
+cubic (:mod:`lcp.events.cubic_phase`); other phases are integrated by SciPy
 (:mod:`lcp.events.ode_phase`).
 """
 from __future__ import annotations
