@@ -30,7 +30,7 @@ from .options import OCP_STATUS_MESSAGES, HomotopyOptions
 from .results import HomotopyStage
 from .transcription import PAIRS
 
-__all__ = ["diagnose", "ipopt_solver", "run_homotopy"]
+__all__ = ["diagnose", "fixed_mode_bounds", "ipopt_solver", "run_fixed_modes", "run_homotopy"]
 
 
 def ipopt_solver(tr, options: HomotopyOptions, warm: bool, cache: dict) -> ca.Function:
@@ -101,8 +101,9 @@ def run_homotopy(tr, x0, P0, options: HomotopyOptions, cache: dict):
     return best[0], best[1], best[2], status, message, history
 
 
-def _polish(tr, x, lam_x, lam_g, P, solver):
-    """Fix the smaller member of each complementarity pair (cross pairs included) at zero and re-solve."""
+def fixed_mode_bounds(tr, x):
+    """Variable bounds with, pair by pair (cross and rate pairs included), the smaller member of
+    each complementarity pair at ``x`` fixed at zero: the mode of every step frozen as at ``x``."""
     ix = tr.ix
     lbx, ubx = tr.lbx.copy(), tr.ubx.copy()
     pairs = [(ix[a].reshape(-1), ix[w].reshape(-1)) for a, w in PAIRS]
@@ -114,15 +115,52 @@ def _polish(tr, x, lam_x, lam_g, P, solver):
         ubx[ia[a_small]] = 0.0
         ubx[iw[~a_small]] = 0.0
     for ia, iw in _rate_pairs(tr):  # a >= 0 against a signed rate: the smaller (in magnitude) is zero
-        a_small = x[ia] <= np.abs(x[iw])
+        # a multiplier at rounding level counts as zero: a guess without rates (a staircase) would
+        # otherwise freeze every rate at zero, sliding steps included
+        tiny = 1e-9 * max(float(np.max(np.abs(x[ia]), initial=0.0)), 1.0)
+        a_small = x[ia] <= np.maximum(np.abs(x[iw]), tiny)
         ubx[ia[a_small]] = 0.0
         lbx[iw[~a_small]] = ubx[iw[~a_small]] = 0.0
+    return lbx, ubx
+
+
+def _polish(tr, x, lam_x, lam_g, P, solver):
+    """Fix the smaller member of each complementarity pair (cross pairs included) at zero and re-solve."""
+    lbx, ubx = fixed_mode_bounds(tr, x)
     t0 = time.perf_counter()
-    sol = solver(x0=np.clip(x, lbx, ubx), lam_x0=lam_x, lam_g0=lam_g, lbx=lbx, ubx=ubx, lbg=tr.lbg,
-                 ubg=tr.ubg, p=P)
+    warm = {} if lam_x is None else {"lam_x0": lam_x, "lam_g0": lam_g}
+    sol = solver(x0=np.clip(x, lbx, ubx), lbx=lbx, ubx=ubx, lbg=tr.lbg, ubg=tr.ubg, p=P, **warm)
     dt = time.perf_counter() - t0
     xs = np.array(sol["x"]).ravel()
     return xs, float(sol["f"]), diagnose(tr, xs), solver.stats(), dt
+
+
+def run_fixed_modes(tr, x0, P0, options: HomotopyOptions, cache: dict):
+    """The phase-structure solve: every step's mode frozen as in the guess ``x0`` (the smaller member of
+    each pair at zero), one smooth NLP. Returns the tuple of :func:`run_homotopy`.
+
+    With free steps the step lengths stay unknowns, so the switch times move freely while the
+    sequence of modes (the phases) is the guess's: a guess from a solution with the right phase
+    sequence (e.g. a uniform-step solve) gives the exact optimum without the relaxation homotopy.
+    A guess with the wrong sequence makes the NLP infeasible or leaves its complementarity violated;
+    status -1 or -2 says so.
+    """
+    P0 = P0.copy()
+    P0[0] = 0.0
+    x, f, diag, st, dt = _polish(tr, np.asarray(x0, dtype=float), None, None, P0,
+                                 ipopt_solver(tr, options, False, cache))
+    ok = bool(st["success"]) or st["return_status"] == "Solved_To_Acceptable_Level"
+    history = [HomotopyStage(0.0, int(st["iter_count"]), diag["residual"], diag["max_product"], f,
+                             st["return_status"], ok, dt)]
+    if not ok:
+        msg = (f"{OCP_STATUS_MESSAGES[-1]} The fixed-phase solve (the guess's mode sequence): IPOPT returned "
+               f"{st['return_status']}.")
+        return x, f, diag, -1, msg, history
+    if diag["residual"] > options.tol or diag["cross"] > options.tol:
+        msg = (f"{OCP_STATUS_MESSAGES[-2]} Residual {diag['residual']:.3g}, cross {diag['cross']:.3g} > "
+               f"tol = {options.tol:.3g} after the fixed-phase solve.")
+        return x, f, diag, -2, msg, history
+    return x, f, diag, 0, f"{OCP_STATUS_MESSAGES[0]} (Fixed-phase solve: the guess's mode sequence.)", history
 
 
 def _rate_pairs(tr):

@@ -47,6 +47,17 @@ def resample(res, N: int, hold: str) -> OCPGuess:
         u_new = sched(tm_new)
     elif hold == "linear":
         u_new = sched(t_new)
+    elif getattr(sched, "hold", None) == "constant":
+        # a staircase guess for an affine hold: both ends of each step from the line through the
+        # old steps' midpoint values. A guess with no slopes at all is a stationary point of the
+        # slopes in the fixed-phase solve (the affine effort is flat in the slope at zero slope).
+        um = np.asarray(res.u, dtype=float).reshape(M, -1)
+        lo_u = getattr(getattr(res, "problem", None), "u_min", None)
+        hi_u = getattr(getattr(res, "problem", None), "u_max", None)
+        ends = _interp(um, tm_old, t_new) if M > 1 else np.repeat(um, N + 1, axis=0)
+        if lo_u is not None:
+            ends = np.clip(ends, lo_u, hi_u)
+        u_new = np.stack([ends[:-1], ends[1:]], axis=1).reshape(2 * N, -1)
     else:
         u_new = np.stack([sched(t_new[:-1]), sched.left(t_new[1:])], axis=1).reshape(2 * N, -1)
     return OCPGuess(T=T, q=_interp(res.q, t_old, t_new), v=_interp(res.v, t_old, t_new), u=u_new,

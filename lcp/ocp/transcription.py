@@ -108,7 +108,7 @@ class Transcription:
         self.pb = pb
         self.step = self._step_function()
         self.cross = pb.steps == "free" and pb.system.n_contacts > 0
-        self._x, self._lbx, self._ubx = [], [], []
+        self._x, self._lbx, self._ubx, self._nx = [], [], [], 0
         self._g, self._lbg, self._ubg = [], [], []
         self.ix = {}
         self._build()
@@ -136,7 +136,8 @@ class Transcription:
     # ------------------------------------------------------------------ NLP bookkeeping
     def _var(self, name, size, lb, ub, key=None):
         s = ca.SX.sym(name, size)
-        start = sum(x.shape[0] for x in self._x)
+        start = self._nx  # a running count: summing the shapes each time made the build quadratic in N
+        self._nx += size
         self._x.append(s)
         self._lbx.append(np.broadcast_to(lb, (size,)).astype(float))
         self._ubx.append(np.broadcast_to(ub, (size,)).astype(float))
@@ -248,7 +249,7 @@ class Transcription:
         self.lbx, self.ubx = np.concatenate(self._lbx), np.concatenate(self._ubx)
         self.lbg = np.concatenate(self._lbg) if self._lbg else np.zeros(0)
         self.ubg = np.concatenate(self._ubg) if self._ubg else np.zeros(0)
-        del self._x, self._g, self._lbx, self._ubx, self._lbg, self._ubg
+        del self._x, self._g, self._lbx, self._ubx, self._lbg, self._ubg, self._nx
 
     def control_pair(self, us, k):
         """The control at the start and at the end of step k (lists of per-row symbols or arrays)."""
