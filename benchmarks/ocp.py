@@ -21,8 +21,8 @@ import csv
 import time
 from pathlib import Path
 
-from studies.optimal_control import (METHODS, hold_bound, hold_problem, min_effort_bound, min_time_bound,
-                                     rest_to_rest_problem, solve)
+from studies.optimal_control import (ALL_METHODS, METHODS, PHASE_METHODS, hold_bound, hold_problem,
+                                     min_effort_bound, min_time_bound, rest_to_rest_problem, solve)
 
 PROBLEMS = {
     "min_time": (lambda N, kw: rest_to_rest_problem(N, "time", **kw), lambda r: r.T, min_time_bound),
@@ -37,7 +37,14 @@ def measure(name: str, Ns) -> list[dict]:
     ref = reference()
     rows, uniform = [], {}
     for N in Ns:
-        for meth, kw in METHODS.items():
+        for meth, kw in ALL_METHODS.items():
+            if meth in PHASE_METHODS:  # its own first pass on the uniform grid (the hold's ends on it)
+                if name == "hold" and N % 6:
+                    continue
+                t0 = time.perf_counter()
+                res = solve(make(N, kw), phases=True)
+                rows.append(_bench_row(name, meth, N, value(res), ref, res, time.perf_counter() - t0))
+                continue
             free = kw["steps"] == "free"
             if name == "hold" and N % 6:  # the hold's ends are not nodes of the uniform grid: free steps
                 if not free:              # only, from the uniform solution at the nearest multiple of 6
@@ -51,11 +58,14 @@ def measure(name: str, Ns) -> list[dict]:
                 uniform[N] = res
             if free:  # the multi-start needs the uniform-step solve first
                 total += uniform[N].solve_time
-            rows.append(dict(problem=name, method=meth, N=N, value=value(res), reference=ref,
-                             rel_gap=(value(res) - ref) / ref, final_miss=res.replay.final_miss,
-                             replay=res.replay.method, success=res.success, solve_s=res.solve_time,
-                             build_s=res.build_time, total_s=total, ipopt_iterations=res.iterations))
+            rows.append(_bench_row(name, meth, N, value(res), ref, res, total))
     return rows
+
+
+def _bench_row(name, meth, N, value, ref, res, total) -> dict:
+    return dict(problem=name, method=meth, N=N, value=value, reference=ref, rel_gap=(value - ref) / ref,
+                final_miss=res.replay.final_miss, replay=res.replay.method, success=res.success,
+                solve_s=res.solve_time, build_s=res.build_time, total_s=total, ipopt_iterations=res.iterations)
 
 
 
@@ -92,11 +102,11 @@ def main(argv=None):
               f"{r['final_miss']:>8.1e} {'yes' if r['success'] else 'no':>3} {r['solve_s']:>8.3f} "
               f"{r['total_s']:>8.3f} {r['ipopt_iterations']:>8d}")
     print("\nequal accuracy: the cheapest successful solve (replay within tolerance) with |gap| <= target")
-    print(f"{'problem':>10} {'target':>7} " + " ".join(f"{m:>28}" for m in METHODS))
+    print(f"{'problem':>10} {'target':>7} " + " ".join(f"{m:>28}" for m in ALL_METHODS))
     for name in PROBLEMS:
         for tgt in TARGETS:
             cells = []
-            for meth in METHODS:
+            for meth in ALL_METHODS:
                 ok = [r for r in rows if r["problem"] == name and r["method"] == meth and r["success"]
                       and abs(r["rel_gap"]) <= tgt]
                 best = min(ok, key=lambda r: r["total_s"]) if ok else None

@@ -74,6 +74,12 @@ METHODS = {"uniform, linear hold": {"hold": "linear", "steps": "uniform"},
            "uniform, constant hold": {"hold": "constant", "steps": "uniform"},
            "free steps, constant hold": {"hold": "constant", "steps": "free"},
            "free steps, affine hold": {"hold": "affine", "steps": "free"}}
+#: the fixed-phase solves (``solve(method="phases")``): a uniform-step, constant-hold first pass
+#: gives the phase sequence, one smooth NLP with free steps places its switches (no homotopy)
+PHASE_METHODS = {"fixed phases, constant hold": {"hold": "constant", "steps": "free"},
+                 "fixed phases, affine hold": {"hold": "affine", "steps": "free"}}
+#: every transcription and solve compared, in the order of the tables and figures
+ALL_METHODS = {**METHODS, **PHASE_METHODS}
 #: the replay tolerance that success requires
 REPLAY_TOL = 1e-6
 #: output samples per control interval of the event replays kept for figures and the hold check
@@ -238,10 +244,13 @@ def _event_available() -> bool:
     return "event" in lcp.METHODS
 
 
-def solve(ocp: OptimalControlProblem, multistart: bool = False, guess=None):
+def solve(ocp: OptimalControlProblem, multistart: bool = False, guess=None, phases: bool = False):
     """The study's solve of ``ocp`` (its replay check included, no further replays): from ``guess``
     (default: the u = 0 simulation), or the multi-start (free steps: from rest and from the
-    uniform-step solution ``guess``; :data:`AFFINE_STARTS` for the affine hold)."""
+    uniform-step solution ``guess``; :data:`AFFINE_STARTS` for the affine hold), or with ``phases``
+    the fixed-phase solve from its own first pass (:meth:`OptimalControlProblem.phase_guess`)."""
+    if phases:
+        return ocp.solve(method="phases", max_iter=3000)
     if multistart and guess is not None and ocp.hold == "affine":
         return ocp.solve_multistart(guesses=AFFINE_STARTS(ocp, guess))
     if multistart and guess is not None:  # free steps: from rest, and from the uniform-step solution
@@ -254,10 +263,11 @@ def solve(ocp: OptimalControlProblem, multistart: bool = False, guess=None):
     return ocp.solve(ocp.guess(u=0.0) if guess is None else guess)
 
 
-def solve_and_verify(ocp: OptimalControlProblem, h_fine: float, multistart: bool = False, guess=None) -> dict:
+def solve_and_verify(ocp: OptimalControlProblem, h_fine: float, multistart: bool = False, guess=None,
+                     phases: bool = False) -> dict:
     """:func:`solve`, then replay by Moreau-Jean at the same h (uniform steps), at about h_fine,
     and by the event integrator."""
-    res = solve(ocp, multistart, guess)
+    res = solve(ocp, multistart, guess, phases)
     out = {"result": res}
     out["same_h"] = replay(res, refine=1) if ocp.steps == "uniform" else None
     refine = max(1, int(math.ceil(res.h / h_fine - 1e-9)))
@@ -513,12 +523,14 @@ def run(out=None, quick: bool = False) -> dict:
     rows, keep = [], {}
     for prob, build in make.items():
         for N in (hold_Ns if prob == "hold" else Ns):
-            for meth, kw in METHODS.items():
+            for meth, kw in ALL_METHODS.items():
                 # free steps: a multi-start from rest and from the uniform-step solution (the
                 # free-step MPCC has local minima; from rest IPOPT fails on the hold problem)
                 uni = keep.get((prob, "uniform, constant hold", N))
-                free = kw["steps"] == "free" and uni is not None
-                v = solve_and_verify(build(N, kw), h_fine, multistart=free, guess=uni["result"] if free else None)
+                phases = meth in PHASE_METHODS
+                free = kw["steps"] == "free" and uni is not None and not phases
+                v = solve_and_verify(build(N, kw), h_fine, multistart=free, guess=uni["result"] if free else None,
+                                     phases=phases)
                 keep[(prob, meth, N)] = v
                 rows.append(_row(prob, meth, N, v, refs[prob], _value(prob, v["result"])))
                 if N == (N_fig_hold if prob == "hold" else N_fig):
@@ -585,15 +597,15 @@ def run(out=None, quick: bool = False) -> dict:
     umax = REST["u_max"]
     files.append(_fig_trajectories(
         [(keep[("min_time", m)], f"min time, {m}: T = {keep[('min_time', m)]['result'].T:.6f} s "
-          f"(T* = {refs['min_time']:.6f})", umax) for m in METHODS], path / "rest_to_rest_min_time.png",
+          f"(T* = {refs['min_time']:.6f})", umax) for m in ALL_METHODS], path / "rest_to_rest_min_time.png",
         f"Jean-Pratt block, R = {REST['R']}: rest to rest over {REST['d']} m in minimum time, |u| <= {umax:g} N"))
     files.append(_fig_trajectories(
         [(keep[("min_effort", m)], f"min effort, {m}: J = {keep[('min_effort', m)]['result'].cost:.4f} N²s "
-          f"(J* = {refs['min_effort']:.4f})", umax) for m in METHODS], path / "rest_to_rest_min_effort.png",
+          f"(J* = {refs['min_effort']:.4f})", umax) for m in ALL_METHODS], path / "rest_to_rest_min_effort.png",
         f"rest to rest over {REST['d']} m within {REST['T_effort']:g} s with minimum effort int u² dt"))
     files.append(_fig_trajectories(
         [(keep[("hold", m)], f"move and hold, {m}: J = {keep[('hold', m)]['result'].cost:.4f} N²s "
-          f"(J* = {refs['hold']:.4f})", umax) for m in METHODS], path / "move_and_hold.png",
+          f"(J* = {refs['hold']:.4f})", umax) for m in ALL_METHODS], path / "move_and_hold.png",
         f"to {HOLD['d']} m, held at rest on [{HOLD['t_hold'][0]}, {HOLD['t_hold'][1]}] s, back by {HOLD['T']:g} s"))
     sc = lcp.scenes.jean_pratt(R=SHOCK["R"], v0=SHOCK["v0"], **BASE)
     unc = lcp.simulate(sc, SHOCK["T"], h=keep[("shock", "uniform, constant hold")]["mj"].h)

@@ -300,3 +300,20 @@ def test_readme_shock_avoidance_bound():
 
     (bound,) = _stated(r"normal force down to the bound {N} N")
     assert optimal_control.peak_bound() == pytest.approx(bound, abs=0.005)
+
+
+def test_readme_fixed_phase_numbers_are_the_recorded_run():
+    rows = {(r["problem"], r["method"], int(r["N"])): r for r in _rows("ocp.csv")}
+    ph_a, ph_c = "fixed phases, affine hold", "fixed phases, constant hold"
+    free_a, free_c = "free steps, affine hold", "free steps, constant hold"
+    cases = [(r"minimum effort to a gap of {N} at N = (\d+) in {N} s \(the free-step homotopy with its "
+              r"multi-start:\s+{N} s\)", "min_effort", ph_a, free_a),
+             (r"the hold problem to {N} at N = (\d+) in {N} s \({N} s\)", "hold", ph_a, free_a),
+             (r"minimum time to {N} at N = (\d+)\s+in {N} s \({N} s\)", "min_time", ph_c, free_c)]
+    for pattern, problem, phases, homotopy in cases:
+        gap, n, t_ph, t_h = _stated(pattern)
+        r, h = rows[(problem, phases, int(n))], rows[(problem, homotopy, int(n))]
+        assert abs(float(r["rel_gap"])) == pytest.approx(gap, rel=0.05)
+        assert float(r["total_s"]) == pytest.approx(t_ph, abs=0.006)
+        assert float(h["total_s"]) == pytest.approx(t_h, abs=0.006)
+        assert r["success"] == "True" and float(r["final_miss"]) <= 1e-8
