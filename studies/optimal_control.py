@@ -40,6 +40,16 @@ multi-start from that simulation and from the uniform-step, constant-hold soluti
 multi-start (:meth:`~lcp.ocp.OptimalControlProblem.solve_multistart`) and reports whether the
 starts agree.
 
+Fixed-phase solves (``PHASE_METHODS``, ``solve(method="phases")``): a first pass on uniform steps
+gives the mode of every step; with those modes fixed, one smooth NLP with free steps places the
+switches, without the homotopy (tens of IPOPT iterations). It reaches the optimum of that phase
+sequence, which here is the continuous optimum to 1e-12 with the affine hold (effort, hold) and to
+1e-9 with the constant hold (minimum time), unless a step is pinned at a length bound.
+
+nosnoc (FESD with IPOPT, the optional extra ``ocp-peers``) solves the same problems when installed
+(``studies._nosnoc_peer``); its controls are replayed by the same event integrator and its series
+join the convergence figure (``nosnoc.csv``); without it the figure says they are skipped.
+
 ``python -m studies.optimal_control [--out DIR] [--quick]`` writes the figures and CSV tables.
 """
 from __future__ import annotations
@@ -80,6 +90,8 @@ PHASE_METHODS = {"fixed phases, constant hold": {"hold": "constant", "steps": "f
                  "fixed phases, affine hold": {"hold": "affine", "steps": "free"}}
 #: every transcription and solve compared, in the order of the tables and figures
 ALL_METHODS = {**METHODS, **PHASE_METHODS}
+#: label of the optional peer's rows (nosnoc, FESD with IPOPT; the extra ``ocp-peers``)
+NOSNOC = "nosnoc (FESD, peer)"
 #: the replay tolerance that success requires
 REPLAY_TOL = 1e-6
 #: output samples per control interval of the event replays kept for figures and the hold check
@@ -419,7 +431,10 @@ def _fig_shock(v, unc, path):
 
 _METHOD_STYLE = {"uniform, linear hold": ("tab:red", "o", "-"), "uniform, constant hold": ("tab:blue", "s", "-"),
                  "free steps, constant hold": ("tab:green", "^", "-"),
-                 "free steps, affine hold": ("tab:purple", "D", "-")}
+                 "free steps, affine hold": ("tab:purple", "D", "-"),
+                 "fixed phases, constant hold": ("tab:olive", "v", "--"),
+                 "fixed phases, affine hold": ("tab:brown", "P", "--"),
+                 NOSNOC: ("k", "x", ":")}
 _PROBLEMS = {"min_time": "minimum time", "min_effort": "minimum effort", "hold": "move and hold"}
 FLOOR = 1e-16
 
@@ -451,9 +466,31 @@ def _fig_convergence(rows, path):
             ax.minorticks_off()
             ax.set_xlabel("control intervals N")
             _legend_below(ax, ncol=1)
-    fig.text(0.5, 0.005, f"values below {FLOOR:g} (round-off) are drawn at {FLOOR:g}", ha="center", fontsize=8)
+    note = f"values below {FLOOR:g} (round-off) are drawn at {FLOOR:g}"
+    if not any(r["method"] == NOSNOC for r in rows):
+        note += "; nosnoc (the optional peer, extra 'ocp-peers') is not installed: its series are skipped"
+    fig.text(0.5, 0.005, note, ha="center", fontsize=8)
     fig.tight_layout()
     return save(fig, path)
+
+
+def nosnoc_rows(Ns, hold_Ns) -> list[dict]:
+    """nosnoc's solves of the three problems at the study's N, each control replayed exactly by the
+    event integrator; [] when nosnoc is not installed."""
+    from studies import _nosnoc_peer as peer
+
+    if not peer.available():
+        return []
+    rows = []
+    for prob in ("min_time", "min_effort", "hold"):
+        for N in (hold_Ns if prob == "hold" else Ns):
+            r = peer.solve_nosnoc(prob, N)
+            rp = peer.replay_nosnoc(r)
+            rows.append({"problem": prob, "method": NOSNOC, "N": N, "value": r.objective,
+                         "reference": peer.reference(prob), "rel_gap": r.rel_gap, "success": r.success,
+                         "status": r.status, "final_miss": rp.final_miss, "hold_violation": rp.hold_violation,
+                         "iterations": r.nlp_iterations, "solve_time": r.solve_time, "build_time": r.build_time})
+    return rows
 
 
 def _fig_homotopy(histories, N_hist, path):
@@ -610,11 +647,15 @@ def run(out=None, quick: bool = False) -> dict:
     sc = lcp.scenes.jean_pratt(R=SHOCK["R"], v0=SHOCK["v0"], **BASE)
     unc = lcp.simulate(sc, SHOCK["T"], h=keep[("shock", "uniform, constant hold")]["mj"].h)
     files.append(_fig_shock(keep[("shock", "uniform, constant hold")], unc, path / "shock_avoidance.png"))
-    files.append(_fig_convergence(rows, path / "convergence.png"))
+    nos = nosnoc_rows(Ns, hold_Ns)
+    if nos:
+        cols = list(nos[0].keys())
+        files.append(write_csv(path / "nosnoc.csv", cols, [[r[c] for c in cols] for r in nos]))
+    files.append(_fig_convergence(rows + nos, path / "convergence.png"))
     files.append(_fig_homotopy(hist, N_fig, path / "homotopy.png"))
     files.append(_fig_sweep(sweep, path / "shock_sweep.png"))
     return {"rows": rows, "sweep": sweep, "references": refs, "multistart": ms, "event_available": _event_available(),
-            "N_figure": N_fig, "files": [Path(f) for f in files]}
+            "N_figure": N_fig, "nosnoc": nos, "files": [Path(f) for f in files]}
 
 
 def main(argv=None):
@@ -629,6 +670,12 @@ def main(argv=None):
         print(f"{r['problem']:>10} {r['method']:>26} {r['N']:>4} {r['value']:>12.9g} {r['rel_gap']:>9.2e} "
               f"{'yes' if r['success'] else 'no':>3} {r['final_miss']:>10.2e} {r['path_violation']:>9.1e} "
               f"{r['hold_violation']:>9.1e} {r['iterations']:>5} {r['solve_time']:>8.3f} {r['replay_method']:>10}")
+    for r in out["nosnoc"]:
+        print(f"{r['problem']:>10} {r['method']:>26} {r['N']:>4} {r['value']:>12.9g} {r['rel_gap']:>9.2e} "
+              f"{r['status']:>3} {r['final_miss']:>10.2e} {'':>9} {r['hold_violation']:>9.1e} {r['iterations']:>5} "
+              f"{r['solve_time']:>8.3f} {'event':>10}")
+    if not out["nosnoc"]:
+        print("nosnoc (optional peer, pip install 'lcp-lem[ocp-peers]') is not installed: its rows and series are skipped")
     print(f"hold problem, multi-start: {out['multistart'].message}")
     for r in out["sweep"]:
         print(f"kappa = {r['kappa']:.2f}: uncontrolled peak {r['peak_uncontrolled']:.1f} N (N0 = {r['N0']:.1f}), "

@@ -102,3 +102,15 @@ def test_hold_is_held_and_converges():
     on_hold = (t[:-1] >= 0.4 - 1e-9) & (t[1:] <= 0.6 + 1e-9)
     assert np.all(np.abs(r2.control.values[on_hold, 0]) <= c + 1e-6)
     assert math.isclose(r2.T, 1.2, abs_tol=1e-9)
+
+
+def test_the_study_adds_nosnoc_series_replayed_exactly():
+    if not peer.available():
+        pytest.skip("nosnoc is not installed (extra 'ocp-peers')")
+    from studies.optimal_control import NOSNOC, nosnoc_rows
+
+    rows = nosnoc_rows((6,), (12,))
+    assert [r["problem"] for r in rows] == ["min_time", "min_effort", "hold"]
+    for r in rows:
+        assert r["method"] == NOSNOC and r["success"]
+        assert r["rel_gap"] > 0 and r["final_miss"] <= 1e-7
