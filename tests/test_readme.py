@@ -317,3 +317,11 @@ def test_readme_fixed_phase_numbers_are_the_recorded_run():
         assert float(r["total_s"]) == pytest.approx(t_ph, abs=0.006)
         assert float(h["total_s"]) == pytest.approx(t_h, abs=0.006)
         assert r["success"] == "True" and float(r["final_miss"]) <= 1e-8
+
+
+def test_readme_nosnoc_ratio_is_the_recorded_run():
+    lo, hi = _stated(r"the cheapest package solve with an equal\s+or smaller gap and replay miss is {N}–{N} times faster")
+    ratios = [float(r["time_ratio"]) for r in _rows("ocp_vs_nosnoc.csv")
+              if r["solver"] == "nosnoc" and r["role"] == "sweep"]
+    assert len(ratios) >= 6
+    assert min(ratios) == pytest.approx(lo, abs=0.05) and max(ratios) == pytest.approx(hi, abs=0.5)
