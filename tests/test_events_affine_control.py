@@ -268,3 +268,31 @@ def test_ocp_replay_in_one_integration_matches_the_restarted_one():
         assert a.t.shape == b.t.shape == (5,) and a.t[0] == 0.0 and abs(a.t[-1] - h) <= 1e-15
         assert np.max(np.abs(a.q - b.q)) <= 1e-13 and np.max(np.abs(a.force_N - b.force_N)) <= 1e-9
         assert a.integrators == ["closed-form"] and a.phases[0].t0 == 0.0
+
+
+def _general(system):
+    """The System integrated without the forcing (CasADi evaluations, DOP853): the reference path."""
+    from lcp.events import model as events_model
+
+    events_model.MODELS[system] = events_model.SystemModel(system, general=True)
+    return system
+
+
+def test_bilateral_constraint_against_the_general_path():
+    """Two blocks held together by a bilateral constraint on a rough floor, pushed by an affine
+    control on the second: the closed form agrees with the general (CasADi, DOP853) integration."""
+    q, v, u = ca.SX.sym("q", 3), ca.SX.sym("v", 3), ca.SX.sym("u", 1)
+    s = System(q, v, mass=ca.diag(ca.vertcat(1.0, 2.0, 3.0)), force=ca.vertcat(0.0, u, -3.0 * G),
+               contacts=[Contact(gap=q[2], tangent=q[0], mu=0.4, e=0.0, name="floor")],
+               constraints=q[0] - q[1], control=u)
+    sched = AffineSchedule([0.0, 0.2, 0.5], [30.0, 2.0, -30.0, 5.0])
+    fast = s.with_control(sched)
+    res = lcp.simulate(fast, 0.5, method="event", q0=[0.0, 0.0, 0.0], v0=[0.5, 0.5, 0.0], n_eval=11)
+    ref = lcp.simulate(_general(s.with_control(sched)), 0.5, method="event", q0=[0.0, 0.0, 0.0],
+                       v0=[0.5, 0.5, 0.0], n_eval=11)
+    assert res.success and ref.success
+    assert system_model(fast).cubic and res.integrators == ["closed-form"] and ref.integrators == ["DOP853"]
+    assert res.mode_sequence == ref.mode_sequence and len(res.mode_sequence) >= 2
+    assert np.allclose(res.t_events, ref.t_events, atol=1e-10)
+    assert np.max(np.abs(res.q - ref.q)) <= 1e-10 and np.max(np.abs(res.v - ref.v)) <= 1e-9
+    assert np.max(np.abs(res.q[:, 0] - res.q[:, 1])) <= 1e-15  # the constraint holds exactly
