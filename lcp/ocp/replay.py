@@ -163,7 +163,8 @@ def replay(result: OCPResult, refine: int = 10, method: str = "moreau-jean", sol
     refine : int
         Moreau-Jean steps per optimizer step (>= 1; the replay step is T / (N refine)).
     method : {"moreau-jean", "event"}
-        Moreau-Jean at a uniform step, or the event-driven integrator restarted at every node.
+        Moreau-Jean at a uniform step, or the event-driven integrator (one integration when its
+        phases have closed forms, else restarted at every node).
     solver : str
         One-step contact solver (Moreau-Jean).
     theta : float, optional
@@ -218,7 +219,7 @@ def replay(result: OCPResult, refine: int = 10, method: str = "moreau-jean", sol
 def replay_check(result: OCPResult, tol: float, refine: int = 50) -> ReplayCheck:
     """The replay miss of a solution: final state and path constraints, replayed open loop.
 
-    The event-driven replay (exact, restarted at the control's nodes) for a piecewise-constant
+    The event-driven replay (exact: closed-form phases, the control's nodes ending phases) for a piecewise-constant
     or piecewise-affine control when the event integrator is available and the drift does not depend on time;
     otherwise (continuous linear hold) Moreau-Jean at T / (N refine), which reports its method and step.
     Path constraints (the largest value) and path equalities (the largest magnitude) are
