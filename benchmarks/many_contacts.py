@@ -334,10 +334,13 @@ def bench_packings(sizes):
 def write_rows(path, rows):
     if not rows:
         return
+    import csv
+
     keys = list(rows[0])
-    with open(path, "w") as fh:
-        fh.write(",".join(keys) + "\n")
-        fh.writelines(",".join(repr(r[k]) if isinstance(r[k], float) else str(r[k]) for k in keys) + "\n" for r in rows)
+    with open(path, "w", newline="") as fh:  # quoted where needed: solver labels hold commas
+        w = csv.writer(fh)
+        w.writerow(keys)
+        w.writerows([repr(r[k]) if isinstance(r[k], float) else str(r[k]) for k in keys] for r in rows)
 
 
 def main(argv=None):
