@@ -59,22 +59,7 @@ def _package_measure():
 
 
 def _nosnoc_row(peer, problem, N, u_guess=0.0, role="sweep"):
-    res = peer.solve_nosnoc(problem, N, u_guess=u_guess)
-    row = {"solver": "nosnoc", "method": METHOD, "role": role, "problem": problem, "N": N, "u_guess": u_guess,
-           "value": res.objective, "reference": peer.reference(problem), "rel_gap": res.rel_gap,
-           "final_miss": float("nan"), "target_miss": float("nan"), "hold_violation": float("nan"),
-           "success": res.success, "status": res.status, "ipopt_status": res.ipopt_status,
-           "complementarity": res.complementarity_residual, "ipopt_iterations": res.nlp_iterations,
-           "homotopy_steps": res.homotopy_steps, "build_s": res.build_time, "solve_s": res.solve_time,
-           "total_s": res.build_time + res.solve_time, "replay_s": float("nan"), "replay_error": ""}
-    try:
-        rp = peer.replay_nosnoc(res)
-    except RuntimeError as err:  # reported, not hidden: the row keeps the integrator's message
-        row["replay_error"] = str(err)
-        return row
-    row.update(final_miss=rp.final_miss, target_miss=rp.target_miss, hold_violation=rp.hold_violation,
-               replay_s=rp.time)
-    return row
+    return {"solver": "nosnoc", "method": METHOD, "role": role, **peer.solve_and_replay(problem, N, u_guess)}
 
 
 def _match(row, package_rows):

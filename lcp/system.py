@@ -410,8 +410,15 @@ class System:
             self._check_contact_rows(q0)  # a constant mass matrix (and constraints) passed the check below once
         if not self.n_bilateral and self.n > 32 and self.mass_expr.nnz() <= self.n * self.n // 8:
             self._check_sparse_mass(q0, t0)
-            self._mass_checked_constant = self.mass_is_constant and self.kinematics_is_constant
-            return q0, v0
+        else:
+            self._check_dense_mass(q0, t0)
+        # the check does not depend on the state when nothing in it does: done once (it costs a
+        # dense factorization or eigenvalue decomposition)
+        self._mass_checked_constant = self.mass_is_constant and self.kinematics_is_constant
+        return q0, v0
+
+    def _check_dense_mass(self, q0, t0) -> None:
+        """The test of :meth:`check_state` on the dense mass matrix (on the constraint manifold)."""
         A = self.mass(q0, t0)
         if not np.all(np.isfinite(A)):
             raise ValueError("mass matrix is not finite at q0")
@@ -422,25 +429,8 @@ class System:
             Z = _null_space(G.reshape(self.n_bilateral, self.n))
             A = Z.T @ A @ Z
         As = 0.5 * (A + A.T)
-        if As.shape[0] > 200:
-            # a Cholesky factorization of A - s I succeeds iff every eigenvalue exceeds s; with s above
-            # 1e-14 of the largest eigenvalue (the infinity norm bounds it) that is the test below, at
-            # a tenth of the cost of the eigenvalues (seconds for thousands of coordinates)
-            shift = 1e-14 * max(1.0, float(np.max(np.sum(np.abs(As), axis=1))))
-            try:
-                np.linalg.cholesky(As - shift * np.eye(As.shape[0]))
-            except np.linalg.LinAlgError:
-                raise ValueError("mass matrix is singular or not positive definite (on the constraint manifold) "
-                                 f"at q0: an eigenvalue is below {shift:.3g}") from None
-        else:
-            eig = np.linalg.eigvalsh(As) if A.size else np.array([1.0])
-            if eig.min() <= 1e-14 * max(1.0, abs(eig).max()):
-                raise ValueError("mass matrix is singular or not positive definite (on the constraint manifold) "
-                                 f"at q0: eigenvalues {eig}")
-        # the check does not depend on the state when nothing in it does: done once (it costs a
-        # dense factorization or eigenvalue decomposition)
-        self._mass_checked_constant = self.mass_is_constant and self.kinematics_is_constant
-        return q0, v0
+        _check_definite([As] if A.size else [], As.shape[0],
+                        1e-14 * max(1.0, float(np.max(np.sum(np.abs(As), axis=1), initial=0.0))))
 
     def _check_sparse_mass(self, q0, t0) -> None:
         """The test of :meth:`check_state` for a sparse mass matrix without bilateral constraints,
@@ -475,18 +465,28 @@ class System:
                 r = np.repeat(idx, size, axis=1).ravel()
                 c = np.tile(idx, (1, size)).ravel()
                 blocks.append(np.asarray(As[r, c], dtype=float).reshape(idx.shape[0], size, size))
-        if n <= 200:  # the dense test's eigenvalues: those of the blocks together
-            eig = np.sort(np.concatenate([np.linalg.eigvalsh(B).ravel() for B in blocks]))
-            if eig.min() <= 1e-14 * max(1.0, abs(eig).max()):
-                raise ValueError("mass matrix is singular or not positive definite (on the constraint manifold) "
-                                 f"at q0: eigenvalues {eig}")
-            return
-        for B in blocks:
-            try:
-                np.linalg.cholesky(B - shift * np.eye(B.shape[-1]))
-            except np.linalg.LinAlgError:
-                raise ValueError("mass matrix is singular or not positive definite (on the constraint manifold) "
-                                 f"at q0: an eigenvalue is below {shift:.3g}") from None
+        _check_definite(blocks, n, shift)
+
+
+def _check_definite(blocks, size: int, shift: float) -> None:
+    """The positive-definiteness test of a symmetric mass matrix of ``size`` rows given as diagonal
+    ``blocks`` (arrays (..., k, k); the whole matrix as one block, or none when it is empty), or
+    ValueError. Up to 200 rows: the eigenvalues, all above 1e-14 of the largest. Larger: a Cholesky
+    factorization of each block minus ``shift`` I, which succeeds iff every eigenvalue exceeds the
+    shift; with the shift above 1e-14 of the largest eigenvalue (the infinity norm bounds it) that
+    is the same test at a tenth of the cost (seconds for thousands of coordinates)."""
+    if size <= 200:
+        eig = np.sort(np.concatenate([np.linalg.eigvalsh(B).ravel() for B in blocks])) if blocks else np.array([1.0])
+        if eig.min() <= 1e-14 * max(1.0, abs(eig).max()):
+            raise ValueError("mass matrix is singular or not positive definite (on the constraint manifold) "
+                             f"at q0: eigenvalues {eig}")
+        return
+    for B in blocks:
+        try:
+            np.linalg.cholesky(B - shift * np.eye(B.shape[-1]))
+        except np.linalg.LinAlgError:
+            raise ValueError("mass matrix is singular or not positive definite (on the constraint manifold) "
+                             f"at q0: an eigenvalue is below {shift:.3g}") from None
 
 
 def _tangent_rows(c: Contact, q, v, t, n: int) -> ca.SX:

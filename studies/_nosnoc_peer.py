@@ -62,7 +62,7 @@ from studies.optimal_control import (
 )
 
 __all__ = ["PROBLEMS", "NosnocReplay", "NosnocResult", "available", "reference", "replay_nosnoc", "scene_dynamics",
-           "solve_nosnoc"]
+           "solve_and_replay", "solve_nosnoc"]
 
 #: the problems and their continuous optima (closed form)
 PROBLEMS = {"min_time": min_time_bound, "min_effort": min_effort_bound, "hold": hold_bound}
@@ -300,3 +300,25 @@ def replay_nosnoc(result: NosnocResult, samples: int = EVENT_SAMPLES) -> NosnocR
         sel = (sim.t >= t_a - 1e-12) & (sim.t <= t_b + 1e-12)
         viol = float(max(np.max(np.abs(sim.q[sel, 0] - HOLD["d"])), np.max(np.abs(sim.v[sel, 0]))))
     return NosnocReplay(sim=sim, final_miss=final_miss, target_miss=target_miss, hold_violation=viol, time=elapsed)
+
+
+def solve_and_replay(problem: str, N: int, u_guess: float = 0.0) -> dict:
+    """One table row: :func:`solve_nosnoc`, then :func:`replay_nosnoc` (value, gap to the closed form,
+    status, iterations, times; final miss, distance to the target and hold violation of the replay).
+    A failed replay is reported in ``replay_error``, its misses left NaN, not hidden."""
+    res = solve_nosnoc(problem, N, u_guess=u_guess)
+    row = {"problem": problem, "N": N, "u_guess": u_guess, "value": res.objective, "reference": reference(problem),
+           "rel_gap": res.rel_gap, "final_miss": float("nan"), "target_miss": float("nan"),
+           "hold_violation": float("nan"), "success": res.success, "status": res.status,
+           "ipopt_status": res.ipopt_status, "complementarity": res.complementarity_residual,
+           "ipopt_iterations": res.nlp_iterations, "homotopy_steps": res.homotopy_steps, "build_s": res.build_time,
+           "solve_s": res.solve_time, "total_s": res.build_time + res.solve_time, "replay_s": float("nan"),
+           "replay_error": ""}
+    try:
+        rp = replay_nosnoc(res)
+    except RuntimeError as err:
+        row["replay_error"] = str(err)
+        return row
+    row.update(final_miss=rp.final_miss, target_miss=rp.target_miss, hold_violation=rp.hold_violation,
+               replay_s=rp.time)
+    return row

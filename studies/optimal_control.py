@@ -481,16 +481,8 @@ def nosnoc_rows(Ns, hold_Ns) -> list[dict]:
 
     if not peer.available():
         return []
-    rows = []
-    for prob in ("min_time", "min_effort", "hold"):
-        for N in (hold_Ns if prob == "hold" else Ns):
-            r = peer.solve_nosnoc(prob, N)
-            rp = peer.replay_nosnoc(r)
-            rows.append({"problem": prob, "method": NOSNOC, "N": N, "value": r.objective,
-                         "reference": peer.reference(prob), "rel_gap": r.rel_gap, "success": r.success,
-                         "status": r.status, "final_miss": rp.final_miss, "hold_violation": rp.hold_violation,
-                         "iterations": r.nlp_iterations, "solve_time": r.solve_time, "build_time": r.build_time})
-    return rows
+    return [{**peer.solve_and_replay(prob, N), "method": NOSNOC}
+            for prob in ("min_time", "min_effort", "hold") for N in (hold_Ns if prob == "hold" else Ns)]
 
 
 def _fig_homotopy(histories, N_hist, path):
@@ -672,8 +664,8 @@ def main(argv=None):
               f"{r['hold_violation']:>9.1e} {r['iterations']:>5} {r['solve_time']:>8.3f} {r['replay_method']:>10}")
     for r in out["nosnoc"]:
         print(f"{r['problem']:>10} {r['method']:>26} {r['N']:>4} {r['value']:>12.9g} {r['rel_gap']:>9.2e} "
-              f"{r['status']:>3} {r['final_miss']:>10.2e} {'':>9} {r['hold_violation']:>9.1e} {r['iterations']:>5} "
-              f"{r['solve_time']:>8.3f} {'event':>10}")
+              f"{r['status']:>3} {r['final_miss']:>10.2e} {'':>9} {r['hold_violation']:>9.1e} "
+              f"{r['ipopt_iterations']:>5} {r['solve_s']:>8.3f} {'event':>10}")
     if not out["nosnoc"]:
         print("nosnoc (optional peer, pip install 'lcp-lem[ocp-peers]') is not installed: its rows and series are skipped")
     print(f"hold problem, multi-start: {out['multistart'].message}")

@@ -129,12 +129,7 @@ class CubicPhase(SmoothPhase):
                 dt = first_descent((g0, float(row @ v0), 0.5 * float(row @ a0), float(row @ a1) / 6.0), T)
                 if dt < best[0]:
                     best = (dt, "impact", j)
-        dt, kind, j = best
-        if not self.t0 + dt < t_stop:
-            self.t1 = t_stop
-            return None
-        self.t1 = self.t0 + dt
-        return self.t1, kind, j
+        return self.end_at(best, t_stop)
 
     def end_acceleration(self):
         return self.qdd + (self.t1 - self.t0) * self.qdd1

@@ -59,6 +59,16 @@ class SmoothPhase:
         (self.modes, self.idx, self.slide, self.open_idx, self.full_modes, self._names, self._sliding,
          self.idx_t) = static
 
+    def end_at(self, best, t_stop):
+        """End the phase at its first event ``best`` = (dt, kind, contact) if that comes before
+        t_stop (returns (t_event, kind, contact)), else at t_stop (returns None)."""
+        dt, kind, j = best
+        if not self.t0 + dt < t_stop:
+            self.t1 = t_stop
+            return None
+        self.t1 = self.t0 + dt
+        return self.t1, kind, j
+
     def names(self) -> tuple:
         return self._names
 
@@ -147,12 +157,7 @@ class ClosedFormPhase(SmoothPhase):
                 dt = first_landing(g0, H[j] @ self.v0, H[j] @ self.qdd)
                 if dt < best[0]:
                     best = (dt, "impact", int(j))
-        dt, kind, j = best
-        if not self.t0 + dt < t_stop:
-            self.t1 = t_stop
-            return None
-        self.t1 = self.t0 + dt
-        return self.t1, kind, j
+        return self.end_at(best, t_stop)
 
     def end_acceleration(self):
         """Acceleration at the end of the phase (constant here)."""

@@ -21,6 +21,7 @@ complementarity constraints, SIAM J. Optim. 11 (2001) 918-936.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import casadi as ca
 import numpy as np
@@ -30,7 +31,7 @@ from .options import OCP_STATUS_MESSAGES, HomotopyOptions
 from .results import HomotopyStage
 from .transcription import PAIRS
 
-__all__ = ["diagnose", "fixed_mode_bounds", "ipopt_solver", "run_fixed_modes", "run_homotopy"]
+__all__ = ["diagnose", "fixed_mode_bounds", "ipopt_solver", "run_fixed_modes", "run_homotopy", "run_phases"]
 
 
 def ipopt_solver(tr, options: HomotopyOptions, warm: bool, cache: dict) -> ca.Function:
@@ -161,6 +162,24 @@ def run_fixed_modes(tr, x0, P0, options: HomotopyOptions, cache: dict):
                f"tol = {options.tol:.3g} after the fixed-phase solve.")
         return x, f, diag, -2, msg, history
     return x, f, diag, 0, f"{OCP_STATUS_MESSAGES[0]} (Fixed-phase solve: the guess's mode sequence.)", history
+
+
+def run_phases(tr, x0, P0, options: HomotopyOptions, cache: dict):
+    """:func:`run_fixed_modes`, and the homotopy if it fails: from the fixed-phase iterate with
+    sigma0 <= 1e-4 when that iterate already satisfies the dynamics and the Coulomb law (IPOPT
+    stopped on a degenerate but nearly optimal point), else from ``x0`` with ``options``. Returns the
+    tuple of :func:`run_homotopy`, the message saying when the fixed-phase solve failed first."""
+    x, cost, diag, status, message, history = run_fixed_modes(tr, x0, P0, options, cache)
+    if status >= 0:
+        return x, cost, diag, status, message, history
+    if np.all(np.isfinite(x)) and diag["dynamics"] <= 1e-8 and diag["residual"] <= options.tol:
+        start = x  # a nearly optimal start: only the tail of the homotopy
+        options = replace(options, sigma0=max(min(options.sigma0, 1e-4), options.sigma_min),
+                          factor=min(options.factor, 1e-2))
+    else:  # the guess's phase sequence does not fit: the whole homotopy from the guess
+        start = x0
+    x, cost, diag, status, msg, more = run_homotopy(tr, start, P0, options, cache)
+    return x, cost, diag, status, f"{msg} (The fixed-phase solve failed first: {message})", history + more
 
 
 def _rate_pairs(tr):

@@ -54,7 +54,7 @@ def resample(res, N: int, hold: str) -> OCPGuess:
         um = np.asarray(res.u, dtype=float).reshape(M, -1)
         lo_u = getattr(getattr(res, "problem", None), "u_min", None)
         hi_u = getattr(getattr(res, "problem", None), "u_max", None)
-        ends = _interp(um, tm_old, t_new) if M > 1 else np.repeat(um, N + 1, axis=0)
+        ends = _interp(um, tm_old, t_new)  # (one old step: its value throughout)
         if lo_u is not None:
             ends = np.clip(ends, lo_u, hi_u)
         u_new = np.stack([ends[:-1], ends[1:]], axis=1).reshape(2 * N, -1)

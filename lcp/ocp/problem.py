@@ -1,15 +1,15 @@
 """The optimal control problem: a controlled System, a horizon, costs and constraints."""
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Callable
-from dataclasses import replace
 
 import numpy as np
 
 from ..control import HOLDS, ControlSchedule
 from ..system import System
-from .complementarity import run_fixed_modes, run_homotopy
+from .complementarity import run_homotopy, run_phases
 from .guess import multistart, resample, simulate_guess, x0_from_guess
 from .model import add_control
 from .options import OCP_STATUS_MESSAGES, HomotopyOptions, positive
@@ -298,10 +298,10 @@ class OptimalControlProblem:
             raise ValueError("give either options or keyword options, not both")
         if not isinstance(options, HomotopyOptions):
             raise ValueError(f"options must be HomotopyOptions, got {type(options).__name__}")
-        if self._tr is None:
-            self._tr = Transcription(self)
         if method not in ("homotopy", "phases"):
             raise ValueError(f"method must be 'homotopy' or 'phases', got {method!r}")
+        if self._tr is None:
+            self._tr = Transcription(self)
         t0 = time.perf_counter()
         first_pass = []
         if method == "phases" and guess is None:
@@ -310,23 +310,9 @@ class OptimalControlProblem:
         gs = self._guess_from(guess)
         P0 = np.concatenate([[0.0], self.q0, self.v0])
         x0 = x0_from_guess(self, self._tr, gs)
-        if method == "phases":
-            x, cost, diag, status, message, history = run_fixed_modes(self._tr, x0, P0, options, self._solvers)
-            history = first_pass + history
-            if status < 0:  # relax the complementarity after all
-                first = message
-                if np.all(np.isfinite(x)) and diag["dynamics"] <= 1e-8 and diag["residual"] <= options.tol:
-                    # IPOPT stopped on a degenerate point that satisfies the dynamics and the Coulomb
-                    # law: a nearly optimal start, so only the tail of the homotopy is run from it
-                    start, opts = x, replace(options, sigma0=max(min(options.sigma0, 1e-4), options.sigma_min),
-                                             factor=min(options.factor, 1e-2))
-                else:  # the guess's phase sequence does not fit: the whole homotopy from the guess
-                    start, opts = x0, options
-                x, cost, diag, status, message, more = run_homotopy(self._tr, start, P0, opts, self._solvers)
-                history = history + more
-                message = f"{message} (The fixed-phase solve failed first: {first})"
-        else:
-            x, cost, diag, status, message, history = run_homotopy(self._tr, x0, P0, options, self._solvers)
+        run = run_phases if method == "phases" else run_homotopy
+        x, cost, diag, status, message, history = run(self._tr, x0, P0, options, self._solvers)
+        history = first_pass + history
         res = self._result(x, cost, diag, status, message, history, time.perf_counter() - t0)
         if method == "phases" and self.steps == "free":
             res.message += self._bound_steps_note(res)
@@ -334,7 +320,8 @@ class OptimalControlProblem:
             try:
                 res.replay = replay_check(res, self.replay_tol)
             except RuntimeError as exc:
-                res.status, res.message = -3, f"{OCP_STATUS_MESSAGES[-3]} The replay failed: {exc} (Solve: {res.message})"
+                res.status = -3
+                res.message = f"{OCP_STATUS_MESSAGES[-3]} The replay failed: {exc} (Solve: {res.message})"
                 return res
             if res.status >= 0 and not res.replay.ok:
                 res.status = -3
@@ -368,8 +355,6 @@ class OptimalControlProblem:
         options : HomotopyOptions, optional
             Default: ``tol=1e-4, factor=1e-2`` (the modes, not the optimum, are wanted).
         """
-        import copy
-
         twin = copy.copy(self)
         twin.steps, twin.hold, twin.replay_tol, twin._tr, twin._solvers = "uniform", "constant", None, None, {}
         try:
