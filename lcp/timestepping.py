@@ -56,7 +56,7 @@ import numpy as np
 
 from . import compiled
 from .assembly import StepAssembly, kahan_add
-from .contact_problem import MODE_NAMES, ContactProblem, ModeArray
+from .contact_problem import MODE_NAMES, STICK, ContactProblem, ModeArray
 from .projection import PositionProjection, needs_projection, violation_function
 from .result import STATUS_MESSAGES, Impact, SimulationResult, SolverStats
 from .solvers import SOLVERS, OneStepSolver, make_solver
@@ -353,6 +353,17 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
                 if md is None:
                     p, md = pb.refine_modes(p)
                 dv = dvf + SHta @ p
+                if md.size and np.all(md == STICK):
+                    # every contact stuck: one correction on the velocities themselves, as in the
+                    # planar branch (the refinement above works on W p + q, whose rounding in the
+                    # generalized velocities would leave a stuck body at 1e-19 m/s for some steps)
+                    r = Ha @ (v + dv)
+                    if ea is not None:
+                        r[: active.size] += shift
+                    dp = pb.solve_linear(pb.W, -r)
+                    if dp is not None:
+                        p = p + dp
+                        dv = dv + SHta @ dp
             else:
                 dv = dvf + SHta @ p
                 md = pb.modes(p)
