@@ -7,6 +7,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 from ._imports import sparse as sp
+from .block_diagonal import block_inverse
+from .system import evaluate_into
 
 __all__ = ["StepAssembly", "kahan_add", "SPARSE_MIN_CONTACT_ROWS", "SPARSE_DROP_TOL"]
 
@@ -14,42 +16,6 @@ __all__ = ["StepAssembly", "kahan_add", "SPARSE_MIN_CONTACT_ROWS", "SPARSE_DROP_
 SPARSE_MIN_CONTACT_ROWS = 200
 #: relative size below which an entry of S H' is dropped in the sparse assembly (rounding level)
 SPARSE_DROP_TOL = 1e-18
-
-
-#: largest diagonal block of W_h inverted densely by :func:`_block_inverse`
-BLOCK_INVERSE_MAX = 32
-
-
-def _block_inverse(Wh):
-    """W_h^-1 as a sparse block-diagonal matrix when W_h is block diagonal (up to a permutation)
-    with blocks of at most ``BLOCK_INVERSE_MAX`` rows, else None.
-
-    The blocks are the connected components of W_h's graph (bodies coupled by nothing but their
-    contacts); blocks of one size are inverted together (one batched LAPACK call per size).
-    """
-    from scipy.sparse.csgraph import connected_components
-
-    n = Wh.shape[0]
-    if n == 0:
-        return None
-    n_comp, label = connected_components(Wh, directed=False)
-    sizes = np.bincount(label, minlength=n_comp)
-    if sizes.max() > BLOCK_INVERSE_MAX:
-        return None
-    order = np.argsort(label, kind="stable")  # the members of each block, block by block
-    starts = np.concatenate([[0], np.cumsum(sizes)])
-    rows, cols, vals = [], [], []
-    csr = Wh.tocsr()
-    for size in np.unique(sizes).tolist():
-        comps = np.flatnonzero(sizes == size)
-        idx = order[starts[comps][:, None] + np.arange(size)[None, :]]  # (n_blocks, size): block members
-        r = np.repeat(idx, size, axis=1).ravel()  # entry (b, i, j) of the stacked blocks is W_h[idx_bi, idx_bj]
-        c = np.tile(idx, (1, size)).ravel()
-        B = np.asarray(csr[r, c], dtype=float).reshape(comps.size, size, size)
-        rows.append(r)
-        cols.append(c)
-        vals.append(np.linalg.inv(B).ravel())
-    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
 
 
 class StepAssembly:
@@ -127,9 +93,9 @@ class StepAssembly:
         data = np.empty(offsets[-1] + 2)
         data[-2:] = h, th
         z = np.zeros(n)
-        _run(fn, [np.zeros(1), z, z], [data[offsets[i]:offsets[i + 1]] for i in range(8)])
+        evaluate_into(fn, [np.zeros(1), z, z], [data[offsets[i]:offsets[i + 1]] for i in range(8)])
         out = np.empty(layout[-1][0] + layout[-1][1] * layout[-1][2])
-        _run(core, [data], [out])
+        evaluate_into(core, [data], [out])
         # dense results, column-major as CasADi writes them: transposed copies of (columns, rows)
         S, T, SHt, W, F, K, C, G, phi_t, gap, H = (out[a:a + nr * nc].reshape(nc, nr).T for a, nr, nc in layout)
         if not (np.all(np.isfinite(S)) and np.all(np.isfinite(F))):
@@ -148,42 +114,37 @@ class StepAssembly:
         factorized once (SuperLU), S is applied through the factors, and S H' and W = H S H' are
         kept sparse. Entries of S H' below ``SPARSE_DROP_TOL`` times its largest entry are dropped:
         for springs between neighbours they decay geometrically away from the contact (ratio about
-        (h theta)^2 k / m), so the operator is banded to rounding level."""
-        import casadi as ca
+        (h theta)^2 k / m), so the operator is banded to rounding level. Independent bodies (W_h
+        block diagonal with small blocks) skip SuperLU: S is W_h's block inverse, sparse itself."""
         from scipy.sparse.linalg import LinearOperator, splu
 
         sys_, n, m = self.sys, self.n, self.m
-        z = np.zeros(n)
-
-        def csc(x):
-            x = ca.DM(x)
-            r, c = x.sparsity().get_triplet()
-            return sp.csc_matrix((np.array(x.nonzeros(), dtype=float), (r, c)), shape=x.shape)
-
-        # structural zeros removed symbolically (a mass matrix built from a dense array has n^2
-        # structural entries, whose conversion alone would cost seconds at n = 2000)
-        q_, v_, t_ = sys_.q_sym, sys_.v_sym, sys_.t_sym
-        fn = ca.Function("sparse_step_data", [t_, q_, v_],
-                         [ca.sparsify(sys_.mass_expr), ca.sparsify(-ca.jacobian(sys_.force_expr, q_)),
-                          ca.sparsify(-ca.jacobian(sys_.force_expr, v_)), ca.sparsify(sys_.H_expr), sys_.gap_expr])
-        A, K, C, H, gap = fn(0.0, z, z)
-        A, K, C, H = csc(A), csc(K), csc(C), csc(H)
-        Wh = (A + (h * th) * C + (h * th) ** 2 * K).tocsc()
+        A, K, C, H, gap, F0 = _sparse_step_data(sys_)
+        Wh = A
+        if C.nnz:
+            Wh = Wh + (h * th) * C
+        if K.nnz:
+            Wh = Wh + (h * th) ** 2 * K
+        # the mass check found A's blocks already; with no damping or stiffness they are W_h's
+        blocks = sys_.mass_blocks if not (C.nnz or K.nnz) else None
         try:
-            lu = splu(Wh)
-        except RuntimeError as exc:
-            raise FloatingPointError(f"singular iteration matrix: {exc}") from None
-        self._lu = lu
-        self.S = LinearOperator((n, n), matvec=lu.solve, dtype=float)
-        self.T = np.zeros((n, 0))
+            Sblk = block_inverse(Wh, blocks)
+        except np.linalg.LinAlgError:
+            raise FloatingPointError("singular iteration matrix: a block of the mass matrix is singular") from None
         Ht = H.T.tocsc()
-        Sblk = _block_inverse(Wh)
         if Sblk is not None:
-            # independent bodies (small diagonal blocks of W_h): S itself is block diagonal and
-            # sparse, and S H' a sparse product; SuperLU's dense-column solves cost 0.4 ms a column
+            # independent bodies: S is block diagonal and sparse, S H' a sparse product (SuperLU's
+            # dense-column solves would cost 0.4 ms a column)
+            self._lu, self.S, self._solve = None, Sblk, Sblk.dot
             SHt = (Sblk @ Ht).tocsr()
             SHt.eliminate_zeros()
         else:
+            try:
+                lu = splu(Wh.tocsc())
+            except RuntimeError as exc:
+                raise FloatingPointError(f"singular iteration matrix: {exc}") from None
+            self._lu, self._solve = lu, lu.solve
+            self.S = LinearOperator((n, n), matvec=lu.solve, dtype=float)
             cols = []
             for a in range(0, self.rows, 512):  # column blocks keep the dense intermediate small
                 X = lu.solve(Ht[:, a:a + 512].toarray())
@@ -191,18 +152,20 @@ class StepAssembly:
                 X[np.abs(X) <= SPARSE_DROP_TOL * big] = 0.0
                 cols.append(sp.csc_matrix(X))
             SHt = sp.hstack(cols).tocsr() if cols else sp.csr_matrix((n, 0))
+        self.T = np.zeros((n, 0))
         if not np.all(np.isfinite(SHt.data)):
             raise FloatingPointError("singular iteration matrix: the mass matrix is singular")
-        self.SHt, self.H = SHt, _LeadingRows(H.tocsr(), m)
-        self.W = (H.tocsr() @ SHt).tocsr()
+        Hr = H.tocsr()
+        self.SHt, self.H = SHt, _LeadingRows(Hr, m)
+        self.W = (Hr @ SHt).tocsr()
         self._HN = self.H[:m]
-        self.gap0 = np.array(gap, dtype=float).ravel()
-        self.F0 = sys_.force(z, z)
+        self.gap0 = gap
+        self.F0 = F0
         self.Kq, self.Cv = -K.tocsr(), -C.tocsr()
         self._hhK = (h * h * th) * self.Kq
         self.G, self.phi_t = np.zeros((0, n)), np.zeros(0)
         self.force_constant = not sys_.force_depends_on_state
-        self.dv_const = (lu.solve(h * self.F0) if self.constant and self.force_constant and not self.Kq.nnz
+        self.dv_const = (self._solve(h * self.F0) if self.constant and self.force_constant and not self.Kq.nnz
                          else None)
 
     def _eval(self, t, q, v):
@@ -255,7 +218,7 @@ class StepAssembly:
             f = self.sys.force_fn
             Fth = ((1 - th) * np.array(f(t, q, v), dtype=float).ravel()
                    + th * np.array(f(t + h, q, v), dtype=float).ravel())
-        dv = self._lu.solve(h * Fth + self._hhK @ v)
+        dv = self._solve(h * Fth + self._hhK @ v)
         return dv, self.SHt, self.W, gap, self.H
 
     def _control_correction(self, t, q, S):
@@ -272,6 +235,47 @@ class StepAssembly:
                     + th * np.array(cf(t + h, q), dtype=float).ravel())
         B = np.array(self.sys.control_matrix_fn(t, q), dtype=float).reshape(self.n, -1)
         return S @ (B @ self.schedule.impulse(t, t + h) - seen)
+
+
+def _sparse_step_data(system):
+    """(A, K, C, H, gap, F) of a system with constant matrices at (0, 0, 0): A, K = -dF/dq,
+    C = -dF/dv and H as SciPy CSC matrices of their nonzeros, the gaps and forces as arrays.
+
+    Structurally sparse outputs are read straight from :attr:`lcp.system.System.step_data_fn`'s
+    buffers; a structurally dense one (a mass matrix written as a dense array has n^2 structural
+    entries, whose conversion would cost seconds at n = 2000) goes through a Function of the
+    symbolically sparsified expressions instead.
+    """
+    n = system.n
+    fn = system.step_data_fn
+    parts = (0, 2, 3, 7)
+    if sum(fn.nnz_out(i) for i in parts) <= max(4096, (n + system.n_contact_rows) * n // 8):
+        sps = [fn.sparsity_out(i) for i in range(8)]
+        bufs = [np.empty(x.nnz()) for x in sps]
+        z = np.zeros(n)
+        evaluate_into(fn, [np.zeros(1), z, z], bufs)
+        out = []
+        for i in parts:
+            colind, row = sps[i].get_ccs()
+            M = sp.csc_matrix((bufs[i], np.array(row, dtype=np.int32), np.array(colind, dtype=np.int32)),
+                              shape=sps[i].shape)
+            M.eliminate_zeros()
+            out.append(M)
+        gap, F = np.zeros(sps[6].numel()), np.zeros(n)
+        gap[np.array(sps[6].find(), dtype=np.int64)] = bufs[6]  # structural zeros are zeros
+        F[np.array(sps[1].find(), dtype=np.int64)] = bufs[1]
+        return (*out, gap, F)
+    q_, v_, t_ = system.q_sym, system.v_sym, system.t_sym
+    f = ca.Function("sparse_step_data", [t_, q_, v_],
+                    [ca.sparsify(system.mass_expr), ca.sparsify(-ca.jacobian(system.force_expr, q_)),
+                     ca.sparsify(-ca.jacobian(system.force_expr, v_)), ca.sparsify(system.H_expr), system.gap_expr])
+    A, K, C, H, gap = f(0.0, np.zeros(n), np.zeros(n))
+
+    def csc(x):
+        r, c = x.sparsity().get_triplet()
+        return sp.csc_matrix((np.array(x.nonzeros(), dtype=float), (r, c)), shape=x.shape)
+
+    return csc(A), csc(K), csc(C), csc(H), np.array(gap, dtype=float).ravel(), system.force(np.zeros(n), np.zeros(n))
 
 
 _LEADING_ROWS = []
@@ -361,16 +365,6 @@ def _constant_core(system):
     found = (core, offsets, layout)
     entries.append((sps, found))
     return found
-
-
-def _run(fn: ca.Function, args, results) -> None:
-    """Evaluate ``fn`` on NumPy arrays (the nonzeros of each argument and result, column-major)."""
-    buf, run = fn.buffer()
-    for i, x in enumerate(args):
-        buf.set_arg(i, memoryview(x))
-    for i, x in enumerate(results):
-        buf.set_res(i, memoryview(x))
-    run()
 
 
 def one_step_function(system) -> ca.Function:

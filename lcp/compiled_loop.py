@@ -128,14 +128,27 @@ def _interleaved(W, m):
     from .friction_contact import interleave
 
     perm = interleave(m)
-    Wi = W[perm][:, perm] if hasattr(W, "tocsr") else np.asarray(W, dtype=float)[np.ix_(perm, perm)]
-    indptr, indices, data = _csr(Wi)
     even = 2 * np.arange(m)
-    if hasattr(Wi, "tocsr"):
-        Wi = Wi.tocsr()
-        d = Wi.diagonal()
-        off = (np.asarray(Wi[even, even + 1]).ravel(), np.asarray(Wi[even + 1, even]).ravel())
+    if hasattr(W, "tocsr"):
+        # the permutation on the nonzeros (SciPy's fancy indexing costs more than the rest of the set-up)
+        W = W.tocsr()
+        inv = np.empty(2 * m, dtype=np.int64)
+        inv[perm] = np.arange(2 * m)
+        keep = W.data != 0.0
+        r = inv[np.repeat(np.arange(2 * m), np.diff(W.indptr))[keep]]
+        c = inv[W.indices[keep]]
+        order = np.lexsort((c, r))
+        r, indices, data = r[order], c[order], np.array(W.data[keep][order], dtype=float)
+        indptr = np.zeros(2 * m + 1, dtype=np.int64)
+        np.cumsum(np.bincount(r, minlength=2 * m), out=indptr[1:])
+        B = np.zeros((m, 2, 2))  # the diagonal 2 x 2 blocks: entries whose row and column share a contact
+        own = r // 2 == indices // 2
+        B[r[own] // 2, r[own] % 2, indices[own] % 2] = data[own]
+        d = B[:, [0, 1], [0, 1]].ravel()
+        off = (B[:, 0, 1], B[:, 1, 0])
     else:
+        Wi = np.asarray(W, dtype=float)[np.ix_(perm, perm)]
+        indptr, indices, data = _csr(Wi)
         d = np.diag(Wi)
         off = (Wi[even, even + 1], Wi[even + 1, even])
     blocks = np.column_stack([d[0::2], off[0], off[1], d[1::2]]).astype(float)
@@ -169,7 +182,7 @@ def _pack_new(asm):
     else:
         Kq, Cv = asm.Kq, asm.Cv
         hK = asm._hhK if asm.sparse else ((h * h) * th) * Kq
-        if asm.sparse:
+        if asm.sparse and asm._lu is not None:
             mode, S, lu = 2, e0, _lu_parts(asm._lu, n)
         else:
             mode, S, lu = 1, _csr(asm.S), lu0

@@ -231,6 +231,8 @@ class System:
         H = ca.vertcat(*(HN + HT)) if m else ca.SX.zeros(0, n)
         self.gap_expr, self.H_expr = gap, H
         self._contact_rows_checked = False
+        #: diagonal blocks of a constant sparse mass matrix, found by its check (lcp.block_diagonal)
+        self.mass_blocks = None
 
         # -dF/dq and -dF/dv: the implicit (theta) step linearizes the forces with them
         K = -ca.jacobian(self.force_expr, q)
@@ -437,35 +439,64 @@ class System:
         on its nonzeros: where A is block diagonal (up to a permutation) with small blocks, its
         eigenvalues (n <= 200) are those of the blocks and the Cholesky factorization of A - s I
         (larger n) is that of each block (batched), so the dense matrix is never formed and the
-        verdicts are the dense test's; otherwise the dense test."""
-        from scipy.sparse import csc_matrix
-        from scipy.sparse.csgraph import connected_components
+        verdicts are the dense test's; otherwise the dense test. A constant mass matrix keeps its
+        blocks (:attr:`mass_blocks`): the sparse assembly inverts them instead of finding them again."""
+        from .block_diagonal import diagonal_blocks
 
         n = self.n
-        M = ca.DM(self.mass_fn(t0, q0))
-        rows, cols = M.sparsity().get_triplet()
-        A = csc_matrix((np.array(M.nonzeros(), dtype=float), (rows, cols)), shape=(n, n))
+        A = self.sparse_mass(q0, t0)
         if not np.all(np.isfinite(A.data)):
             raise ValueError("mass matrix is not finite at q0")
         scale = max(1.0, float(np.max(np.abs(A.data), initial=0.0)))
-        if abs(A - A.T).max() > 1e-12 * scale:
+        # symmetry on the nonzeros: CCS order sorts the keys col * n + row, so each entry's mirror
+        # (row * n + col) is found by bisection; a missing mirror is a zero
+        col = np.repeat(np.arange(n), np.diff(A.indptr))
+        keys = col * n + A.indices
+        at = np.minimum(np.searchsorted(keys, A.indices * n + col), keys.size - 1)
+        mirror = np.where(keys[at] == A.indices * n + col, A.data[at], 0.0)
+        if np.max(np.abs(A.data - mirror), initial=0.0) > 1e-12 * scale:
             raise ValueError("mass matrix must be symmetric")
-        As = (0.5 * (A + A.T)).tocsr()
-        shift = 1e-14 * max(1.0, float(np.max(np.asarray(abs(As).sum(axis=1)))))
-        n_comp, label = connected_components(As, directed=False)
-        sizes = np.bincount(label, minlength=n_comp)
-        if sizes.max() > 32:
-            blocks = [As.toarray()]
-        else:
-            order = np.argsort(label, kind="stable")  # the members of each block, block by block
-            starts = np.concatenate([[0], np.cumsum(sizes)])
-            blocks = []
-            for size in np.unique(sizes).tolist():
-                idx = order[starts[np.flatnonzero(sizes == size)][:, None] + np.arange(size)[None, :]]
-                r = np.repeat(idx, size, axis=1).ravel()
-                c = np.tile(idx, (1, size)).ravel()
-                blocks.append(np.asarray(As[r, c], dtype=float).reshape(idx.shape[0], size, size))
-        _check_definite(blocks, n, shift)
+        shift = 1e-14 * max(1.0, float(np.max(np.bincount(A.indices, np.abs(A.data), minlength=n), initial=0.0)))
+        blocks = diagonal_blocks(A)
+        if blocks is None:
+            As = 0.5 * (A + A.T)
+            _check_definite([As.toarray()], n, shift)
+            return
+        _check_definite([0.5 * (B + B.transpose(0, 2, 1)) for _, B in blocks], n, shift)
+        if self.mass_is_constant:
+            self.mass_blocks = blocks
+
+    def sparse_mass(self, q, t: float = 0.0):
+        """The mass matrix A(t, q) as a SciPy CSC matrix of its structural nonzeros (never dense).
+
+        Examples
+        --------
+        >>> import lcp
+        >>> A = lcp.scenes.block_chain(3).system.sparse_mass([0.0] * 3)
+        >>> A.shape, A.nnz
+        ((3, 3), 3)
+        """
+        from scipy.sparse import csc_matrix
+
+        sparsity = self.mass_fn.sparsity_out(0)
+        if "_mass_ccs" not in self.__dict__:
+            colind, row = sparsity.get_ccs()
+            self._mass_ccs = (np.array(row, dtype=np.int32), np.array(colind, dtype=np.int32))
+        data = np.empty(sparsity.nnz())
+        evaluate_into(self.mass_fn, [np.array([float(t)]), np.asarray(q, dtype=float)], [data])
+        row, colind = self._mass_ccs
+        return csc_matrix((data, row, colind), shape=(self.n, self.n))
+
+
+def evaluate_into(fn: ca.Function, args, results) -> None:
+    """Evaluate ``fn`` on NumPy arrays (the nonzeros of each argument and result, column-major):
+    converting arguments and results to CasADi matrices would cost more than small evaluations."""
+    buf, run = fn.buffer()
+    for i, x in enumerate(args):
+        buf.set_arg(i, memoryview(x))
+    for i, x in enumerate(results):
+        buf.set_res(i, memoryview(x))
+    run()
 
 
 def _check_definite(blocks, size: int, shift: float) -> None:

@@ -1,0 +1,119 @@
+"""Block-diagonal structure of a sparse matrix: bodies coupled by nothing but their contacts.
+
+The mass matrix of K independent bodies, and the iteration matrix W_h of the theta-method built
+from it, are block diagonal up to a permutation of the coordinates. Their positive-definiteness test
+and their inverse then reduce to small dense blocks, batched by size (one LAPACK call per size).
+The blocks are gathered from the nonzeros in O(nnz) NumPy operations, without SciPy's fancy
+indexing, whose fixed cost (a fraction of a millisecond per call) dominated the set-up of a few
+hundred contacts.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ._imports import sparse as sp
+
+__all__ = ["BLOCK_MAX", "block_inverse", "diagonal_blocks"]
+
+#: largest diagonal block handled densely
+BLOCK_MAX = 32
+
+
+def diagonal_blocks(A, max_size: int = BLOCK_MAX):
+    """The diagonal blocks of a sparse square matrix, grouped by size, or None.
+
+    The blocks are the connected components of A's graph (an entry (i, j) joins i and j). Returns
+    None when a component has more than ``max_size`` rows, else a list of ``(idx, B)`` per block
+    size s: ``idx`` (n_blocks, s) the rows of each block in increasing order, ``B`` (n_blocks, s, s)
+    the blocks, ``B[b] == A[idx[b]][:, idx[b]]``.
+
+    Parameters
+    ----------
+    A : scipy.sparse matrix, shape (n, n)
+    max_size : int
+
+    Examples
+    --------
+    >>> import numpy as np, scipy.sparse as sp
+    >>> from lcp.block_diagonal import diagonal_blocks
+    >>> A = sp.csr_matrix(np.array([[2.0, 0, 1], [0, 3, 0], [1, 0, 4]]))
+    >>> [(idx.tolist(), B.tolist()) for idx, B in diagonal_blocks(A)]
+    [([[1]], [[[3.0]]]), ([[0, 2]], [[[2.0, 1.0], [1.0, 4.0]]])]
+    """
+    from scipy.sparse.csgraph import connected_components
+
+    n = A.shape[0]
+    if n == 0:
+        return []
+    if A.format == "csc":  # read as the CSR arrays of A', without a conversion
+        ptr, inner, vals, transposed = A.indptr, A.indices, A.data, True
+        graph = sp.csr_matrix((vals, inner, ptr), shape=A.shape)  # A': the same components
+    else:
+        A = A.tocsr()
+        ptr, inner, vals, transposed, graph = A.indptr, A.indices, A.data, False, A
+    n_comp, label = connected_components(graph, directed=False)
+    sizes = np.bincount(label, minlength=n_comp)
+    if sizes.max() > max_size:
+        return None
+    order = np.argsort(label, kind="stable")  # the members of each block, block by block, increasing
+    starts = np.concatenate([[0], np.cumsum(sizes)])
+    pos = np.empty(n, dtype=np.int64)
+    pos[order] = np.arange(n) - np.repeat(starts[:-1], sizes)  # place of each row in its block
+    rows = np.repeat(np.arange(n), np.diff(ptr))
+    cols = inner
+    if transposed:
+        rows, cols = cols, rows
+    out = []
+    size_of_entry = sizes[label[rows]]
+    for size in np.unique(sizes).tolist():
+        comps = np.flatnonzero(sizes == size)
+        slot = np.empty(n_comp, dtype=np.int64)
+        slot[comps] = np.arange(comps.size)  # the place of each component among blocks of this size
+        idx = order[starts[comps][:, None] + np.arange(size)[None, :]]
+        B = np.zeros((comps.size, size, size))
+        sel = size_of_entry == size
+        r = rows[sel]
+        # duplicates (an unsummed COO-born matrix) add up, as in A's value
+        np.add.at(B, (slot[label[r]], pos[r], pos[cols[sel]]), vals[sel])
+        out.append((idx, B))
+    return out
+
+
+def block_inverse(A, blocks=None):
+    """A^-1 as a sparse matrix when A is block diagonal (up to a permutation) with blocks of at most
+    :data:`BLOCK_MAX` rows, else None.
+
+    Parameters
+    ----------
+    A : scipy.sparse matrix, shape (n, n)
+    blocks : list, optional
+        A's :func:`diagonal_blocks`, when the caller has them already.
+
+    Examples
+    --------
+    >>> import numpy as np, scipy.sparse as sp
+    >>> from lcp.block_diagonal import block_inverse
+    >>> A = sp.csr_matrix(np.array([[2.0, 0, 1], [0, 4, 0], [1, 0, 1]]))
+    >>> np.allclose(block_inverse(A) @ A.toarray(), np.eye(3))
+    True
+    """
+    n = A.shape[0]
+    if blocks is None:
+        blocks = diagonal_blocks(A)
+    if not blocks:
+        return None
+    # CSR arrays directly: each row of a block holds that block's columns, in increasing order
+    # (idx is increasing within a block), so no COO sort is needed
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    indices = np.empty(sum(idx.size * idx.shape[1] for idx, _ in blocks), dtype=np.int64)
+    data = np.empty(indices.size)
+    row_len = np.zeros(n, dtype=np.int64)
+    for idx, _ in blocks:
+        row_len[idx.ravel()] = idx.shape[1]
+    np.cumsum(row_len, out=indptr[1:])
+    for idx, B in blocks:
+        size = idx.shape[1]
+        at = indptr[idx.ravel()][:, None] + np.arange(size)[None, :]  # (n_blocks * size, size) slots
+        indices[at] = np.repeat(idx, size, axis=0)
+        data[at] = np.linalg.inv(B).reshape(-1, size)
+    return sp.csr_matrix((data, indices, indptr), shape=(n, n))
