@@ -515,8 +515,13 @@ class AutoSolver(OneStepSolver):
     """The fastest exact solver for the problem at hand: the closed form for one contact; NSGS
     sweeps with a semismooth Newton finish (``"newton"``) for several, which on the measured
     scenes (block chains, independent copies, granular problems) beats Lemke from two contacts on
-    and scales with nnz(W). Up to ``LEMKE_FALLBACK_MAX`` contacts a failure of the iterative
-    solver is retried by Lemke; one contact's enumeration falls back on Lemke too."""
+    and scales with nnz(W).
+
+    Where the iteration stalls (nearly singular W: redundant contacts, a W stored with few digits
+    and slightly indefinite), :func:`lcp.core_pivot.core_pivot_solve` finishes from the stalled
+    point: the settled contacts keep their modes and Lemke solves the small core around the
+    near-null space exactly. Up to ``LEMKE_FALLBACK_MAX`` contacts a remaining failure is retried by
+    Lemke on the whole problem; one contact's enumeration falls back on Lemke too."""
 
     name = "auto"
     #: largest number of contacts for which a failed iterative solve is retried by (dense) Lemke
@@ -528,12 +533,17 @@ class AutoSolver(OneStepSolver):
         self.lemke = LemkeSolver(residual_tol)
         self.iterative = NewtonSolver(residual_tol, error_tol=error_tol)
         self.fallbacks = 0
+        self.core_pivots = 0
 
     def _solve(self, pb):
         first = self.enum if pb.k == 1 else self.iterative
         sol = first.solve(pb)
         if sol.success:
             return sol
+        if pb.k > 1 and np.all(np.isfinite(sol.p)):
+            fin = self._core_pivot(pb, sol)
+            if fin is not None:
+                return fin
         if pb.k <= self.LEMKE_FALLBACK_MAX:
             sol2 = self.lemke.solve(pb)
             if sol2.success:
@@ -541,6 +551,26 @@ class AutoSolver(OneStepSolver):
                 sol2.message = f"fallback to lemke after: {sol.message}"
                 return sol2
         return sol
+
+    def _core_pivot(self, pb, sol):
+        """The stalled iterate finished by the core pivot, or None; accepted on the iterative
+        solver's own criteria (residual, and the normalised error when one is asked for)."""
+        from .core_pivot import core_pivot_solve
+        from .friction_contact import natural_map_error
+
+        error_tol = self.iterative.error_tol
+        fin = core_pivot_solve(pb, sol.p, error_tol=error_tol or 0.01 * self.residual_tol)
+        if not fin.success or not pb.residual(fin.p) <= 0.1 * self.residual_tol * pb.scale:
+            return None
+        if error_tol is not None and not natural_map_error(pb.W, pb.q, pb.mu, fin.p) <= error_tol:
+            return None
+        # the warm start of the next step with this W is the finished impulses, not the stalled ones
+        key = pb.key
+        if key is not None and key in self.iterative._cache:
+            self.iterative._cache[key] = (self.iterative._cache[key][0], fin.p.copy())
+        self.core_pivots += 1
+        return StepSolution(fin.p, 0, f"core pivot ({fin.core.size} contacts, {fin.pivots} pivots) after: {sol.message}",
+                            sol.iterations + fin.pivots)
 
 
 SOLVERS = {"auto": AutoSolver, "enum": EnumSolver, "lemke": LemkeSolver, "osqp": OsqpSolver,

@@ -196,3 +196,24 @@ def test_sparse_assembly_matches_dense_and_chain_trajectories_agree():
     r3 = lcp.simulate(sc, 0.05, h=1e-3, solver="auto")
     assert r1.success and r2.success and r3.success
     assert np.abs(r1.q - r2.q).max() <= 1e-12 and np.abs(r1.q - r3.q).max() <= 1e-12
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_auto_finishes_a_stalled_iteration_by_the_core_pivot(seed):
+    """Where the iteration stops short (here: crippled to one round of two sweeps and one Newton
+    step), auto finishes from its point with the core pivot, on the solver's own criteria and
+    before any Lemke fallback; rounded, slightly indefinite W with redundant contacts."""
+    from lcp.solvers import AutoSolver, NewtonSolver
+
+    from .test_core_pivot import disc_chain, planted
+
+    pb, _ = planted(disc_chain(40, seed, digits=6, duplicates=6), seed, degenerate=0.3)
+    auto = AutoSolver(error_tol=1e-10)
+    auto.iterative = NewtonSolver(sweeps=2, newton_iter=1, max_rounds=1, error_tol=1e-10)
+    assert not auto.iterative.solve(pb).success
+    auto.iterative._cache.clear()
+    sol = auto.solve(pb)
+    assert sol.success and sol.message.startswith("core pivot"), sol.message
+    assert auto.core_pivots == 1 and auto.fallbacks == 0
+    assert natural_map_error(pb.W, pb.q, pb.mu, sol.p) <= 1e-10
+    assert pb.residual(sol.p) <= 1e-11 * pb.scale
