@@ -12,7 +12,7 @@ import math
 import casadi as ca
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 import lcp
@@ -61,6 +61,10 @@ def test_min_effort_exact_with_affine_hold(R, d):
 
 @settings(max_examples=8)
 @given(R=st.floats(0.2, 0.5), d=st.floats(0.2, 0.8))
+# IPOPT stopped at its acceptable level here: a replay miss of 1.4e-7, and a cost 1.1e-9 under the
+# optimum with a miss of 1.6e-9, until the fixed-phase solve restarted from such a point
+@example(R=0.33984375, d=0.586412636127074)
+@example(R=0.33984375, d=0.5)
 def test_min_effort_by_phases_is_never_silently_wrong(R, d):
     """Over a parameter range: a successful solve replays exactly and never beats the true optimum;
     it is within 1e-5 of it (a step parked at its lower length bound with a suboptimal slope leaves
