@@ -131,14 +131,14 @@ class StepAssembly:
             Sblk = block_inverse(Wh, blocks)
         except np.linalg.LinAlgError:
             raise FloatingPointError("singular iteration matrix: a block of the mass matrix is singular") from None
-        Ht = H.T.tocsc()
         if Sblk is not None:
             # independent bodies: S is block diagonal and sparse, S H' a sparse product (SuperLU's
-            # dense-column solves would cost 0.4 ms a column)
+            # dense-column solves would cost 0.4 ms a column); H' of the CSC H is CSR, no conversion
             self._lu, self.S, self._solve = None, Sblk, Sblk.dot
-            SHt = (Sblk @ Ht).tocsr()
+            SHt = Sblk @ H.T
             SHt.eliminate_zeros()
         else:
+            Ht = H.T.tocsc()
             try:
                 lu = splu(Wh.tocsc())
             except RuntimeError as exc:
@@ -161,8 +161,11 @@ class StepAssembly:
         self._HN = self.H[:m]
         self.gap0 = gap
         self.F0 = F0
-        self.Kq, self.Cv = -K.tocsr(), -C.tocsr()
-        self._hhK = (h * h * th) * self.Kq
+        # no stiffness or damping (the common case): one empty matrix for all three
+        zero = sp.csr_matrix((n, n)) if not (K.nnz and C.nnz) else None
+        self.Kq = -K.tocsr() if K.nnz else zero
+        self.Cv = -C.tocsr() if C.nnz else zero
+        self._hhK = (h * h * th) * self.Kq if K.nnz else zero
         self.G, self.phi_t = np.zeros((0, n)), np.zeros(0)
         self.force_constant = not sys_.force_depends_on_state
         self.dv_const = (self._solve(h * self.F0) if self.constant and self.force_constant and not self.Kq.nnz

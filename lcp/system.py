@@ -421,7 +421,7 @@ class System:
 
     def _check_dense_mass(self, q0, t0) -> None:
         """The test of :meth:`check_state` on the dense mass matrix (on the constraint manifold)."""
-        A = self.mass(q0, t0)
+        A = self._dense_mass(q0, t0)
         if not np.all(np.isfinite(A)):
             raise ValueError("mass matrix is not finite at q0")
         if np.max(np.abs(A - A.T)) > 1e-12 * max(1.0, np.max(np.abs(A))):
@@ -465,6 +465,17 @@ class System:
         _check_definite([0.5 * (B + B.transpose(0, 2, 1)) for _, B in blocks], n, shift)
         if self.mass_is_constant:
             self.mass_blocks = blocks
+
+    def _dense_mass(self, q, t) -> np.ndarray:
+        """:meth:`mass` for a validated q, evaluated into NumPy buffers (the check of a fresh small
+        system pays CasADi's matrix conversion otherwise)."""
+        n = self.n
+        sparsity = self.mass_fn.sparsity_out(0)
+        data = np.empty(sparsity.nnz())
+        evaluate_into(self.mass_fn, [np.array([float(t)]), np.asarray(q, dtype=float)], [data])
+        flat = np.zeros(n * n)
+        flat[np.array(sparsity.find(), dtype=np.int64)] = data  # column-major positions
+        return np.ascontiguousarray(flat.reshape(n, n).T)
 
     def sparse_mass(self, q, t: float = 0.0):
         """The mass matrix A(t, q) as a SciPy CSC matrix of its structural nonzeros (never dense).

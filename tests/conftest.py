@@ -16,8 +16,11 @@ N_RTOL = 1e-6
 #: Coulomb (complementarity) residual per step, impulse units
 RESIDUAL_TOL = 1e-9
 
-# "default" keeps CI fast; "thorough" (HYPOTHESIS_PROFILE=thorough, with -m slow) runs >= 1000 examples
-settings.register_profile("default", max_examples=25, deadline=None,
+# "default" keeps CI fast and reproducible: the same examples on every run (derandomized), so a
+# clean checkout passes or fails the same way; "thorough" (HYPOTHESIS_PROFILE=thorough, with -m slow)
+# draws >= 1000 fresh random examples, the search for new counterexamples, whose finds become explicit
+# @example cases
+settings.register_profile("default", max_examples=25, deadline=None, derandomize=True,
                           suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile("thorough", max_examples=1000, deadline=None,
                           suppress_health_check=[HealthCheck.too_slow])

