@@ -14,7 +14,8 @@ whole loop runs here as one numba function:
   solves of :mod:`lcp.nsgs` on the whole operator W (contact-by-contact CSR; the inactive contacts
   hold zero impulse, so the sweep sees exactly the active set's problem), warm-started from the
   previous step's impulses, accepted at the same natural-map residual as the Python solvers
-  (0.1 ``residual_tol`` times the problem's impulse scale); ``"auto"`` with a single active
+  (0.1 ``residual_tol`` times the problem's impulse scale, and times each contact's own scale,
+  :meth:`lcp.contact_problem.ContactProblem.stop_measure`); ``"auto"`` with a single active
   contact takes the closed form (open, stick, slide+, slide-) with its ambiguity count;
 - the modes and the branch refinement of the Python loop: the local velocity of the actual
   post-step velocity, r = H (v + dv), is cancelled on the branch of the modes. Where the loop
@@ -43,7 +44,7 @@ import weakref
 import numpy as np
 
 from .contact_problem import MODE_NAMES, ContactProblem, ModeArray
-from .nsgs import HAVE_NUMBA, _contact_residual, _row_dot, local_planar, njit
+from .nsgs import HAVE_NUMBA, _contact_residual, _contact_scale, _row_dot, local_planar, njit
 from .projection import violation_function
 from .result import STATUS_MESSAGES, Impact, SimulationResult, SolverStats
 
@@ -440,8 +441,10 @@ def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, ma
                 scale = max(scale, abs(qN) * rho[2 * j], abs(qT) * rho[2 * j + 1])
             scale = max(scale, 1e-300)
             tol = 0.1 * res_tol * scale
+            rtol = 0.1 * res_tol
             its = 0
             res = 0.0
+            rel = 0.0
             ok = True
             if forced and k == k0:
                 for t in range(na):
@@ -500,6 +503,7 @@ def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, ma
                         r[iT] = pT
                     if change <= tol or blockdiag:
                         res = 0.0
+                        rel = 0.0
                         for t in range(na):
                             j = act[t]
                             if blockdiag:  # the row's two entries, in CSR's column order
@@ -510,28 +514,36 @@ def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, ma
                                 uT = _row_dot(Wp, Wi, Wx, r, 2 * j + 1)
                             uTs[t] = uT
                             uT = qi[2 * j + 1] + uT
-                            res = max(res, _contact_residual(r[2 * j], r[2 * j + 1], uN, uT, mu[j],
-                                                             rho[2 * j], rho[2 * j + 1]))
-                        if res <= tol:
+                            c = _contact_residual(r[2 * j], r[2 * j + 1], uN, uT, mu[j], rho[2 * j], rho[2 * j + 1])
+                            res = max(res, c)
+                            # and contact by contact, on each contact's own scale (lcp.nsgs._contact_scale)
+                            rel = max(rel, c / _contact_scale(r[2 * j], r[2 * j + 1], qi[2 * j], qi[2 * j + 1],
+                                                              rho[2 * j], rho[2 * j + 1]))
+                        if res <= tol and rel <= rtol:
                             break
-                if not (res <= tol) and change > tol and not blockdiag:
+                if not (res <= tol and rel <= rtol) and change > tol and not blockdiag:
                     # the sweeps ran out: the residual of the last one decides (as lcp.nsgs.nsgs_sweeps)
                     res = 0.0
+                    rel = 0.0
                     for t in range(na):
                         j = act[t]
                         uN = qi[2 * j] + _row_dot(Wp, Wi, Wx, r, 2 * j)
                         uT = _row_dot(Wp, Wi, Wx, r, 2 * j + 1)
                         uTs[t] = uT
                         uT = qi[2 * j + 1] + uT
-                        res = max(res, _contact_residual(r[2 * j], r[2 * j + 1], uN, uT, mu[j],
-                                                         rho[2 * j], rho[2 * j + 1]))
-                if not (res <= tol):
+                        c = _contact_residual(r[2 * j], r[2 * j + 1], uN, uT, mu[j], rho[2 * j], rho[2 * j + 1])
+                        res = max(res, c)
+                        rel = max(rel, c / _contact_scale(r[2 * j], r[2 * j + 1], qi[2 * j], qi[2 * j + 1],
+                                                          rho[2 * j], rho[2 * j + 1]))
+                if not (res <= tol and rel <= rtol):
                     ok = False
             if ok and not (forced and k == k0):
-                # modes of the solution (ContactProblem.modes, rtol 1e-9); W_T r from the residual's pass
-                tol_p = 1e-9 * scale
+                # modes of the solution (ContactProblem.modes, rtol 1e-9 of each contact's scale);
+                # W_T r from the residual's pass
                 for t in range(na):
                     j = act[t]
+                    tol_p = 1e-9 * _contact_scale(r[2 * j], r[2 * j + 1], qi[2 * j], qi[2 * j + 1], rho[2 * j],
+                                                  rho[2 * j + 1])
                     if use_enum and na == 1:
                         uTs[t] = _row_dot(Wp, Wi, Wx, r, 2 * j + 1)
                     uT = (uTs[t] + qi[2 * j + 1]) * rho[2 * j + 1]

@@ -94,14 +94,19 @@ class ConeSolver(OneStepSolver):
         p = sol.p
         if p.shape == (problem.n,) and math.isfinite(p.sum()):  # NaN/inf propagate into the sum
             sol.residual = problem.residual(p)
+            sol.error = problem.error(p)
         else:
-            sol.residual = float("nan")
+            sol.residual = sol.error = float("nan")
         if sol.success and self.exact:
             scale = max(problem.scale, float(np.abs(p).max()) if p.size else 0.0, 1e-300)
             if not np.isfinite(sol.residual) or sol.residual > self.residual_tol * scale:
                 sol.status = -2
                 sol.message = (f"solver '{self.name}' returned an impulse violating the Coulomb law "
                                f"(residual {sol.residual:.3g})")
+            elif not sol.error <= self.error_target:
+                sol.status = -1
+                sol.message = (f"solver '{self.name}' stopped short: natural-map error {sol.error:.3g} > "
+                               f"{self.error_target:.3g} (Coulomb residual {sol.residual:.3g})")
         return sol
 
 

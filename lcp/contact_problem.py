@@ -21,10 +21,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import enum
+import math
 
 import numpy as np
 from ._imports import issparse
 from ._imports import sparse as sp
+
+_EPS = float(np.finfo(float).eps)
 
 __all__ = ["ContactMode", "ModeArray", "OPEN", "STICK", "SLIDE_POS", "SLIDE_NEG", "SLIDE", "MODE_NAMES", "ContactProblem",
            "planar_enum",
@@ -329,16 +332,86 @@ class ContactProblem:
         rT = pT - np.clip(pT - self.rho[k:] * u[k:], -s, s)
         return float(max(np.max(np.abs(rN)), np.max(np.abs(rT))))
 
-    def modes(self, p: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
-        """Mode of each contact in the solution p (OPEN, STICK, SLIDE_POS, SLIDE_NEG)."""
+    def error(self, p: np.ndarray) -> float:
+        """Siconos-normalised natural-map error of p (:func:`lcp.friction_contact.natural_map_error`).
+
+        Computed from (W, q, mu, p) alone, in the units Siconos uses (no 1/W_ii weights), so a
+        contact whose impulse is small beside the problem's impulse scale is still measured
+        against the impulses actually there. NaN if p is not finite.
+        """
+        if self.k == 1 and p.shape == (2,):  # floats: NumPy calls on 2-vectors cost more than the math
+            (W00, W01), (W10, W11) = self.W.tolist()
+            qN, qT = self.q.tolist()
+            rN, rT = p.tolist()
+            if not (math.isfinite(rN) and math.isfinite(rT)):
+                return float("nan")
+            mu = float(self.mu[0])
+            uN, uT = W00 * rN + W01 * rT + qN, W10 * rN + W11 * rT + qT
+            zN, zT = rN - uN - mu * abs(uT), rT - uT
+            aT = abs(zT)
+            if aT <= mu * zN:
+                pN, pT = zN, zT
+            elif mu * aT <= -zN:
+                pN = pT = 0.0
+            else:
+                pN = (zN + mu * aT) / (1.0 + mu * mu)
+                pT = math.copysign(mu * pN, zT)
+            err = math.hypot(rN - pN, rT - pT)
+            scale = max(math.hypot(rN, rT), math.hypot(uN, uT), math.hypot(qN, qT))
+            return err / scale if scale > _EPS else err
+        from .friction_contact import natural_map_error
+
+        return natural_map_error(self.W, self.q, self.mu, p)
+
+    def contact_scales(self, p: np.ndarray) -> np.ndarray:
+        """Impulse scale of each contact: the largest of its impulses in p and of the impulses that
+        would cancel its own free velocity (|q| / W_ii).
+
+        Mode thresholds and the contact-by-contact acceptance are relative to these, so that a
+        light body's contacts beside a heavy body's (masses 1e8 apart, say) are resolved to as
+        many digits as the heavy ones: a threshold on the largest scale alone would leave them
+        none.
+        """
         k = self.k
-        tol_p = rtol * self.scale
+        aq = np.abs(self.q) * self.rho
+        ap = np.abs(p)
+        return np.maximum(np.maximum(aq[:k], aq[k:]), np.maximum(np.maximum(ap[:k], ap[k:]), 1e-300))
+
+    def relative_residual(self, p: np.ndarray) -> float:
+        """max over contacts of the natural-map residual (:meth:`residual`'s terms) divided by the
+        contact's own impulse scale (:meth:`contact_scales`); NaN if p is not finite."""
+        k = self.k
+        if k == 0:
+            return 0.0
+        if not np.all(np.isfinite(p)):
+            return float("nan")
+        u = self.velocity(p)
+        pN, pT = p[:k], p[k:]
+        rN = np.minimum(pN, self.rho[:k] * u[:k])
+        s = self.mu * np.maximum(pN, 0.0)
+        rT = pT - np.clip(pT - self.rho[k:] * u[k:], -s, s)
+        return float(np.max(np.maximum(np.abs(rN), np.abs(rT)) / self.contact_scales(p)))
+
+    def stop_measure(self, p: np.ndarray) -> float:
+        """The iterative solvers' stopping measure: max(:meth:`residual`, scale *
+        :meth:`relative_residual`). Below ``tol_rel * scale`` it says that the residual meets
+        tol_rel on the problem's scale and every contact meets it on its own."""
+        return max(self.residual(p), self.scale * self.relative_residual(p))
+
+    def modes(self, p: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
+        """Mode of each contact in the solution p (OPEN, STICK, SLIDE_POS, SLIDE_NEG), with
+        thresholds rtol times each contact's own scale (:meth:`contact_scales`)."""
+        k = self.k
         if k == 1:  # floats, as in residual()
             (W10, W11) = self.W[1].tolist()
             pN, pT = p.tolist()
-            uT = (W10 * pN + W11 * pT + float(self.q[1])) * float(self.rho[1])
+            qN, qT = self.q.tolist()
+            rhoN, rhoT = self.rho.tolist()
+            tol_p = rtol * max(abs(qN) * rhoN, abs(qT) * rhoT, abs(pN), abs(pT), 1e-300)
+            uT = (W10 * pN + W11 * pT + qT) * rhoT
             mode = OPEN if pN <= tol_p else (SLIDE_POS if uT > tol_p else (SLIDE_NEG if uT < -tol_p else STICK))
             return np.array([mode], dtype=np.int8)
+        tol_p = rtol * self.contact_scales(p)
         u = self.velocity(p)
         out = np.full(k, STICK, dtype=np.int8)
         uT = u[k:] * self.rho[k:]  # impulse units, comparable with tol_p
@@ -417,9 +490,12 @@ class ContactProblem:
         pl = p.tolist()
         u = self.velocity(p).tolist()
         rho, mu = self.rho.tolist(), self.mu.tolist()
-        tol = rtol * max(self.scale, max(map(abs, pl)) if k else 0.0)
+        # contact by contact (contact_scales): a light contact's inequalities are not waved
+        # through on a heavy contact's scale
+        tols = (rtol * self.contact_scales(p)).tolist()
         for j, md in enumerate(modes):
             pN, pT = pl[j], pl[k + j]
+            tol = tols[j]
             if md == OPEN:
                 if u[j] * rho[j] < -tol:
                     return False
@@ -458,10 +534,11 @@ class ContactProblem:
             if self.admissible(p, modes):
                 return p, modes
             u = self.velocity(p)
-            tol = 1e-11 * max(self.scale, float(np.max(np.abs(p))))
+            tols = 1e-11 * self.contact_scales(p)
             new = modes.copy()
             for j in range(k):
                 pN, pT, uT = p[j], p[k + j], u[k + j] * self.rho[k + j]
+                tol = tols[j]
                 if modes[j] == OPEN:
                     if u[j] * self.rho[j] < -tol:
                         new[j] = STICK

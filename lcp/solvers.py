@@ -49,6 +49,10 @@ class StepSolution:
         Coulomb residual :meth:`ContactProblem.residual`, recomputed independently of the solver.
     ambiguous : bool
         More than one solution was found (enumeration only): the first admissible case is used.
+    error : float
+        Normalised natural-map error of ``p`` (Siconos's measure,
+        :func:`lcp.friction_contact.natural_map_error`), recomputed from (W, q, mu, p) apart from
+        the solver; NaN when ``p`` is not finite.
     """
 
     p: np.ndarray
@@ -58,6 +62,7 @@ class StepSolution:
     qp_solves: int = 0
     residual: float = 0.0
     ambiguous: bool = False
+    error: float = float("nan")
 
     @property
     def success(self) -> bool:
@@ -72,15 +77,28 @@ class OneStepSolver:
     residual_tol : float
         Largest accepted Coulomb residual, relative to the larger of the problem's impulse scale
         and the largest impulse of the solution.
+
+    Every solution also carries its normalised natural-map error (``StepSolution.error``,
+    Siconos's measure). An exact solver's answer above :attr:`error_target` (``error_tol`` where
+    the solver takes one, else ``residual_tol``) has stopped short by that measure: status -1,
+    with the error in the message. The two measures differ where the problem's impulse scale
+    (``ContactProblem.scale``, the impulse that would cancel each contact's free velocity alone)
+    is far above the impulses of the solution, as with redundant contacts.
     """
 
     name = "base"
     exact = True
+    error_tol: float | None = None
 
     def __init__(self, residual_tol: float = 1e-10):
         if not (np.isfinite(residual_tol) and residual_tol > 0):
             raise ValueError(f"residual_tol must be finite and > 0, got {residual_tol!r}")
         self.residual_tol = residual_tol
+
+    @property
+    def error_target(self) -> float:
+        """Largest accepted natural-map error: ``error_tol`` when given, else ``residual_tol``."""
+        return self.residual_tol if self.error_tol is None else self.error_tol
 
     def applicable(self, problem: ContactProblem) -> bool:
         return True
@@ -92,6 +110,7 @@ class OneStepSolver:
             return StepSolution(np.full(2 * problem.k, np.nan), -3,
                                 f"solver '{self.name}' does not apply to {problem.k} contacts")
         sol = self._solve(problem)
+        sol.error = problem.error(sol.p)
         if sol.success:
             sol.residual = problem.residual(sol.p)
             # relative to the impulses at hand: an absolute floor would pass any answer to a problem
@@ -101,6 +120,10 @@ class OneStepSolver:
                 sol.status = -2
                 sol.message = (f"solver '{self.name}' returned an impulse violating the Coulomb law "
                                f"(residual {sol.residual:.3g})")
+            elif not sol.error <= self.error_target:
+                sol.status = -1
+                sol.message = (f"solver '{self.name}' stopped short: natural-map error {sol.error:.3g} > "
+                               f"{self.error_target:.3g} (Coulomb residual {sol.residual:.3g})")
         return sol
 
     def _solve(self, problem: ContactProblem) -> StepSolution:  # pragma: no cover - abstract
@@ -368,9 +391,10 @@ class _IterativeSolver(OneStepSolver):
     """Bookkeeping shared by the iterative solvers: warm start, tolerance, the optional error check.
 
     ``residual_tol`` bounds :meth:`ContactProblem.residual` relative to the problem's impulse
-    scale (the iterations stop at a tenth of it). With ``error_tol`` the normalised natural-map
-    error (:func:`lcp.friction_contact.natural_map_error`, Siconos's measure) must be below it
-    too: the iterations go on with a tolerance tightened a hundredfold, up to three times.
+    scale (the iterations stop at a tenth of it). The normalised natural-map error
+    (:func:`lcp.friction_contact.natural_map_error`, Siconos's measure) must be below
+    ``error_tol`` too (None: ``residual_tol``): the iterations go on with a tolerance tightened a
+    hundredfold, up to three times, and a solve that still misses it reports status -1.
     """
 
     def __init__(self, residual_tol: float = 1e-10, error_tol: float | None = None, compiled: bool = True):
@@ -389,15 +413,21 @@ class _IterativeSolver(OneStepSolver):
         tol = 0.1 * self.residual_tol * pb.scale
         p = None if warm.p is None else warm.p.copy()
         its = 0
+        target = self.error_target
         for _ in range(4):
+            # res is ContactProblem.stop_measure: every contact is also solved on its own scale,
+            # which can be far below the problem's (bodies of very different masses)
             p, n, res, msg = self._run(pb, warm.op, p, tol)
             its += n
-            if res > tol or self.error_tol is None or natural_map_error(pb.W, pb.q, pb.mu, p) <= self.error_tol:
+            # the problem's impulse scale can be far above the impulses at hand (redundant
+            # contacts): the error in Siconos's units decides whether the iteration has finished
+            if res > tol or natural_map_error(pb.W, pb.q, pb.mu, p) <= target:
                 break
             tol *= 1e-2
         warm.store(p)
         if res > tol:
-            return StepSolution(p, -1, f"{self.name}: {msg}; residual {res:.3g} > tolerance {tol:.3g}", its)
+            return StepSolution(p, -1, f"{self.name}: {msg}; residual {res:.3g} > tolerance {tol:.3g} "
+                                "(on the problem's scale and each contact's own)", its)
         return StepSolution(p, 0, "solved", its)
 
     def _run(self, pb, op, p, tol):  # pragma: no cover - abstract
@@ -432,7 +462,7 @@ class NsgsSolver(_IterativeSolver):
         from .nsgs import nsgs
 
         r0 = None if p is None else p[op.perm]
-        r, sweeps, res, _ = nsgs(op, pb.q[op.perm], pb.mu, r0, tol, self.max_sweeps, self.compiled)
+        r, sweeps, res, _ = nsgs(op, pb.q[op.perm], pb.mu, r0, tol, self.max_sweeps, self.compiled, pb.scale)
         p = np.empty_like(r)
         p[op.perm] = r
         return p, sweeps, res, f"NSGS stopped after {sweeps} sweeps"
@@ -486,25 +516,25 @@ class NewtonSolver(_IterativeSolver):
                 slow = 0
             res_prev = res
             if not self.sweeps and rnd == 0:
-                res = pb.residual(p)
+                res = pb.stop_measure(p)
                 if res <= tol:
                     break
             if self.sweeps:
                 # where Newton stalls (degenerate contacts) NSGS does the work: its share doubles
                 n_sw = self.sweeps * 2 ** min(rnd, 10)
-                r, sw, res_s, _ = nsgs(op, qi, pb.mu, p[op.perm], tol, n_sw, self.compiled)
+                r, sw, res_s, _ = nsgs(op, qi, pb.mu, p[op.perm], tol, n_sw, self.compiled, pb.scale)
                 its += sw
                 p_s = np.empty_like(r)
                 p_s[op.perm] = r
-                if res_s <= res:  # the sweeps' residual is ContactProblem.residual's measure
+                if res_s <= res:  # the sweeps' measure is ContactProblem.stop_measure
                     p, res = p_s, res_s
                 if res <= tol:
                     break
             if res > 0.01 * res_failed:  # Newton failed here before: sweeps first gain 100x
                 continue
-            p_n, it, _, msg = newton_solve(pb.W, pb.q, pb.mu, pb.rho, p, tol, self.newton_iter, pb.residual)
+            p_n, it, _, msg = newton_solve(pb.W, pb.q, pb.mu, pb.rho, p, tol, self.newton_iter, pb.stop_measure)
             its += it
-            res_n = pb.residual(p_n)
+            res_n = pb.stop_measure(p_n)
             res_failed = res if res_n > 0.5 * res else np.inf
             if res_n <= res:
                 p, res = p_n, res_n
@@ -532,6 +562,7 @@ class AutoSolver(OneStepSolver):
         self.enum = EnumSolver(residual_tol)
         self.lemke = LemkeSolver(residual_tol)
         self.iterative = NewtonSolver(residual_tol, error_tol=error_tol)
+        self.error_tol = error_tol
         self.fallbacks = 0
         self.core_pivots = 0
 
@@ -560,7 +591,7 @@ class AutoSolver(OneStepSolver):
 
         error_tol = self.iterative.error_tol
         fin = core_pivot_solve(pb, sol.p, error_tol=error_tol or 0.01 * self.residual_tol)
-        if not fin.success or not pb.residual(fin.p) <= 0.1 * self.residual_tol * pb.scale:
+        if not fin.success or not pb.stop_measure(fin.p) <= 0.1 * self.residual_tol * pb.scale:
             return None
         if error_tol is not None and not natural_map_error(pb.W, pb.q, pb.mu, fin.p) <= error_tol:
             return None
