@@ -331,6 +331,22 @@ def _shtp(Cp, Ci, Cx, act, na, m, r, out):
 
 
 @njit(cache=True)
+def _relative_residual(act, na, qi, r, Wp, Wi, Wx, mu, rho):
+    """max over the active contacts of the natural-map residual relative to the contact's own scale
+    (:func:`lcp.nsgs._contact_scale`; ContactProblem.relative_residual)."""
+    rel = 0.0
+    for t in range(na):
+        j = act[t]
+        iN = 2 * j
+        iT = iN + 1
+        uN = qi[iN] + _row_dot(Wp, Wi, Wx, r, iN)
+        uT = qi[iT] + _row_dot(Wp, Wi, Wx, r, iT)
+        c = _contact_residual(r[iN], r[iT], uN, uT, mu[j], rho[iN], rho[iT])
+        rel = max(rel, c / _contact_scale(r[iN], r[iT], qi[iN], qi[iT], rho[iN], rho[iT]))
+    return rel
+
+
+@njit(cache=True)
 def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, max_sweeps, use_enum, blockdiag,
          q, v, cq, cv, loaded, r, istate, fstate, Q, V, PN, PT, MD, imp_t, imp_j, imp_p,
          act, qa, forced, fp, fmd):
@@ -430,6 +446,7 @@ def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, ma
                 if e[act[t]] != 0.0:
                     has_e = True
             scale = 0.0
+            cmin = np.inf  # the smallest contact scale of the free velocities
             for t in range(na):
                 j = act[t]
                 qN = uNf[j]  # H_N v_free, computed by the activation
@@ -438,13 +455,15 @@ def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, ma
                 qT = _row_dot(Hp, Hi, Hx, vfree, m + j)
                 qi[2 * j] = qN
                 qi[2 * j + 1] = qT
-                scale = max(scale, abs(qN) * rho[2 * j], abs(qT) * rho[2 * j + 1])
+                cj = max(abs(qN) * rho[2 * j], abs(qT) * rho[2 * j + 1])
+                scale = max(scale, cj)
+                cmin = min(cmin, cj)
             scale = max(scale, 1e-300)
             tol = 0.1 * res_tol * scale
             rtol = 0.1 * res_tol
             its = 0
             res = 0.0
-            rel = 0.0
+            rel_ok = False
             ok = True
             if forced and k == k0:
                 for t in range(na):
@@ -503,7 +522,6 @@ def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, ma
                         r[iT] = pT
                     if change <= tol or blockdiag:
                         res = 0.0
-                        rel = 0.0
                         for t in range(na):
                             j = act[t]
                             if blockdiag:  # the row's two entries, in CSR's column order
@@ -514,28 +532,28 @@ def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, ma
                                 uT = _row_dot(Wp, Wi, Wx, r, 2 * j + 1)
                             uTs[t] = uT
                             uT = qi[2 * j + 1] + uT
-                            c = _contact_residual(r[2 * j], r[2 * j + 1], uN, uT, mu[j], rho[2 * j], rho[2 * j + 1])
-                            res = max(res, c)
-                            # and contact by contact, on each contact's own scale (lcp.nsgs._contact_scale)
-                            rel = max(rel, c / _contact_scale(r[2 * j], r[2 * j + 1], qi[2 * j], qi[2 * j + 1],
-                                                              rho[2 * j], rho[2 * j + 1]))
-                        if res <= tol and rel <= rtol:
+                            res = max(res, _contact_residual(r[2 * j], r[2 * j + 1], uN, uT, mu[j],
+                                                             rho[2 * j], rho[2 * j + 1]))
+                        # and contact by contact, on each contact's own scale (lcp.nsgs._contact_scale);
+                        # below rtol times the smallest scale of the free velocities it holds already
+                        if res <= tol and (res <= rtol * cmin or _relative_residual(act, na, qi, r, Wp, Wi, Wx, mu, rho)
+                                           <= rtol):
+                            rel_ok = True
                             break
-                if not (res <= tol and rel <= rtol) and change > tol and not blockdiag:
+                if not rel_ok and change > tol and not blockdiag:
                     # the sweeps ran out: the residual of the last one decides (as lcp.nsgs.nsgs_sweeps)
                     res = 0.0
-                    rel = 0.0
                     for t in range(na):
                         j = act[t]
                         uN = qi[2 * j] + _row_dot(Wp, Wi, Wx, r, 2 * j)
                         uT = _row_dot(Wp, Wi, Wx, r, 2 * j + 1)
                         uTs[t] = uT
                         uT = qi[2 * j + 1] + uT
-                        c = _contact_residual(r[2 * j], r[2 * j + 1], uN, uT, mu[j], rho[2 * j], rho[2 * j + 1])
-                        res = max(res, c)
-                        rel = max(rel, c / _contact_scale(r[2 * j], r[2 * j + 1], qi[2 * j], qi[2 * j + 1],
-                                                          rho[2 * j], rho[2 * j + 1]))
-                if not (res <= tol and rel <= rtol):
+                        res = max(res, _contact_residual(r[2 * j], r[2 * j + 1], uN, uT, mu[j],
+                                                         rho[2 * j], rho[2 * j + 1]))
+                    rel_ok = res <= tol and (res <= rtol * cmin
+                                             or _relative_residual(act, na, qi, r, Wp, Wi, Wx, mu, rho) <= rtol)
+                if not rel_ok:
                     ok = False
             if ok and not (forced and k == k0):
                 # modes of the solution (ContactProblem.modes, rtol 1e-9 of each contact's scale);
