@@ -44,7 +44,8 @@ import weakref
 import numpy as np
 
 from .contact_problem import MODE_NAMES, ContactProblem, ModeArray
-from .nsgs import HAVE_NUMBA, _contact_residual, _contact_scale, _row_dot, local_planar, njit
+from .friction_contact import SCALE_FLOOR
+from .nsgs import HAVE_NUMBA, _contact_residual, _contact_scale, _row_absdot, _row_dot, local_planar, njit
 from .projection import violation_function
 from .result import STATUS_MESSAGES, Impact, SimulationResult, SolverStats
 
@@ -331,7 +332,7 @@ def _shtp(Cp, Ci, Cx, act, na, m, r, out):
 
 
 @njit(cache=True)
-def _relative_residual(act, na, qi, r, Wp, Wi, Wx, mu, rho):
+def _relative_residual(act, na, qi, r, Wp, Wi, Wx, mu, rho, floor):
     """max over the active contacts of the natural-map residual relative to the contact's own scale
     (:func:`lcp.nsgs._contact_scale`; ContactProblem.relative_residual)."""
     rel = 0.0
@@ -342,7 +343,9 @@ def _relative_residual(act, na, qi, r, Wp, Wi, Wx, mu, rho):
         uN = qi[iN] + _row_dot(Wp, Wi, Wx, r, iN)
         uT = qi[iT] + _row_dot(Wp, Wi, Wx, r, iT)
         c = _contact_residual(r[iN], r[iT], uN, uT, mu[j], rho[iN], rho[iT])
-        rel = max(rel, c / _contact_scale(r[iN], r[iT], qi[iN], qi[iT], rho[iN], rho[iT]))
+        if c > 0.0:
+            rel = max(rel, c / _contact_scale(r[iN], r[iT], qi[iN], qi[iT], rho[iN], rho[iT],
+                                              _row_absdot(Wp, Wi, Wx, r, iN), _row_absdot(Wp, Wi, Wx, r, iT), floor))
     return rel
 
 
@@ -459,6 +462,8 @@ def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, ma
                 scale = max(scale, cj)
                 cmin = min(cmin, cj)
             scale = max(scale, 1e-300)
+            gfloor = SCALE_FLOOR * scale
+            cmin = max(cmin, gfloor)
             tol = 0.1 * res_tol * scale
             rtol = 0.1 * res_tol
             its = 0
@@ -536,7 +541,7 @@ def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, ma
                                                              rho[2 * j], rho[2 * j + 1]))
                         # and contact by contact, on each contact's own scale (lcp.nsgs._contact_scale);
                         # below rtol times the smallest scale of the free velocities it holds already
-                        if res <= tol and (res <= rtol * cmin or _relative_residual(act, na, qi, r, Wp, Wi, Wx, mu, rho)
+                        if res <= tol and (res <= rtol * cmin or _relative_residual(act, na, qi, r, Wp, Wi, Wx, mu, rho, gfloor)
                                            <= rtol):
                             rel_ok = True
                             break
@@ -552,7 +557,7 @@ def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, ma
                         res = max(res, _contact_residual(r[2 * j], r[2 * j + 1], uN, uT, mu[j],
                                                          rho[2 * j], rho[2 * j + 1]))
                     rel_ok = res <= tol and (res <= rtol * cmin
-                                             or _relative_residual(act, na, qi, r, Wp, Wi, Wx, mu, rho) <= rtol)
+                                             or _relative_residual(act, na, qi, r, Wp, Wi, Wx, mu, rho, gfloor) <= rtol)
                 if not rel_ok:
                     ok = False
             if ok and not (forced and k == k0):
@@ -560,8 +565,14 @@ def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, ma
                 # W_T r from the residual's pass
                 for t in range(na):
                     j = act[t]
+                    if blockdiag:
+                        aN = abs(blocks[j, 0] * r[2 * j]) + abs(blocks[j, 1] * r[2 * j + 1])
+                        aT = abs(blocks[j, 2] * r[2 * j]) + abs(blocks[j, 3] * r[2 * j + 1])
+                    else:
+                        aN = _row_absdot(Wp, Wi, Wx, r, 2 * j)
+                        aT = _row_absdot(Wp, Wi, Wx, r, 2 * j + 1)
                     tol_p = 1e-9 * _contact_scale(r[2 * j], r[2 * j + 1], qi[2 * j], qi[2 * j + 1], rho[2 * j],
-                                                  rho[2 * j + 1])
+                                                  rho[2 * j + 1], aN, aT, gfloor)
                     if use_enum and na == 1:
                         uTs[t] = _row_dot(Wp, Wi, Wx, r, 2 * j + 1)
                     uT = (uTs[t] + qi[2 * j + 1]) * rho[2 * j + 1]

@@ -26,6 +26,7 @@ import math
 import numpy as np
 from ._imports import issparse
 from ._imports import sparse as sp
+from .friction_contact import COUPLING_FLOOR, SCALE_FLOOR
 
 _EPS = float(np.finfo(float).eps)
 
@@ -286,6 +287,8 @@ class ContactProblem:
         new.q = q
         if "_branch_lus" in self.__dict__:  # sparse W: branch factorizations are shared too
             new._branch_lus = self._branch_lus
+        if "_absW" in self.__dict__:
+            new._absW = self._absW
         if self.k == 1:  # floats: cheaper than three NumPy calls on a 2-vector
             qN, qT = q.tolist()
             rN, rT = self.rho.tolist()
@@ -375,7 +378,16 @@ class ContactProblem:
         k = self.k
         aq = np.abs(self.q) * self.rho
         ap = np.abs(p)
-        return np.maximum(np.maximum(aq[:k], aq[k:]), np.maximum(np.maximum(ap[:k], ap[k:]), 1e-300))
+        # at least a fraction of the terms the contact's velocity is summed from: a contact with no
+        # impulse and no free velocity of its own is measured against their rounding
+        ac = COUPLING_FLOOR * self.rho * (self._abs_W() @ ap)
+        s = np.maximum(np.maximum(aq, ap), ac)
+        return np.maximum(np.maximum(s[:k], s[k:]), SCALE_FLOOR * self.scale)
+
+    def _abs_W(self):
+        if "_absW" not in self.__dict__:
+            self._absW = abs(self.W) if issparse(self.W) else np.abs(self.W)
+        return self._absW
 
     def relative_residual(self, p: np.ndarray) -> float:
         """max over contacts of the natural-map residual (:meth:`residual`'s terms) divided by the
@@ -405,9 +417,12 @@ class ContactProblem:
         if k == 1:  # floats, as in residual()
             (W10, W11) = self.W[1].tolist()
             pN, pT = p.tolist()
+            (W00, W01) = self.W[0].tolist()
             qN, qT = self.q.tolist()
             rhoN, rhoT = self.rho.tolist()
-            tol_p = rtol * max(abs(qN) * rhoN, abs(qT) * rhoT, abs(pN), abs(pT), 1e-300)
+            tol_p = rtol * max(abs(qN) * rhoN, abs(qT) * rhoT, abs(pN), abs(pT),
+                               COUPLING_FLOOR * rhoN * (abs(W00 * pN) + abs(W01 * pT)),
+                               COUPLING_FLOOR * rhoT * (abs(W10 * pN) + abs(W11 * pT)), SCALE_FLOOR * self.scale)
             uT = (W10 * pN + W11 * pT + qT) * rhoT
             mode = OPEN if pN <= tol_p else (SLIDE_POS if uT > tol_p else (SLIDE_NEG if uT < -tol_p else STICK))
             return np.array([mode], dtype=np.int8)

@@ -22,7 +22,17 @@ import numpy as np
 from ._imports import issparse
 from ._imports import sparse as sp
 
-__all__ = ["ProblemCheck", "blocked", "check_problem", "interleave", "natural_map_error"]
+#: floor of a contact's impulse scale (:meth:`lcp.contact_problem.ContactProblem.contact_scales`), as
+#: a fraction of rho times the terms its velocity is summed from (the row of |W| |p|): a contact with
+#: (almost) no impulse and no free velocity of its own is measured against the rounding of those
+#: terms, not against nothing
+COUPLING_FLOOR = 1e-2
+#: and as a fraction of the problem's impulse scale: contacts 1e12 below it (a body 1e12 times
+#: lighter than the heaviest) are still solved on their own scale, while a contact that carries
+#: nothing and feels only the 1e-30 impulses of its neighbours is not asked for more than that
+SCALE_FLOOR = 1e-12
+
+__all__ = ["COUPLING_FLOOR", "SCALE_FLOOR", "ProblemCheck", "blocked", "check_problem", "interleave", "natural_map_error"]
 
 
 def interleave(k: int) -> np.ndarray:

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .friction_contact import COUPLING_FLOOR, SCALE_FLOOR
+
 try:  # optional: compiled sweeps
     from numba import njit
 
@@ -88,13 +90,24 @@ def _contact_residual(pN, pT, uN, uT, mu, rhoN, rhoT):
 
 
 @njit(cache=True, inline="always")
-def _contact_scale(pN, pT, qN, qT, rhoN, rhoT):
-    """Impulse scale of one contact: its impulses, or those that would cancel its free velocity.
+def _contact_scale(pN, pT, qN, qT, rhoN, rhoT, aN, aT, floor):
+    """Impulse scale of one contact: its impulses, or those that would cancel its free velocity,
+    at least COUPLING_FLOOR of rho times the terms of its velocity (aN, aT: the rows of |W| |p|)
+    and ``floor`` (SCALE_FLOOR times the problem's scale).
 
     Acceptance and mode thresholds are taken relative to each contact's own scale as well as to
     the problem's: with bodies of very different masses (1e8 apart, say) a tolerance on the heavy
     contacts' scale alone accepts light contacts' impulses with no correct digit."""
-    return max(abs(qN) * rhoN, abs(qT) * rhoT, abs(pN), abs(pT), 1e-300)
+    return max(abs(qN) * rhoN, abs(qT) * rhoT, abs(pN), abs(pT),
+               COUPLING_FLOOR * rhoN * aN, COUPLING_FLOOR * rhoT * aT, floor, 1e-300)
+
+
+@njit(cache=True, inline="always")
+def _row_absdot(indptr, indices, data, x, i):
+    s = 0.0
+    for p in range(indptr[i], indptr[i + 1]):
+        s += abs(data[p] * x[indices[p]])
+    return s
 
 
 @njit(cache=True)
@@ -128,8 +141,11 @@ def stop_measure_interleaved(indptr, indices, data, q, mu, rho, r, rel_scale):
         uT = q[iT] + _row_dot(indptr, indices, data, r, iT)
         c = _contact_residual(r[iN], r[iT], uN, uT, mu[j], rho[iN], rho[iT])
         res = max(res, c)
-        if rel_scale > 0.0:
-            rel = max(rel, c / _contact_scale(r[iN], r[iT], q[iN], q[iT], rho[iN], rho[iT]))
+        if rel_scale > 0.0 and c > 0.0:
+            sc = _contact_scale(r[iN], r[iT], q[iN], q[iT], rho[iN], rho[iT],
+                                _row_absdot(indptr, indices, data, r, iN), _row_absdot(indptr, indices, data, r, iT),
+                                SCALE_FLOOR * rel_scale)
+            rel = max(rel, c / sc)
     return max(res, rel_scale * rel)
 
 

@@ -120,6 +120,12 @@ class OneStepSolver:
                 sol.status = -2
                 sol.message = (f"solver '{self.name}' returned an impulse violating the Coulomb law "
                                f"(residual {sol.residual:.3g})")
+            elif problem.k > 1 and not problem.relative_residual(sol.p) <= self.residual_tol:
+                # one contact's own scale is the problem's; with several, a light body's contacts
+                # must hold the law on theirs (ContactProblem.contact_scales)
+                sol.status = -2
+                sol.message = (f"solver '{self.name}' returned an impulse violating the Coulomb law at a contact's "
+                               f"own scale (relative residual {problem.relative_residual(sol.p):.3g})")
             elif not sol.error <= self.error_target:
                 sol.status = -1
                 sol.message = (f"solver '{self.name}' stopped short: natural-map error {sol.error:.3g} > "
@@ -413,24 +419,32 @@ class _IterativeSolver(OneStepSolver):
         tol = 0.1 * self.residual_tol * pb.scale
         p = None if warm.p is None else warm.p.copy()
         its = 0
-        target = self.error_target
+        target, rtol = self.error_target, 0.1 * self.residual_tol
+        rel, rel_scale = 0.0, 0.0
         for _ in range(4):
-            # res is ContactProblem.stop_measure: every contact is also solved on its own scale,
-            # which can be far below the problem's (bodies of very different masses)
-            p, n, res, msg = self._run(pb, warm.op, p, tol)
+            p, n, res, msg = self._run(pb, warm.op, p, tol, rel_scale)
             its += n
-            # the problem's impulse scale can be far above the impulses at hand (redundant
-            # contacts): the error in Siconos's units decides whether the iteration has finished
-            if res > tol or natural_map_error(pb.W, pb.q, pb.mu, p) <= target:
+            if res > tol:
+                break
+            # the problem's impulse scale can be far above some contacts' impulses (redundant
+            # contacts, bodies of very different masses): the residual contact by contact, on each
+            # contact's own scale, and the error in Siconos's units decide whether it has finished
+            rel = pb.relative_residual(p)
+            if rel > rtol:
+                rel_scale = pb.scale  # go on with ContactProblem.stop_measure: every contact on its own scale
+                continue
+            if natural_map_error(pb.W, pb.q, pb.mu, p) <= target:
                 break
             tol *= 1e-2
         warm.store(p)
         if res > tol:
-            return StepSolution(p, -1, f"{self.name}: {msg}; residual {res:.3g} > tolerance {tol:.3g} "
-                                "(on the problem's scale and each contact's own)", its)
+            return StepSolution(p, -1, f"{self.name}: {msg}; residual {res:.3g} > tolerance {tol:.3g}", its)
+        if not rel <= rtol:
+            return StepSolution(p, -1, f"{self.name}: {msg}; a contact's residual is {rel:.3g} of its own impulse "
+                                f"scale (> {rtol:.3g})", its)
         return StepSolution(p, 0, "solved", its)
 
-    def _run(self, pb, op, p, tol):  # pragma: no cover - abstract
+    def _run(self, pb, op, p, tol, rel_scale):  # pragma: no cover - abstract
         raise NotImplementedError
 
 
@@ -458,11 +472,11 @@ class NsgsSolver(_IterativeSolver):
             raise ValueError(f"max_sweeps must be >= 1, got {max_sweeps!r}")
         self.max_sweeps = int(max_sweeps)
 
-    def _run(self, pb, op, p, tol):
+    def _run(self, pb, op, p, tol, rel_scale):
         from .nsgs import nsgs
 
         r0 = None if p is None else p[op.perm]
-        r, sweeps, res, _ = nsgs(op, pb.q[op.perm], pb.mu, r0, tol, self.max_sweeps, self.compiled, pb.scale)
+        r, sweeps, res, _ = nsgs(op, pb.q[op.perm], pb.mu, r0, tol, self.max_sweeps, self.compiled, rel_scale)
         p = np.empty_like(r)
         p[op.perm] = r
         return p, sweeps, res, f"NSGS stopped after {sweeps} sweeps"
@@ -495,9 +509,12 @@ class NewtonSolver(_IterativeSolver):
             raise ValueError("sweeps must be >= 0, newton_iter and max_rounds >= 1")
         self.sweeps, self.newton_iter, self.max_rounds = int(sweeps), int(newton_iter), int(max_rounds)
 
-    def _run(self, pb, op, p, tol):
+    def _run(self, pb, op, p, tol, rel_scale):
         from .newton import newton_solve
         from .nsgs import nsgs
+
+        # rel_scale > 0: ContactProblem.stop_measure, each contact also on its own scale
+        measure = pb.residual if rel_scale == 0 else pb.stop_measure
 
         p = np.zeros(2 * pb.k) if p is None else p
         res = np.inf  # the sweeps below compute it
@@ -516,25 +533,25 @@ class NewtonSolver(_IterativeSolver):
                 slow = 0
             res_prev = res
             if not self.sweeps and rnd == 0:
-                res = pb.stop_measure(p)
+                res = measure(p)
                 if res <= tol:
                     break
             if self.sweeps:
                 # where Newton stalls (degenerate contacts) NSGS does the work: its share doubles
                 n_sw = self.sweeps * 2 ** min(rnd, 10)
-                r, sw, res_s, _ = nsgs(op, qi, pb.mu, p[op.perm], tol, n_sw, self.compiled, pb.scale)
+                r, sw, res_s, _ = nsgs(op, qi, pb.mu, p[op.perm], tol, n_sw, self.compiled, rel_scale)
                 its += sw
                 p_s = np.empty_like(r)
                 p_s[op.perm] = r
-                if res_s <= res:  # the sweeps' measure is ContactProblem.stop_measure
+                if res_s <= res:  # the sweeps' measure is the same
                     p, res = p_s, res_s
                 if res <= tol:
                     break
             if res > 0.01 * res_failed:  # Newton failed here before: sweeps first gain 100x
                 continue
-            p_n, it, _, msg = newton_solve(pb.W, pb.q, pb.mu, pb.rho, p, tol, self.newton_iter, pb.stop_measure)
+            p_n, it, _, msg = newton_solve(pb.W, pb.q, pb.mu, pb.rho, p, tol, self.newton_iter, measure)
             its += it
-            res_n = pb.stop_measure(p_n)
+            res_n = measure(p_n)
             res_failed = res if res_n > 0.5 * res else np.inf
             if res_n <= res:
                 p, res = p_n, res_n
@@ -591,7 +608,8 @@ class AutoSolver(OneStepSolver):
 
         error_tol = self.iterative.error_tol
         fin = core_pivot_solve(pb, sol.p, error_tol=error_tol or 0.01 * self.residual_tol)
-        if not fin.success or not pb.stop_measure(fin.p) <= 0.1 * self.residual_tol * pb.scale:
+        if (not fin.success or not pb.residual(fin.p) <= 0.1 * self.residual_tol * pb.scale
+                or not pb.relative_residual(fin.p) <= 0.1 * self.residual_tol):
             return None
         if error_tol is not None and not natural_map_error(pb.W, pb.q, pb.mu, fin.p) <= error_tol:
             return None
