@@ -22,6 +22,8 @@ would add a 3 x 3 local solve beside :func:`local_planar` and dispatch on the bl
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .friction_contact import COUPLING_FLOOR, SCALE_FLOOR
@@ -272,3 +274,105 @@ def residual_blocked_csr(indptr, indices, data, q, mu, rho, p):
         uT = q[k + j] + _row_dot(indptr, indices, data, p, k + j)
         res = max(res, _contact_residual(p[j], p[k + j], uN, uT, mu[j], rho[j], rho[k + j]))
     return res
+
+
+@njit(cache=True, inline="always")
+def _contact_checks(pN, pT, uN, uT, qN, qT, mu, rhoN, rhoT, aN, aT, floor):
+    """One contact's terms of ContactProblem.checks: (residual, relative residual, squared
+    natural-map error of lcp.friction_contact.natural_map_error)."""
+    c = _contact_residual(pN, pT, uN, uT, mu, rhoN, rhoT)
+    rel = c / _contact_scale(pN, pT, qN, qT, rhoN, rhoT, aN, aT, floor) if c > 0.0 else 0.0
+    zN = pN - uN - mu * abs(uT)
+    zT = pT - uT
+    az = abs(zT)
+    if az <= mu * zN:
+        xN, xT = zN, zT
+    elif mu * az <= -zN:
+        xN, xT = 0.0, 0.0
+    else:
+        xN = (zN + mu * az) / (1.0 + mu * mu)
+        xT = mu * xN if zT >= 0.0 else -mu * xN
+    return c, rel, (pN - xN) ** 2 + (pT - xT) ** 2
+
+
+@njit(cache=True)
+def checks_blocked_csr(indptr, indices, data, q, mu, rho, p, floor):
+    """(residual, relative residual, natural-map error) of p for a CSR W in blocked order, in one
+    pass (ContactProblem.checks)."""
+    k = mu.size
+    res = 0.0
+    rel = 0.0
+    e2 = 0.0
+    nr = 0.0
+    nu = 0.0
+    nq = 0.0
+    for j in range(k):
+        uN = q[j]
+        aN = 0.0
+        for t in range(indptr[j], indptr[j + 1]):
+            x = data[t] * p[indices[t]]
+            uN += x
+            aN += abs(x)
+        uT = q[k + j]
+        aT = 0.0
+        for t in range(indptr[k + j], indptr[k + j + 1]):
+            x = data[t] * p[indices[t]]
+            uT += x
+            aT += abs(x)
+        c, r, e = _contact_checks(p[j], p[k + j], uN, uT, q[j], q[k + j], mu[j], rho[j], rho[k + j], aN, aT, floor)
+        res = max(res, c)
+        rel = max(rel, r)
+        e2 += e
+        nr += p[j] * p[j] + p[k + j] * p[k + j]
+        nu += uN * uN + uT * uT
+        nq += q[j] * q[j] + q[k + j] * q[k + j]
+    scale = max(math.sqrt(nr), math.sqrt(nu), math.sqrt(nq))
+    err = math.sqrt(e2)
+    return res, rel, err / scale if scale > 2.220446049250313e-16 else err
+
+
+@njit(cache=True)
+def checks_blocked_dense(W, q, mu, rho, p, floor):
+    """:func:`checks_blocked_csr` for a dense W."""
+    k = mu.size
+    n = 2 * k
+    res = 0.0
+    rel = 0.0
+    e2 = 0.0
+    nr = 0.0
+    nu = 0.0
+    nq = 0.0
+    for j in range(k):
+        uN = q[j]
+        uT = q[k + j]
+        aN = 0.0
+        aT = 0.0
+        for i in range(n):
+            x = W[j, i] * p[i]
+            y = W[k + j, i] * p[i]
+            uN += x
+            uT += y
+            aN += abs(x)
+            aT += abs(y)
+        c, r, e = _contact_checks(p[j], p[k + j], uN, uT, q[j], q[k + j], mu[j], rho[j], rho[k + j], aN, aT, floor)
+        res = max(res, c)
+        rel = max(rel, r)
+        e2 += e
+        nr += p[j] * p[j] + p[k + j] * p[k + j]
+        nu += uN * uN + uT * uT
+        nq += q[j] * q[j] + q[k + j] * q[k + j]
+    scale = max(math.sqrt(nr), math.sqrt(nu), math.sqrt(nq))
+    err = math.sqrt(e2)
+    return res, rel, err / scale if scale > 2.220446049250313e-16 else err
+
+
+@njit(cache=True)
+def contact_scales_blocked_csr(indptr, indices, data, q, rho, p, floor):
+    """ContactProblem.contact_scales for a CSR W in blocked order."""
+    k = q.size // 2
+    out = np.empty(k)
+    for j in range(k):
+        aN = _row_absdot(indptr, indices, data, p, j)
+        aT = _row_absdot(indptr, indices, data, p, k + j)
+        out[j] = _contact_scale(p[j], p[k + j], q[j], q[k + j], rho[j], rho[k + j], aN, aT, floor)
+    return out

@@ -110,9 +110,9 @@ class OneStepSolver:
             return StepSolution(np.full(2 * problem.k, np.nan), -3,
                                 f"solver '{self.name}' does not apply to {problem.k} contacts")
         sol = self._solve(problem)
-        sol.error = problem.error(sol.p)
+        res, rel, sol.error = problem.checks(sol.p)
         if sol.success:
-            sol.residual = problem.residual(sol.p)
+            sol.residual = res
             # relative to the impulses at hand: an absolute floor would pass any answer to a problem
             # whose impulses are tiny (a file with |q| ~ 1e-15 once passed with a 38 % error)
             scale = max(problem.scale, float(np.max(np.abs(sol.p))) if sol.p.size else 0.0, 1e-300)
@@ -120,12 +120,12 @@ class OneStepSolver:
                 sol.status = -2
                 sol.message = (f"solver '{self.name}' returned an impulse violating the Coulomb law "
                                f"(residual {sol.residual:.3g})")
-            elif problem.k > 1 and not problem.relative_residual(sol.p) <= self.residual_tol:
+            elif problem.k > 1 and not rel <= self.residual_tol:
                 # one contact's own scale is the problem's; with several, a light body's contacts
                 # must hold the law on theirs (ContactProblem.contact_scales)
                 sol.status = -2
                 sol.message = (f"solver '{self.name}' returned an impulse violating the Coulomb law at a contact's "
-                               f"own scale (relative residual {problem.relative_residual(sol.p):.3g})")
+                               f"own scale (relative residual {rel:.3g})")
             elif not sol.error <= self.error_target:
                 sol.status = -1
                 sol.message = (f"solver '{self.name}' stopped short: natural-map error {sol.error:.3g} > "
@@ -411,8 +411,6 @@ class _IterativeSolver(OneStepSolver):
         self._cache: dict = {}
 
     def _solve(self, pb):
-        from .friction_contact import natural_map_error
-
         warm = _Warm(self, pb)
         # relative to the problem's own impulse scale, so that small-impulse problems (granular
         # files) reach the same normalised error as large ones
@@ -429,11 +427,11 @@ class _IterativeSolver(OneStepSolver):
             # the problem's impulse scale can be far above some contacts' impulses (redundant
             # contacts, bodies of very different masses): the residual contact by contact, on each
             # contact's own scale, and the error in Siconos's units decide whether it has finished
-            rel = pb.relative_residual(p)
+            _, rel, err = pb.checks(p)
             if rel > rtol:
                 rel_scale = pb.scale  # go on with ContactProblem.stop_measure: every contact on its own scale
                 continue
-            if natural_map_error(pb.W, pb.q, pb.mu, p) <= target:
+            if err <= target:
                 break
             tol *= 1e-2
         warm.store(p)
