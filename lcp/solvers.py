@@ -110,7 +110,10 @@ class OneStepSolver:
             return StepSolution(np.full(2 * problem.k, np.nan), -3,
                                 f"solver '{self.name}' does not apply to {problem.k} contacts")
         sol = self._solve(problem)
-        res, rel, sol.error = problem.checks(sol.p)
+        # (the contact-by-contact residual is the iterative solvers' stopping test: an exact
+        # solver's pivoting rounds a contact whose free velocity is 1e-17 of the problem's to zero,
+        # which that test, on the contact's own scale, would call a violation)
+        res, _, sol.error = problem.checks(sol.p)
         if sol.success:
             sol.residual = res
             # relative to the impulses at hand: an absolute floor would pass any answer to a problem
@@ -120,12 +123,6 @@ class OneStepSolver:
                 sol.status = -2
                 sol.message = (f"solver '{self.name}' returned an impulse violating the Coulomb law "
                                f"(residual {sol.residual:.3g})")
-            elif problem.k > 1 and not rel <= self.residual_tol:
-                # one contact's own scale is the problem's; with several, a light body's contacts
-                # must hold the law on theirs (ContactProblem.contact_scales)
-                sol.status = -2
-                sol.message = (f"solver '{self.name}' returned an impulse violating the Coulomb law at a contact's "
-                               f"own scale (relative residual {rel:.3g})")
             elif not sol.error <= self.error_target:
                 sol.status = -1
                 sol.message = (f"solver '{self.name}' stopped short: natural-map error {sol.error:.3g} > "
@@ -606,8 +603,7 @@ class AutoSolver(OneStepSolver):
 
         error_tol = self.iterative.error_tol
         fin = core_pivot_solve(pb, sol.p, error_tol=error_tol or 0.01 * self.residual_tol)
-        if (not fin.success or not pb.residual(fin.p) <= 0.1 * self.residual_tol * pb.scale
-                or not pb.relative_residual(fin.p) <= 0.1 * self.residual_tol):
+        if not fin.success or not pb.residual(fin.p) <= 0.1 * self.residual_tol * pb.scale:
             return None
         if error_tol is not None and not natural_map_error(pb.W, pb.q, pb.mu, fin.p) <= error_tol:
             return None
