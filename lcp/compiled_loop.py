@@ -23,7 +23,9 @@ whole loop runs here as one numba function:
   contacts (each an exact 2 x 2 or sliding-line solve, :func:`lcp.contact_problem.planar_refine`'s
   formulas) until a sweep changes the correction by less than 1e-8 of itself: the correction is of
   the order of the solver's tolerance, so this lands on the branch solution to rounding, as the
-  direct solve does;
+  direct solve does; where the sweeps do not converge (a stack of blocks couples each contact to
+  its neighbours as strongly as to itself) and at most ``BRANCH_DIRECT_MAX`` contacts are active,
+  the branch system is solved directly by elimination;
 - restitution shift, Kahan-compensated sums of v and q, impacts, every ``save_every``-th state
   with its impulses and modes.
 
@@ -56,6 +58,9 @@ __all__ = ["AUTO_MAX_SWEEPS", "BRANCH_MAX_SWEEPS", "applicable", "moreau_jean_lo
 AUTO_MAX_SWEEPS = 500
 #: Gauss-Seidel sweeps of the branch refinement before the step goes to the exact Python solve
 BRANCH_MAX_SWEEPS = 60
+#: largest number of active contacts whose branch system is solved directly where the sweeps
+#: do not converge (a dense elimination, (2 k)^3 / 3 flops); above it the step goes to Python
+BRANCH_DIRECT_MAX = 48
 _EPS = float(np.finfo(float).eps)
 
 # reasons for which the kernel returns before the last step
@@ -313,6 +318,92 @@ def _enum1(W00, W01, W10, W11, qN, qT, mu):
     if sm_ok and (abs(pN_m - pN) + abs(mu * pN_m - pT)) > far:
         nd += 1
     return pN, pT, mode, nd
+
+
+@njit(cache=True)
+def _branch_direct(act, na, md, mu, Wp, Wi, Wx, rloc, dpi):
+    """The branch refinement's linear system solved directly (Gaussian elimination with partial
+    pivoting on the dense system of the closed contacts' unknowns), where Gauss-Seidel sweeps
+    converge too slowly (a stack of blocks: every contact coupled to its neighbours as strongly
+    as to itself). The same equations as the sweeps: a stuck contact cancels its local velocity,
+    a sliding one its normal velocity with p_T = -+mu p_N. Returns False if the system is singular."""
+    m2 = dpi.size
+    col = np.full(m2, -1, dtype=np.int64)  # unknown of each interleaved row (-1: none)
+    sgn = np.zeros(m2)  # factor of the normal unknown in the tangent entry of a sliding contact
+    nu = 0
+    for t in range(na):
+        j = act[t]
+        mo = md[t]
+        if mo == 0:
+            continue
+        col[2 * j] = nu
+        nu += 1
+        if mo == 1:
+            col[2 * j + 1] = nu
+            nu += 1
+        else:
+            sgn[2 * j] = -mu[j] if mo == 2 else mu[j]
+    if nu == 0:
+        return True
+    A = np.zeros((nu, nu))
+    b = np.zeros(nu)
+    for t in range(na):
+        j = act[t]
+        mo = md[t]
+        if mo == 0:
+            continue
+        for comp in range(2 if mo == 1 else 1):
+            row = 2 * j + comp
+            eq = col[row]
+            b[eq] = -rloc[row]
+            for p in range(Wp[row], Wp[row + 1]):
+                c = Wi[p]
+                i = c // 2
+                base = col[2 * i]
+                if base < 0:
+                    continue
+                if c % 2 == 0:
+                    A[eq, base] += Wx[p]
+                elif col[2 * i + 1] >= 0:
+                    A[eq, col[2 * i + 1]] += Wx[p]
+                else:  # sliding: p_T = sgn p_N
+                    A[eq, base] += Wx[p] * sgn[2 * i]
+    for k in range(nu):
+        piv = k
+        big = abs(A[k, k])
+        for r in range(k + 1, nu):
+            if abs(A[r, k]) > big:
+                big = abs(A[r, k])
+                piv = r
+        if big == 0.0:
+            return False
+        if piv != k:
+            for c in range(nu):
+                A[k, c], A[piv, c] = A[piv, c], A[k, c]
+            b[k], b[piv] = b[piv], b[k]
+        for r in range(k + 1, nu):
+            f = A[r, k] / A[k, k]
+            if f != 0.0:
+                for c in range(k, nu):
+                    A[r, c] -= f * A[k, c]
+                b[r] -= f * b[k]
+    for k in range(nu - 1, -1, -1):
+        x = b[k]
+        for c in range(k + 1, nu):
+            x -= A[k, c] * b[c]
+        b[k] = x / A[k, k]
+    for t in range(na):
+        j = act[t]
+        mo = md[t]
+        if mo == 0:
+            continue
+        dpi[2 * j] = b[col[2 * j]]
+        dpi[2 * j + 1] = b[col[2 * j + 1]] if mo == 1 else sgn[2 * j] * b[col[2 * j]]
+    for t in range(na):
+        j = act[t]
+        if not (math.isfinite(dpi[2 * j]) and math.isfinite(dpi[2 * j + 1])):
+            return False
+    return True
 
 
 @njit(cache=True)
@@ -649,7 +740,10 @@ def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, ma
                             j = act[t]
                             dpi[2 * j] = 0.0
                             dpi[2 * j + 1] = 0.0
-                    elif not converged:
+                    elif not converged and na <= BRANCH_DIRECT_MAX and _branch_direct(act, na, md, mu, Wp, Wi, Wx,
+                                                                                 rloc, dpi):
+                        converged = True
+                    if not singular and not converged:
                         ok = False
                         its = -its - 1  # marks the branch sweeps as the cause
                     else:

@@ -197,3 +197,20 @@ def test_failing_step_stops_like_the_python_loop(monkeypatch):
     assert fast.status == slow.status == -1
     assert fast.stats.steps == slow.stats.steps
     assert fast.q.shape == slow.q.shape and np.max(np.abs(fast.q - slow.q)) <= 1e-12
+
+
+@pytest.mark.parametrize("K", [3, 5, 10])
+def test_stack_runs_compiled_with_the_direct_branch_solve(K):
+    """A stack couples every contact to its neighbours as strongly as to itself: the branch
+    refinement's Gauss-Seidel sweeps do not converge in BRANCH_MAX_SWEEPS, and every step used to
+    go to the Python solver (1e5 steps: 15 s, and a drift of the gaps by 1e-19 a step). The direct
+    solve of the branch system keeps the steps compiled and equal to Lemke's."""
+    from lcp.classical import stacked_blocks
+
+    sc = stacked_blocks(K, height=0.1)
+    res = lcp.simulate(sc, 0.5, h=1e-2, solver="auto")
+    ref = lcp.simulate(sc, 0.5, h=1e-2, solver="lemke")
+    assert res.success and ref.success
+    assert res.stats.fallbacks <= 1, res.message  # at most the cold first step, NSGS's 500 sweeps
+    np.testing.assert_allclose(res.q, ref.q, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(res.p_N, ref.p_N, rtol=1e-12, atol=0)
