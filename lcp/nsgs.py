@@ -113,20 +113,6 @@ def _row_absdot(indptr, indices, data, x, i):
 
 
 @njit(cache=True)
-def residual_interleaved(indptr, indices, data, q, mu, rho, r):
-    """max over contacts of the natural-map residual (ContactProblem.residual's measure)."""
-    k = mu.size
-    res = 0.0
-    for j in range(k):
-        iN = 2 * j
-        iT = iN + 1
-        uN = q[iN] + _row_dot(indptr, indices, data, r, iN)
-        uT = q[iT] + _row_dot(indptr, indices, data, r, iT)
-        res = max(res, _contact_residual(r[iN], r[iT], uN, uT, mu[j], rho[iN], rho[iT]))
-    return res
-
-
-@njit(cache=True)
 def stop_measure_interleaved(indptr, indices, data, q, mu, rho, r, rel_scale):
     """max(residual, rel_scale * the largest contact residual relative to its own scale).
 
@@ -149,6 +135,12 @@ def stop_measure_interleaved(indptr, indices, data, q, mu, rho, r, rel_scale):
                                 SCALE_FLOOR * rel_scale)
             rel = max(rel, c / sc)
     return max(res, rel_scale * rel)
+
+
+@njit(cache=True)
+def residual_interleaved(indptr, indices, data, q, mu, rho, r):
+    """max over contacts of the natural-map residual (ContactProblem.residual's measure)."""
+    return stop_measure_interleaved(indptr, indices, data, q, mu, rho, r, 0.0)
 
 
 @njit(cache=True)
@@ -296,9 +288,8 @@ def _contact_checks(pN, pT, uN, uT, qN, qT, mu, rhoN, rhoT, aN, aT, floor):
 
 
 @njit(cache=True)
-def checks_blocked_csr(indptr, indices, data, q, mu, rho, p, floor):
-    """(residual, relative residual, natural-map error) of p for a CSR W in blocked order, in one
-    pass (ContactProblem.checks)."""
+def _checks_from_velocity(q, mu, rho, p, u, a, floor):
+    """ContactProblem.checks from the local velocity u = W p + q and a = |W| |p| (blocked order)."""
     k = mu.size
     res = 0.0
     rel = 0.0
@@ -307,24 +298,13 @@ def checks_blocked_csr(indptr, indices, data, q, mu, rho, p, floor):
     nu = 0.0
     nq = 0.0
     for j in range(k):
-        uN = q[j]
-        aN = 0.0
-        for t in range(indptr[j], indptr[j + 1]):
-            x = data[t] * p[indices[t]]
-            uN += x
-            aN += abs(x)
-        uT = q[k + j]
-        aT = 0.0
-        for t in range(indptr[k + j], indptr[k + j + 1]):
-            x = data[t] * p[indices[t]]
-            uT += x
-            aT += abs(x)
-        c, r, e = _contact_checks(p[j], p[k + j], uN, uT, q[j], q[k + j], mu[j], rho[j], rho[k + j], aN, aT, floor)
+        c, r, e = _contact_checks(p[j], p[k + j], u[j], u[k + j], q[j], q[k + j], mu[j], rho[j], rho[k + j],
+                                  a[j], a[k + j], floor)
         res = max(res, c)
         rel = max(rel, r)
         e2 += e
         nr += p[j] * p[j] + p[k + j] * p[k + j]
-        nu += uN * uN + uT * uT
+        nu += u[j] * u[j] + u[k + j] * u[k + j]
         nq += q[j] * q[j] + q[k + j] * q[k + j]
     scale = max(math.sqrt(nr), math.sqrt(nu), math.sqrt(nq))
     err = math.sqrt(e2)
@@ -332,38 +312,32 @@ def checks_blocked_csr(indptr, indices, data, q, mu, rho, p, floor):
 
 
 @njit(cache=True)
+def checks_blocked_csr(indptr, indices, data, q, mu, rho, p, floor):
+    """(residual, relative residual, natural-map error) of p for a CSR W in blocked order, in one
+    pass over W (ContactProblem.checks)."""
+    n = q.size
+    u = q.copy()
+    a = np.zeros(n)
+    for i in range(n):
+        for t in range(indptr[i], indptr[i + 1]):
+            x = data[t] * p[indices[t]]
+            u[i] += x
+            a[i] += abs(x)
+    return _checks_from_velocity(q, mu, rho, p, u, a, floor)
+
+
+@njit(cache=True)
 def checks_blocked_dense(W, q, mu, rho, p, floor):
     """:func:`checks_blocked_csr` for a dense W."""
-    k = mu.size
-    n = 2 * k
-    res = 0.0
-    rel = 0.0
-    e2 = 0.0
-    nr = 0.0
-    nu = 0.0
-    nq = 0.0
-    for j in range(k):
-        uN = q[j]
-        uT = q[k + j]
-        aN = 0.0
-        aT = 0.0
-        for i in range(n):
-            x = W[j, i] * p[i]
-            y = W[k + j, i] * p[i]
-            uN += x
-            uT += y
-            aN += abs(x)
-            aT += abs(y)
-        c, r, e = _contact_checks(p[j], p[k + j], uN, uT, q[j], q[k + j], mu[j], rho[j], rho[k + j], aN, aT, floor)
-        res = max(res, c)
-        rel = max(rel, r)
-        e2 += e
-        nr += p[j] * p[j] + p[k + j] * p[k + j]
-        nu += uN * uN + uT * uT
-        nq += q[j] * q[j] + q[k + j] * q[k + j]
-    scale = max(math.sqrt(nr), math.sqrt(nu), math.sqrt(nq))
-    err = math.sqrt(e2)
-    return res, rel, err / scale if scale > 2.220446049250313e-16 else err
+    n = q.size
+    u = q.copy()
+    a = np.zeros(n)
+    for i in range(n):
+        for c in range(n):
+            x = W[i, c] * p[c]
+            u[i] += x
+            a[i] += abs(x)
+    return _checks_from_velocity(q, mu, rho, p, u, a, floor)
 
 
 @njit(cache=True)
