@@ -330,12 +330,26 @@ class ContactProblem:
                 W = self.W
                 return float(fast[1](W.indptr, W.indices, W.data, self.q, self.mu, self.rho, p))
             return float(fast[0](self.W, self.q, self.mu, self.rho, p))
+        return float(np.max(self._residual_terms(p)))
+
+    def _residual_terms(self, p: np.ndarray) -> np.ndarray:
+        """Each contact's natural-map residual, max(|r_N|, |r_T|) (NumPy)."""
+        k = self.k
         u = self.velocity(p)
         pN, pT = p[:k], p[k:]
         rN = np.minimum(pN, self.rho[:k] * u[:k])
         s = self.mu * np.maximum(pN, 0.0)
         rT = pT - np.clip(pT - self.rho[k:] * u[k:], -s, s)
-        return float(max(np.max(np.abs(rN)), np.max(np.abs(rT))))
+        return np.maximum(np.abs(rN), np.abs(rT))
+
+    def _scale_one(self, pN: float, pT: float) -> float:
+        """:meth:`contact_scales` of a single contact, in floats."""
+        (W00, W01), (W10, W11) = self.W.tolist()
+        qN, qT = self.q.tolist()
+        rhoN, rhoT = self.rho.tolist()
+        return max(abs(qN) * rhoN, abs(qT) * rhoT, abs(pN), abs(pT),
+                   COUPLING_FLOOR * rhoN * (abs(W00 * pN) + abs(W01 * pT)),
+                   COUPLING_FLOOR * rhoT * (abs(W10 * pN) + abs(W11 * pT)), SCALE_FLOOR * self.scale)
 
     def error(self, p: np.ndarray) -> float:
         """Siconos-normalised natural-map error of p (:func:`lcp.friction_contact.natural_map_error`).
@@ -402,14 +416,7 @@ class ContactProblem:
             res, err = self.residual(p), self.error(p)
             if not res > 0.0:
                 return res, res, err
-            (W00, W01), (W10, W11) = self.W.tolist()
-            qN, qT = self.q.tolist()
-            pN, pT = p.tolist()
-            rhoN, rhoT = self.rho.tolist()
-            sc = max(abs(qN) * rhoN, abs(qT) * rhoT, abs(pN), abs(pT),
-                     COUPLING_FLOOR * rhoN * (abs(W00 * pN) + abs(W01 * pT)),
-                     COUPLING_FLOOR * rhoT * (abs(W10 * pN) + abs(W11 * pT)), SCALE_FLOOR * self.scale)
-            return res, res / sc, err
+            return res, res / self._scale_one(*p.tolist()), err
         fast = _compiled_residual() if self.k > 1 else None
         if fast is not None and p.dtype == np.float64 and p.shape == (2 * self.k,) and np.all(np.isfinite(p)):
             floor = SCALE_FLOOR * self.scale
@@ -429,18 +436,14 @@ class ContactProblem:
             return 0.0
         if not np.all(np.isfinite(p)):
             return float("nan")
-        u = self.velocity(p)
-        pN, pT = p[:k], p[k:]
-        rN = np.minimum(pN, self.rho[:k] * u[:k])
-        s = self.mu * np.maximum(pN, 0.0)
-        rT = pT - np.clip(pT - self.rho[k:] * u[k:], -s, s)
-        return float(np.max(np.maximum(np.abs(rN), np.abs(rT)) / self.contact_scales(p)))
+        return float(np.max(self._residual_terms(p) / self.contact_scales(p)))
 
     def stop_measure(self, p: np.ndarray) -> float:
         """The iterative solvers' stopping measure: max(:meth:`residual`, scale *
         :meth:`relative_residual`). Below ``tol_rel * scale`` it says that the residual meets
         tol_rel on the problem's scale and every contact meets it on its own."""
-        return max(self.residual(p), self.scale * self.relative_residual(p))
+        res, rel, _ = self.checks(p)
+        return max(res, self.scale * rel)
 
     def modes(self, p: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
         """Mode of each contact in the solution p (OPEN, STICK, SLIDE_POS, SLIDE_NEG), with
@@ -449,13 +452,8 @@ class ContactProblem:
         if k == 1:  # floats, as in residual()
             (W10, W11) = self.W[1].tolist()
             pN, pT = p.tolist()
-            (W00, W01) = self.W[0].tolist()
-            qN, qT = self.q.tolist()
-            rhoN, rhoT = self.rho.tolist()
-            tol_p = rtol * max(abs(qN) * rhoN, abs(qT) * rhoT, abs(pN), abs(pT),
-                               COUPLING_FLOOR * rhoN * (abs(W00 * pN) + abs(W01 * pT)),
-                               COUPLING_FLOOR * rhoT * (abs(W10 * pN) + abs(W11 * pT)), SCALE_FLOOR * self.scale)
-            uT = (W10 * pN + W11 * pT + qT) * rhoT
+            tol_p = rtol * self._scale_one(pN, pT)
+            uT = (W10 * pN + W11 * pT + float(self.q[1])) * float(self.rho[1])
             mode = OPEN if pN <= tol_p else (SLIDE_POS if uT > tol_p else (SLIDE_NEG if uT < -tol_p else STICK))
             return np.array([mode], dtype=np.int8)
         tol_p = rtol * self.contact_scales(p)
