@@ -119,14 +119,19 @@ class StepAssembly:
         from scipy.sparse.linalg import LinearOperator, splu
 
         sys_, n, m = self.sys, self.n, self.m
-        A, K, C, H, gap, F0 = _sparse_step_data(sys_)
+        # the mass check found A's blocks already; with no damping or stiffness they are W_h's, and
+        # A itself is not needed (each SciPy matrix built costs tens of microseconds on a fresh system)
+        blocks = sys_.mass_blocks
+        A, K, C, H, gap, F0 = _sparse_step_data(sys_, need_mass=blocks is None)
+        if K is not None or C is not None:
+            blocks = None
+            if A is None:
+                A = sys_.sparse_mass(np.zeros(n))
         Wh = A
-        if C.nnz:
+        if C is not None:
             Wh = Wh + (h * th) * C
-        if K.nnz:
+        if K is not None:
             Wh = Wh + (h * th) ** 2 * K
-        # the mass check found A's blocks already; with no damping or stiffness they are W_h's
-        blocks = sys_.mass_blocks if not (C.nnz or K.nnz) else None
         try:
             Sblk = block_inverse(Wh, blocks)
         except np.linalg.LinAlgError:
@@ -138,6 +143,8 @@ class StepAssembly:
             SHt = Sblk @ H.T
             SHt.eliminate_zeros()
         else:
+            if Wh is None:
+                Wh = sys_.sparse_mass(np.zeros(n))
             Ht = H.T.tocsc()
             try:
                 lu = splu(Wh.tocsc())
@@ -158,14 +165,13 @@ class StepAssembly:
         Hr = H.tocsr()
         self.SHt, self.H = SHt, _LeadingRows(Hr, m)
         self.W = (Hr @ SHt).tocsr()
-        self._HN = self.H[:m]
         self.gap0 = gap
         self.F0 = F0
         # no stiffness or damping (the common case): one empty matrix for all three
-        zero = sp.csr_matrix((n, n)) if not (K.nnz and C.nnz) else None
-        self.Kq = -K.tocsr() if K.nnz else zero
-        self.Cv = -C.tocsr() if C.nnz else zero
-        self._hhK = (h * h * th) * self.Kq if K.nnz else zero
+        zero = _empty_csr(n) if K is None or C is None else None
+        self.Kq = -K.tocsr() if K is not None else zero
+        self.Cv = -C.tocsr() if C is not None else zero
+        self._hhK = (h * h * th) * self.Kq if K is not None else zero
         self.G, self.phi_t = np.zeros((0, n)), np.zeros(0)
         self.force_constant = not sys_.force_depends_on_state
         self.dv_const = (self._solve(h * self.F0) if self.constant and self.force_constant and not self.Kq.nnz
@@ -211,7 +217,7 @@ class StepAssembly:
 
     def _at_sparse(self, t, q, v):
         """:meth:`at` of the sparse assembly: the factors of W_h instead of S, no matrix rebuilt."""
-        gap = self.gap0 + self._HN @ q
+        gap = self.gap0 + self.H[: self.m] @ q
         if self.dv_const is not None:
             return self.dv_const, self.SHt, self.W, gap, self.H
         h, th = self.h, self.theta
@@ -240,9 +246,11 @@ class StepAssembly:
         return S @ (B @ self.schedule.impulse(t, t + h) - seen)
 
 
-def _sparse_step_data(system):
+def _sparse_step_data(system, need_mass: bool = True):
     """(A, K, C, H, gap, F) of a system with constant matrices at (0, 0, 0): A, K = -dF/dq,
     C = -dF/dv and H as SciPy CSC matrices of their nonzeros, the gaps and forces as arrays.
+    K and C are None when structurally empty (no springs, no damping: the usual case), and A is
+    None when not ``need_mass`` (the caller has the mass matrix's blocks from the check already).
 
     Structurally sparse outputs are read straight from :attr:`lcp.system.System.step_data_fn`'s
     buffers; a structurally dense one (a mass matrix written as a dense array has n^2 structural
@@ -259,6 +267,9 @@ def _sparse_step_data(system):
         evaluate_into(fn, [np.zeros(1), z, z], bufs)
         out = []
         for i in parts:
+            if (i == 0 and not need_mass) or (i in (2, 3) and not np.any(bufs[i])):
+                out.append(None)  # all zero: no matrix to build (the caller tests for None)
+                continue
             colind, row = sps[i].get_ccs()
             M = sp.csc_matrix((bufs[i], np.array(row, dtype=np.int32), np.array(colind, dtype=np.int32)),
                               shape=sps[i].shape)
@@ -278,7 +289,22 @@ def _sparse_step_data(system):
         r, c = x.sparsity().get_triplet()
         return sp.csc_matrix((np.array(x.nonzeros(), dtype=float), (r, c)), shape=x.shape)
 
-    return csc(A), csc(K), csc(C), csc(H), np.array(gap, dtype=float).ravel(), system.force(np.zeros(n), np.zeros(n))
+    K, C = csc(K), csc(C)
+    return (csc(A), K if np.any(K.data) else None, C if np.any(C.data) else None, csc(H), np.array(gap, dtype=float).ravel(),
+            system.force(np.zeros(n), np.zeros(n)))
+
+
+_EMPTY = {}
+
+
+def _empty_csr(n):
+    """An n x n CSR matrix of no entries, shared by size (read only: it stands for absent springs
+    and dampers, and building one costs as much as the rest of a small set-up step)."""
+    if n not in _EMPTY:
+        if len(_EMPTY) > 64:
+            _EMPTY.clear()
+        _EMPTY[n] = sp.csr_matrix((n, n))
+    return _EMPTY[n]
 
 
 _LEADING_ROWS = []
@@ -294,11 +320,13 @@ def _LeadingRows(A, m):
             def __init__(self, A, m):
                 super().__init__(A)
                 self._m = m
-                self._lead = sp.csr_matrix(A[:m])
+                self._lead = None  # sliced on first use (the compiled loop never asks)
 
             def __getitem__(self, key):
                 if (isinstance(key, slice) and key.start in (None, 0) and key.step in (None, 1)
                         and key.stop == self._m):
+                    if self._lead is None:
+                        self._lead = sp.csr_matrix(sp.csr_matrix(self)[: self._m])
                     return self._lead
                 return sp.csr_matrix(self).__getitem__(key)
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from ._imports import sparse as sp
 
-__all__ = ["BLOCK_MAX", "block_inverse", "diagonal_blocks"]
+__all__ = ["BLOCK_MAX", "block_inverse", "compressed_diagonal_blocks", "diagonal_blocks"]
 
 #: largest diagonal block handled densely
 BLOCK_MAX = 32
@@ -40,34 +40,36 @@ def diagonal_blocks(A, max_size: int = BLOCK_MAX):
     >>> [(idx.tolist(), B.tolist()) for idx, B in diagonal_blocks(A)]
     [([[1]], [[[3.0]]]), ([[0, 2]], [[[2.0, 1.0], [1.0, 4.0]]])]
     """
-    from scipy.sparse.csgraph import connected_components
+    if A.format == "csc":  # read as the CSR arrays of A', without a conversion
+        return compressed_diagonal_blocks(A.shape[0], A.indptr, A.indices, A.data, True, max_size)
+    A = A.tocsr()
+    return compressed_diagonal_blocks(A.shape[0], A.indptr, A.indices, A.data, False, max_size)
 
-    n = A.shape[0]
+
+def compressed_diagonal_blocks(n, ptr, inner, vals, by_columns: bool, max_size: int = BLOCK_MAX):
+    """:func:`diagonal_blocks` of the n x n matrix given by its compressed arrays: CSC (column
+    pointers, row indices) when ``by_columns``, else CSR. A fresh system's check passes CasADi's
+    arrays here directly: a SciPy matrix built only to be read costs more than the search."""
     if n == 0:
         return []
-    if A.format == "csc":  # read as the CSR arrays of A', without a conversion
-        ptr, inner, vals, transposed = A.indptr, A.indices, A.data, True
-        graph = sp.csr_matrix((vals, inner, ptr), shape=A.shape)  # A': the same components
-    else:
-        A = A.tocsr()
-        ptr, inner, vals, transposed, graph = A.indptr, A.indices, A.data, False, A
-    n_comp, label = connected_components(graph, directed=False)
-    sizes = np.bincount(label, minlength=n_comp)
-    if sizes.max() > max_size:
-        return None
-    order = np.argsort(label, kind="stable")  # the members of each block, block by block, increasing
+    rows = np.repeat(np.arange(n), np.diff(ptr))
+    cols = inner
+    if by_columns:
+        rows, cols = cols, rows
+    found = _contiguous_blocks(n, rows, cols, max_size)
+    if found is None:
+        found = _components(n, ptr, inner, vals, max_size)
+        if found is None:
+            return None
+    label, sizes, order = found
     starts = np.concatenate([[0], np.cumsum(sizes)])
     pos = np.empty(n, dtype=np.int64)
     pos[order] = np.arange(n) - np.repeat(starts[:-1], sizes)  # place of each row in its block
-    rows = np.repeat(np.arange(n), np.diff(ptr))
-    cols = inner
-    if transposed:
-        rows, cols = cols, rows
     out = []
     size_of_entry = sizes[label[rows]]
     for size in np.unique(sizes).tolist():
         comps = np.flatnonzero(sizes == size)
-        slot = np.empty(n_comp, dtype=np.int64)
+        slot = np.empty(sizes.size, dtype=np.int64)
         slot[comps] = np.arange(comps.size)  # the place of each component among blocks of this size
         idx = order[starts[comps][:, None] + np.arange(size)[None, :]]
         B = np.zeros((comps.size, size, size))
@@ -79,13 +81,50 @@ def diagonal_blocks(A, max_size: int = BLOCK_MAX):
     return out
 
 
+def _contiguous_blocks(n, rows, cols, max_size):
+    """(label, sizes, order) when the components of A's graph are intervals of consecutive rows
+    (the usual numbering: each body's coordinates together), found in O(nnz) without a graph
+    search (bodies of one or two coordinates: particles, the reduced Jean-Pratt system); else None.
+    Each interval closes where no entry of its rows reaches beyond it; the labels are then checked
+    on every entry, so an entry that joins two intervals sends the caller to the graph search."""
+    if rows.size == 0:
+        return None
+    reach = np.arange(n)
+    np.maximum.at(reach, rows, cols)
+    np.maximum.at(reach, cols, rows)
+    reach = np.maximum.accumulate(reach)
+    ends = reach == np.arange(n)
+    label = np.cumsum(ends) - ends  # the interval of each row
+    if not np.array_equal(label[rows], label[cols]):
+        return None
+    sizes = np.bincount(label)
+    # an interval of two rows is linked by the entry that opened it; a longer one may hold several
+    # components (a zero pattern inside it), whose blocks the graph search finds
+    if sizes.max() > min(2, max_size):
+        return None
+    return label, sizes, np.arange(n)
+
+
+def _components(n, ptr, inner, vals, max_size):
+    """(label, sizes, order) of the connected components of A's graph, or None past max_size."""
+    from scipy.sparse.csgraph import connected_components
+
+    graph = sp.csr_matrix((vals, inner, ptr), shape=(n, n))  # A or A': the same components
+    n_comp, label = connected_components(graph, directed=False)
+    sizes = np.bincount(label, minlength=n_comp)
+    if sizes.max() > max_size:
+        return None
+    return label, sizes, np.argsort(label, kind="stable")  # the members of each block, block by block, increasing
+
+
 def block_inverse(A, blocks=None):
     """A^-1 as a sparse matrix when A is block diagonal (up to a permutation) with blocks of at most
     :data:`BLOCK_MAX` rows, else None.
 
     Parameters
     ----------
-    A : scipy.sparse matrix, shape (n, n)
+    A : scipy.sparse matrix, shape (n, n), or None
+        None when ``blocks`` are given (every row is in one of them).
     blocks : list, optional
         A's :func:`diagonal_blocks`, when the caller has them already.
 
@@ -97,7 +136,7 @@ def block_inverse(A, blocks=None):
     >>> np.allclose(block_inverse(A) @ A.toarray(), np.eye(3))
     True
     """
-    n = A.shape[0]
+    n = A.shape[0] if A is not None else sum(idx.size for idx, _ in blocks)
     if blocks is None:
         blocks = diagonal_blocks(A)
     if not blocks:

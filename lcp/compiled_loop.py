@@ -92,21 +92,37 @@ def _csr(A):
         indptr = np.zeros(A.shape[0] + 1, dtype=np.int64)
         np.cumsum(np.bincount(rows, minlength=A.shape[0]), out=indptr[1:])
         return indptr, cols.astype(np.int64), A[rows, cols]
-    import scipy.sparse as sp
-
-    A = A.tocsr()
-    # a plain CSR copy built from the arrays (A may be a csr_matrix subclass whose copy() fails)
-    M = sp.csr_matrix((np.array(A.data, dtype=float), A.indices.copy(), A.indptr.copy()), shape=A.shape)
-    M.eliminate_zeros()
-    M.sort_indices()
-    return M.indptr.astype(np.int64), M.indices.astype(np.int64), M.data
+    return _compressed(A.tocsr())
 
 
 def _csc(A):
     """(indptr, indices, data) of A in CSC."""
     if not hasattr(A, "tocsc"):
         return _csr(np.asarray(A, dtype=float).T)
-    return _csr(A.T)
+    return _compressed(A.tocsc())
+
+
+def _compressed(M):
+    """The compressed arrays (pointers, indices, values; int64, float) of a CSR or CSC matrix, copied,
+    exact zeros dropped and indices sorted."""
+    if not (M.has_sorted_indices and M.data.dtype == np.float64):
+        import scipy.sparse as sp
+
+        # a plain copy built from the arrays (M may be a subclass whose copy() fails), sorted
+        cls = sp.csr_matrix if M.format == "csr" else sp.csc_matrix
+        M = cls((np.array(M.data, dtype=float), M.indices.copy(), M.indptr.copy()), shape=M.shape)
+        M.sort_indices()
+    # sorted (what every assembly here builds): the arrays themselves, without SciPy's
+    # constructors (the largest part of this conversion's cost otherwise)
+    ptr, idx, val = M.indptr, M.indices, M.data
+    keep = val != 0.0
+    pointers = np.zeros(ptr.size, dtype=np.int64)
+    if keep.all():
+        np.copyto(pointers, ptr)
+        return pointers, idx.astype(np.int64), val.copy()
+    major = np.repeat(np.arange(ptr.size - 1), np.diff(ptr))
+    np.cumsum(np.bincount(major[keep], minlength=ptr.size - 1), out=pointers[1:])
+    return pointers, idx[keep].astype(np.int64), val[keep]
 
 
 def _empty_csr(rows):
@@ -198,14 +214,13 @@ def _pack_new(asm):
         Gc = _csr(asm.G) if nb else e0
         fv = (z, np.asarray(asm.F0, dtype=float).ravel(), *_csr(Kq), *_csr(Cv), *_csr(hK), *S, *lu, *Tc, *Gc,
               np.asarray(asm.phi_t, dtype=float).ravel() if nb else z)
-    H = asm.H
-    HN = H[:m]
-    absHN = abs(HN) if hasattr(HN, "tocsr") else np.abs(HN)
+    Hp, Hi, Hx = _csr(asm.H)
+    end = Hp[m]  # |H_N|: the leading m rows of H's CSR arrays
     gap0 = np.asarray(asm.gap0, dtype=float).ravel()
     sysm = asm.sys
     Wp, Wi, Wx, blocks, rho = _interleaved(asm.W, m)
-    ct = (*_csr(H), *_csr(absHN), np.abs(gap0), gap0, *_csc(asm.SHt), Wp, Wi, Wx, blocks, rho,
-          np.asarray(sysm.mu, dtype=float), np.asarray(sysm.e, dtype=float))
+    ct = (Hp, Hi, Hx, Hp[:m + 1].copy(), Hi[:end].copy(), np.abs(Hx[:end]), np.abs(gap0), gap0, *_csc(asm.SHt),
+          Wp, Wi, Wx, blocks, rho, np.asarray(sysm.mu, dtype=float), np.asarray(sysm.e, dtype=float))
     # no operator entry couples two contacts: one sweep solves every local problem exactly
     blockdiag = bool(np.all(Wi // 2 == np.repeat(np.arange(Wp.size - 1) // 2, np.diff(Wp))))
     return mode, fv, ct, blockdiag
@@ -240,7 +255,7 @@ def _lu_solve(Lp, Li, Lx, Ld, Up, Ui, Ux, Ud, perm_r, perm_c, b, work, out):
         out[a] = work[perm_c[a]]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _free_dv(mode, fv, h, th, q, v, dvf, rhs, t1, t2):
     """dv_free of StepAssembly.at for a constant system, into ``dvf``."""
     (dv_const, F0, Kp, Ki, Kx, Cp, Ci, Cx, hKp, hKi, hKx, Sp, Si, Sx,
@@ -455,6 +470,7 @@ def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, ma
     takes the impulses ``fp`` (blocked over all contacts) and modes ``fmd`` instead of solving.
     """
     (Hp, Hi, Hx, aHp, aHi, aHx, absg0, gap0, Cp, Ci, Cx, Wp, Wi, Wx, blocks, rho, mu, e) = ct
+    dv_const = fv[0]
     n = q.size
     m = mu.size
     dvf = np.empty(n)
@@ -484,7 +500,11 @@ def _run(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, ma
         if istate[11] + m > cap:
             return k, _BUFFER_FULL
         tk = k * h
-        _free_dv(mode, fv, h, th, q, v, dvf, rhs, t1, t2)
+        if mode == 0:  # constant: copied here (a call that takes fv costs more than the copy)
+            for a in range(n):
+                dvf[a] = dv_const[a]
+        else:
+            _free_dv(mode, fv, h, th, q, v, dvf, rhs, t1, t2)
         for a in range(n):
             vfree[a] = v[a] + dvf[a]
         # activation (lcp.timestepping._Activation): the same sums in the same order

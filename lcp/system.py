@@ -440,25 +440,32 @@ class System:
         eigenvalues (n <= 200) are those of the blocks and the Cholesky factorization of A - s I
         (larger n) is that of each block (batched), so the dense matrix is never formed and the
         verdicts are the dense test's; otherwise the dense test. A constant mass matrix keeps its
-        blocks (:attr:`mass_blocks`): the sparse assembly inverts them instead of finding them again."""
-        from .block_diagonal import diagonal_blocks
+        blocks (:attr:`mass_blocks`): the sparse assembly inverts them instead of finding them again.
+        Everything is read from CasADi's compressed arrays (no SciPy matrix unless the blocks are
+        large): on a fresh system the conversions would cost more than the test."""
+        from .block_diagonal import compressed_diagonal_blocks
 
         n = self.n
-        A = self.sparse_mass(q0, t0)
-        if not np.all(np.isfinite(A.data)):
+        data, row, colind = self._mass_ccs_values(q0, t0)
+        if not np.all(np.isfinite(data)):
             raise ValueError("mass matrix is not finite at q0")
-        scale = max(1.0, float(np.max(np.abs(A.data), initial=0.0)))
+        scale = max(1.0, float(np.max(np.abs(data), initial=0.0)))
         # symmetry on the nonzeros: CCS order sorts the keys col * n + row, so each entry's mirror
         # (row * n + col) is found by bisection; a missing mirror is a zero
-        col = np.repeat(np.arange(n), np.diff(A.indptr))
-        keys = col * n + A.indices
-        at = np.minimum(np.searchsorted(keys, A.indices * n + col), keys.size - 1)
-        mirror = np.where(keys[at] == A.indices * n + col, A.data[at], 0.0)
-        if np.max(np.abs(A.data - mirror), initial=0.0) > 1e-12 * scale:
+        col = np.repeat(np.arange(n), np.diff(colind))
+        row64 = row.astype(np.int64)  # row * n in int32 would overflow past 46340 coordinates
+        keys = col * n + row64
+        mkeys = row64 * n + col
+        at = np.minimum(np.searchsorted(keys, mkeys), keys.size - 1)
+        mirror = np.where(keys[at] == mkeys, data[at], 0.0)
+        if np.max(np.abs(data - mirror), initial=0.0) > 1e-12 * scale:
             raise ValueError("mass matrix must be symmetric")
-        shift = 1e-14 * max(1.0, float(np.max(np.bincount(A.indices, np.abs(A.data), minlength=n), initial=0.0)))
-        blocks = diagonal_blocks(A)
+        shift = 1e-14 * max(1.0, float(np.max(np.bincount(row, np.abs(data), minlength=n), initial=0.0)))
+        blocks = compressed_diagonal_blocks(n, colind, row, data, True)
         if blocks is None:
+            from scipy.sparse import csc_matrix
+
+            A = csc_matrix((data, row, colind), shape=(n, n))
             As = 0.5 * (A + A.T)
             _check_definite([As.toarray()], n, shift)
             return
@@ -489,6 +496,11 @@ class System:
         """
         from scipy.sparse import csc_matrix
 
+        data, row, colind = self._mass_ccs_values(q, t)
+        return csc_matrix((data, row, colind), shape=(self.n, self.n))
+
+    def _mass_ccs_values(self, q, t):
+        """(nonzeros, row indices, column pointers) of A(t, q), CasADi's CCS arrays (int32 indices)."""
         sparsity = self.mass_fn.sparsity_out(0)
         if "_mass_ccs" not in self.__dict__:
             colind, row = sparsity.get_ccs()
@@ -496,7 +508,7 @@ class System:
         data = np.empty(sparsity.nnz())
         evaluate_into(self.mass_fn, [np.array([float(t)]), np.asarray(q, dtype=float)], [data])
         row, colind = self._mass_ccs
-        return csc_matrix((data, row, colind), shape=(self.n, self.n))
+        return data, row, colind
 
 
 def evaluate_into(fn: ca.Function, args, results) -> None:
