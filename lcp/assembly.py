@@ -122,7 +122,14 @@ class StepAssembly:
         # the mass check found A's blocks already; with no damping or stiffness they are W_h's, and
         # A itself is not needed (each SciPy matrix built costs tens of microseconds on a fresh system)
         blocks = sys_.mass_blocks
-        A, K, C, H, gap, F0 = _sparse_step_data(sys_, need_mass=blocks is None)
+        compiled = blocks is not None and _have_numba()
+        A, K, C, H, gap, F0 = _sparse_step_data(sys_, need_mass=blocks is None, h_arrays=compiled)
+        if compiled and K is None and C is None:
+            return self._init_blocks(h, blocks, H, gap, F0)
+        if compiled:  # springs or dampers after all: the SciPy route below
+            Hc, Hr_, Hv = H
+            H = sp.csc_matrix((Hv, Hr_, Hc), shape=(self.rows, n))
+            H.eliminate_zeros()
         if K is not None or C is not None:
             blocks = None
             if A is None:
@@ -176,6 +183,51 @@ class StepAssembly:
         self.force_constant = not sys_.force_depends_on_state
         self.dv_const = (self._solve(h * self.F0) if self.constant and self.force_constant and not self.Kq.nnz
                          else None)
+
+    def _init_blocks(self, h, blocks, H, gap, F0):
+        """The constant data of independent bodies without springs or dampers (W_h = A, block
+        diagonal), computed by :mod:`lcp.block_products` on compressed arrays: the same numbers as
+        :meth:`_init_sparse`'s SciPy route, to the last bit. The SciPy matrices (S, S H', W, H)
+        are built on first use only; the compiled loop reads :attr:`arrays` instead."""
+        from .block_diagonal import block_inverse_arrays
+        from .block_products import block_products, csr_matvec
+
+        n, m, rows = self.n, self.m, self.rows
+        try:
+            Sx, Si, Sp = block_inverse_arrays(blocks, n)
+        except np.linalg.LinAlgError:
+            raise FloatingPointError("singular iteration matrix: a block of the mass matrix is singular") from None
+        Hc, Hrow, Hv = H
+        Hcsr, SHt, W, SHt_csc = block_products(n, rows, Sp, Si, Sx, Hc, Hrow, np.asarray(Hv, dtype=float))
+        if not np.all(np.isfinite(SHt[2])):
+            raise FloatingPointError("singular iteration matrix: the mass matrix is singular")
+        #: compressed arrays (pointers, indices, values) of H and W (CSR) and S H' (CSC)
+        self.arrays = {"H": Hcsr, "W": W, "SHt_csc": SHt_csc}
+        self._lu = None
+        self.T = np.zeros((n, 0))
+        self.gap0, self.F0 = gap, F0
+        zero = _empty_csr(n)
+        self.Kq = self.Cv = self._hhK = zero
+        self.G, self.phi_t = np.zeros((0, n)), np.zeros(0)
+        self.force_constant = not self.sys.force_depends_on_state
+        self._solve = lambda x: csr_matvec(Sp, Si, Sx, np.ascontiguousarray(x, dtype=float))
+        self.dv_const = self._solve(h * self.F0) if self.constant and self.force_constant else None
+        csr = sp.csr_matrix
+        self._lazy = {
+            "S": lambda: csr((Sx, Si, Sp), shape=(n, n)),
+            "SHt": lambda: csr((SHt[2], SHt[1], SHt[0]), shape=(n, rows)),
+            "W": lambda: csr((W[2], W[1], W[0]), shape=(rows, rows)),
+            "H": lambda: _LeadingRows(csr((Hcsr[2], Hcsr[1], Hcsr[0]), shape=(rows, n)), m),
+        }
+
+    def __getattr__(self, name):
+        # the SciPy matrices of _init_blocks, built on first use
+        lazy = self.__dict__.get("_lazy")
+        if lazy is not None and name in lazy:
+            value = lazy.pop(name)()
+            setattr(self, name, value)
+            return value
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def _eval(self, t, q, v):
         """CasADi's one-step data (System.one_step_fn) as NumPy arrays, checked."""
@@ -246,11 +298,13 @@ class StepAssembly:
         return S @ (B @ self.schedule.impulse(t, t + h) - seen)
 
 
-def _sparse_step_data(system, need_mass: bool = True):
+def _sparse_step_data(system, need_mass: bool = True, h_arrays: bool = False):
     """(A, K, C, H, gap, F) of a system with constant matrices at (0, 0, 0): A, K = -dF/dq,
     C = -dF/dv and H as SciPy CSC matrices of their nonzeros, the gaps and forces as arrays.
     K and C are None when structurally empty (no springs, no damping: the usual case), and A is
     None when not ``need_mass`` (the caller has the mass matrix's blocks from the check already).
+    With ``h_arrays`` H comes as CasADi's compressed-column arrays (pointers, rows, values) instead
+    of a SciPy matrix.
 
     Structurally sparse outputs are read straight from :attr:`lcp.system.System.step_data_fn`'s
     buffers; a structurally dense one (a mass matrix written as a dense array has n^2 structural
@@ -271,6 +325,9 @@ def _sparse_step_data(system, need_mass: bool = True):
                 out.append(None)  # all zero: no matrix to build (the caller tests for None)
                 continue
             colind, row = sps[i].get_ccs()
+            if i == 7 and h_arrays:
+                out.append((np.array(colind, dtype=np.int64), np.array(row, dtype=np.int64), bufs[i]))
+                continue
             M = sp.csc_matrix((bufs[i], np.array(row, dtype=np.int32), np.array(colind, dtype=np.int32)),
                               shape=sps[i].shape)
             M.eliminate_zeros()
@@ -289,9 +346,17 @@ def _sparse_step_data(system, need_mass: bool = True):
         r, c = x.sparsity().get_triplet()
         return sp.csc_matrix((np.array(x.nonzeros(), dtype=float), (r, c)), shape=x.shape)
 
-    K, C = csc(K), csc(C)
-    return (csc(A), K if np.any(K.data) else None, C if np.any(C.data) else None, csc(H), np.array(gap, dtype=float).ravel(),
+    K, C, H = csc(K), csc(C), csc(H)
+    if h_arrays:
+        H = (H.indptr.astype(np.int64), H.indices.astype(np.int64), H.data)
+    return (csc(A), K if np.any(K.data) else None, C if np.any(C.data) else None, H, np.array(gap, dtype=float).ravel(),
             system.force(np.zeros(n), np.zeros(n)))
+
+
+def _have_numba() -> bool:
+    from .nsgs import HAVE_NUMBA
+
+    return HAVE_NUMBA
 
 
 _EMPTY = {}

@@ -13,7 +13,7 @@ import numpy as np
 
 from ._imports import sparse as sp
 
-__all__ = ["BLOCK_MAX", "block_inverse", "compressed_diagonal_blocks", "diagonal_blocks"]
+__all__ = ["BLOCK_MAX", "block_inverse", "block_inverse_arrays", "compressed_diagonal_blocks", "diagonal_blocks"]
 
 #: largest diagonal block handled densely
 BLOCK_MAX = 32
@@ -141,6 +141,13 @@ def block_inverse(A, blocks=None):
         blocks = diagonal_blocks(A)
     if not blocks:
         return None
+    data, indices, indptr = block_inverse_arrays(blocks, n)
+    return sp.csr_matrix((data, indices, indptr), shape=(n, n))
+
+
+def block_inverse_arrays(blocks, n: int):
+    """The CSR arrays (data, indices, indptr) of the inverse of the n x n block-diagonal matrix of
+    ``blocks`` (:func:`diagonal_blocks`' list); LinAlgError for a singular block."""
     # CSR arrays directly: each row of a block holds that block's columns, in increasing order
     # (idx is increasing within a block), so no COO sort is needed
     indptr = np.zeros(n + 1, dtype=np.int64)
@@ -155,4 +162,4 @@ def block_inverse(A, blocks=None):
         at = indptr[idx.ravel()][:, None] + np.arange(size)[None, :]  # (n_blocks * size, size) slots
         indices[at] = np.repeat(idx, size, axis=0)
         data[at] = np.linalg.inv(B).reshape(-1, size)
-    return sp.csr_matrix((data, indices, indptr), shape=(n, n))
+    return data, indices, indptr

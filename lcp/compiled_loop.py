@@ -150,30 +150,89 @@ def _interleaved(W, m):
     and the natural-map weights rho = 1/W_ii (as :class:`lcp.nsgs.InterleavedOperator`)."""
     from .friction_contact import interleave
 
+    if hasattr(W, "tocsr"):
+        W = W.tocsr()
+        return _interleaved_csr(W.indptr, W.indices, W.data, m)
     perm = interleave(m)
     even = 2 * np.arange(m)
-    if hasattr(W, "tocsr"):
-        # the permutation on the nonzeros (SciPy's fancy indexing costs more than the rest of the set-up)
-        W = W.tocsr()
-        inv = np.empty(2 * m, dtype=np.int64)
-        inv[perm] = np.arange(2 * m)
-        keep = W.data != 0.0
-        r = inv[np.repeat(np.arange(2 * m), np.diff(W.indptr))[keep]]
-        c = inv[W.indices[keep]]
-        order = np.lexsort((c, r))
-        r, indices, data = r[order], c[order], np.array(W.data[keep][order], dtype=float)
-        indptr = np.zeros(2 * m + 1, dtype=np.int64)
-        np.cumsum(np.bincount(r, minlength=2 * m), out=indptr[1:])
-        B = np.zeros((m, 2, 2))  # the diagonal 2 x 2 blocks: entries whose row and column share a contact
-        own = r // 2 == indices // 2
-        B[r[own] // 2, r[own] % 2, indices[own] % 2] = data[own]
-        d = B[:, [0, 1], [0, 1]].ravel()
-        off = (B[:, 0, 1], B[:, 1, 0])
-    else:
-        Wi = np.asarray(W, dtype=float)[np.ix_(perm, perm)]
-        indptr, indices, data = _csr(Wi)
-        d = np.diag(Wi)
-        off = (Wi[even, even + 1], Wi[even + 1, even])
+    Wi = np.asarray(W, dtype=float)[np.ix_(perm, perm)]
+    indptr, indices, data = _csr(Wi)
+    d = np.diag(Wi)
+    off = (Wi[even, even + 1], Wi[even + 1, even])
+    return _blocks_and_weights(indptr, indices, data, d, off)
+
+
+def _interleaved_csr(Wp, Wi, Wx, m):
+    """:func:`_interleaved` of W given by its CSR arrays (blocked rows: normals, then tangents): the
+    permutation is applied to the nonzeros (SciPy's fancy indexing costs more than the rest of the
+    set-up)."""
+    from .friction_contact import interleave
+
+    perm = interleave(m)
+    inv = np.empty(2 * m, dtype=np.int64)
+    inv[perm] = np.arange(2 * m)
+    keep = Wx != 0.0
+    r = inv[np.repeat(np.arange(2 * m), np.diff(Wp))[keep]]
+    c = inv[Wi[keep]]
+    order = np.lexsort((c, r))
+    r, indices, data = r[order], c[order], np.array(Wx[keep][order], dtype=float)
+    indptr = np.zeros(2 * m + 1, dtype=np.int64)
+    np.cumsum(np.bincount(r, minlength=2 * m), out=indptr[1:])
+    B = np.zeros((m, 2, 2))  # the diagonal 2 x 2 blocks: entries whose row and column share a contact
+    own = r // 2 == indices // 2
+    B[r[own] // 2, r[own] % 2, indices[own] % 2] = data[own]
+    d = B[:, [0, 1], [0, 1]].ravel()
+    return _blocks_and_weights(indptr, indices, data, d, (B[:, 0, 1], B[:, 1, 0]))
+
+
+@njit(cache=True)
+def _interleave_compiled(Wp, Wi, Wx, m):
+    """:func:`_interleaved_csr` in one compiled pass (the same arrays): blocked row or column r
+    becomes 2 r (normal) or 2 (r - m) + 1 (tangent), exact zeros dropped, columns sorted."""
+    rows = 2 * m
+    ptr = np.zeros(rows + 1, dtype=np.int64)
+    for r in range(rows):
+        t = 2 * r if r < m else 2 * (r - m) + 1
+        for a in range(Wp[r], Wp[r + 1]):
+            if Wx[a] != 0.0:
+                ptr[t + 1] += 1
+    for t in range(rows):
+        ptr[t + 1] += ptr[t]
+    idx = np.empty(ptr[rows], dtype=np.int64)
+    val = np.empty(ptr[rows])
+    fill = ptr[:rows].copy()
+    blocks = np.zeros((m, 4))
+    for r in range(rows):
+        t = 2 * r if r < m else 2 * (r - m) + 1
+        for a in range(Wp[r], Wp[r + 1]):
+            if Wx[a] != 0.0:
+                c = Wi[a]
+                u = 2 * c if c < m else 2 * (c - m) + 1
+                idx[fill[t]] = u
+                val[fill[t]] = Wx[a]
+                fill[t] += 1
+                if t // 2 == u // 2:  # the contact's own 2 x 2 block: [NN, NT, TN, TT]
+                    blocks[t // 2, 2 * (t % 2) + u % 2] = Wx[a]
+    for t in range(rows):  # insertion sort of each row by column
+        for s in range(ptr[t] + 1, ptr[t + 1]):
+            c = idx[s]
+            x = val[s]
+            b = s - 1
+            while b >= ptr[t] and idx[b] > c:
+                idx[b + 1] = idx[b]
+                val[b + 1] = val[b]
+                b -= 1
+            idx[b + 1] = c
+            val[b + 1] = x
+    rho = np.empty(rows)
+    for j in range(m):
+        for k in range(2):
+            d = blocks[j, 3 * k]
+            rho[2 * j + k] = 1.0 / d if d > 0 else 1.0
+    return ptr, idx, val, blocks, rho
+
+
+def _blocks_and_weights(indptr, indices, data, d, off):
     blocks = np.column_stack([d[0::2], off[0], off[1], d[1::2]]).astype(float)
     rho = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 1.0)
     return indptr, indices, data, np.ascontiguousarray(blocks), rho
@@ -214,12 +273,18 @@ def _pack_new(asm):
         Gc = _csr(asm.G) if nb else e0
         fv = (z, np.asarray(asm.F0, dtype=float).ravel(), *_csr(Kq), *_csr(Cv), *_csr(hK), *S, *lu, *Tc, *Gc,
               np.asarray(asm.phi_t, dtype=float).ravel() if nb else z)
-    Hp, Hi, Hx = _csr(asm.H)
+    arrays = getattr(asm, "arrays", None)  # independent bodies: the compressed arrays, no SciPy matrix
+    if arrays is not None:
+        (Hp, Hi, Hx), SHtc = arrays["H"], arrays["SHt_csc"]
+        Wp, Wi, Wx, blocks, rho = _interleave_compiled(*arrays["W"], m)
+    else:
+        Hp, Hi, Hx = _csr(asm.H)
+        SHtc = _csc(asm.SHt)
+        Wp, Wi, Wx, blocks, rho = _interleaved(asm.W, m)
     end = Hp[m]  # |H_N|: the leading m rows of H's CSR arrays
     gap0 = np.asarray(asm.gap0, dtype=float).ravel()
     sysm = asm.sys
-    Wp, Wi, Wx, blocks, rho = _interleaved(asm.W, m)
-    ct = (Hp, Hi, Hx, Hp[:m + 1].copy(), Hi[:end].copy(), np.abs(Hx[:end]), np.abs(gap0), gap0, *_csc(asm.SHt),
+    ct = (Hp, Hi, Hx, Hp[:m + 1].copy(), Hi[:end].copy(), np.abs(Hx[:end]), np.abs(gap0), gap0, *SHtc,
           Wp, Wi, Wx, blocks, rho, np.asarray(sysm.mu, dtype=float), np.asarray(sysm.e, dtype=float))
     # no operator entry couples two contacts: one sweep solves every local problem exactly
     blockdiag = bool(np.all(Wi // 2 == np.repeat(np.arange(Wp.size - 1) // 2, np.diff(Wp))))
