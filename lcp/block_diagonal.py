@@ -57,6 +57,12 @@ def compressed_diagonal_blocks(n, ptr, inner, vals, by_columns: bool, max_size: 
     if by_columns:
         rows, cols = cols, rows
     found = _contiguous_blocks(n, rows, cols, max_size)
+    if found is not None and found[1].min() == found[1].max():
+        # consecutive blocks of one size s (bodies of s coordinates each): block r // s, place r % s
+        s = int(found[1][0])
+        B = np.zeros((n // s, s, s))
+        np.add.at(B, (rows // s, rows % s, cols % s), vals)  # duplicates add up, as in A's value
+        return [(np.arange(n).reshape(-1, s), B)]
     if found is None:
         found = _components(n, ptr, inner, vals, max_size)
         if found is None:

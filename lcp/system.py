@@ -530,8 +530,11 @@ def _check_definite(blocks, size: int, shift: float) -> None:
     shift; with the shift above 1e-14 of the largest eigenvalue (the infinity norm bounds it) that
     is the same test at a tenth of the cost (seconds for thousands of coordinates)."""
     if size <= 200:
-        eig = np.sort(np.concatenate([np.linalg.eigvalsh(B).ravel() for B in blocks])) if blocks else np.array([1.0])
-        if eig.min() <= 1e-14 * max(1.0, abs(eig).max()):
+        eigs = [np.linalg.eigvalsh(B) for B in blocks]  # ascending along the last axis
+        low = min((float(e[..., 0].min()) for e in eigs if e.size), default=1.0)
+        high = max((max(-float(e[..., 0].min()), float(e[..., -1].max())) for e in eigs if e.size), default=1.0)
+        if low <= 1e-14 * max(1.0, high):
+            eig = np.sort(np.concatenate([e.ravel() for e in eigs]))
             raise ValueError("mass matrix is singular or not positive definite (on the constraint manifold) "
                              f"at q0: eigenvalues {eig}")
         return
