@@ -170,3 +170,39 @@ def test_compressed_readers_equal_the_dense_route(seed, rows, cols, density, uns
         for x, y in zip(compiled_loop._interleave_compiled(A.indptr.astype(np.int64), A.indices.astype(np.int64),
                                                            A.data, m), ref):
             np.testing.assert_array_equal(x, y)
+
+
+def _spatial_blocks(K, seed):
+    """K blocks on a floor (three coordinates each, spatial contacts), sliding in random directions:
+    3K contact rows, the sparse assembly from K = 67."""
+    rng = np.random.default_rng(seed)
+    n = 3 * K
+    q, v = ca.SX.sym("q", n), ca.SX.sym("v", n)
+    masses = rng.uniform(0.5, 2.0, size=K)
+    mass = ca.SX(ca.DM(sp.diags(np.repeat(masses, 3)).tocsc()))
+    force = ca.SX(np.column_stack([np.zeros(K), np.zeros(K), -9.81 * masses]).ravel())
+    contacts = [Contact(gap=q[3 * i + 2], tangent=ca.vertcat(q[3 * i], q[3 * i + 1]), mu=0.4, name=f"b{i}")
+                for i in range(K)]
+    v0 = np.zeros(n)
+    v0[0::3], v0[1::3] = rng.normal(size=K), rng.normal(size=K)
+    return Scene(System(q, v, mass, force, contacts=contacts), np.zeros(n), v0, 0.05, f"floor_{K}")
+
+
+def test_spatial_contacts_on_the_compiled_route_keep_their_trajectory(monkeypatch):
+    """The Python loop of spatial contacts reads the lazily built SciPy matrices: the same run as
+    the SciPy route, and each block slides as alone (deceleration mu g along its velocity)."""
+    sc = _spatial_blocks(80, 1)
+    sc.system.check_state(sc.q0, sc.v0)  # finds the mass matrix's blocks, as simulate does first
+    asm = assembly.StepAssembly(sc.system, 1e-3, 0.5)
+    assert "arrays" in asm.__dict__
+    res = lcp.simulate(sc, 0.05, h=1e-3)
+    with monkeypatch.context() as mp:
+        mp.setattr(assembly, "_have_numba", lambda: False)
+        ref = lcp.simulate(_spatial_blocks(80, 1), 0.05, h=1e-3)
+    assert res.status == ref.status == 0
+    np.testing.assert_array_equal(res.q, ref.q)
+    np.testing.assert_array_equal(res.v, ref.v)
+    speed0 = np.hypot(sc.v0[0::3], sc.v0[1::3])
+    speed = np.hypot(res.v[-1, 0::3], res.v[-1, 1::3])
+    np.testing.assert_allclose(speed, np.maximum(speed0 - 0.4 * 9.81 * res.t[-1], 0.0), rtol=0, atol=1e-12)
+    assert np.all(np.abs(res.q[:, 2::3]) < 1e-12)
