@@ -29,6 +29,7 @@ import functools
 import itertools
 import math
 import numbers
+import os
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -149,6 +150,10 @@ def _run_chunk(fn, chunk) -> list:
     return [fn(p) for p in chunk]
 
 
+#: the thread-count variables of the BLAS libraries, which Dask's workers would otherwise set to 1
+_BLAS_THREADS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+
 def _connect(client, workers):
     """(client, cluster to close or None, client to close or None)."""
     try:
@@ -171,8 +176,15 @@ def _connect(client, workers):
 
     # processes, one thread each: the runs hold the GIL, so threads would not run them in
     # parallel; and no statistical profiler, whose sampling thread takes the GIL from these
-    # pure-Python runs every few milliseconds (about 10% of a worker's time, measured)
-    with dask.config.set({"distributed.worker.profile.enabled": False}):
+    # pure-Python runs every few milliseconds (about 10% of a worker's time, measured). The workers
+    # keep this process's BLAS thread settings: Dask sets them to 1 by default, and OpenBLAS's
+    # results depend on its thread count in the last digit (a Radau solve of a 2 x 2 system: 15th
+    # digit), which would break the serial loop's bit-for-bit rows
+    environ = {k: v for k, v in dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()
+               if k not in _BLAS_THREADS}
+    environ.update({k: os.environ[k] for k in _BLAS_THREADS if k in os.environ})
+    with dask.config.set({"distributed.worker.profile.enabled": False,
+                          "distributed.nanny.pre-spawn-environ": environ}):
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                dashboard_address=None)
     c = Client(cluster)

@@ -86,6 +86,23 @@ def test_local_cluster_of_processes_gives_the_serial_table_bit_for_bit():
     assert a.tobytes() == b.tobytes()
 
 
+def _blas_threads():
+    return {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+
+
+def test_workers_keep_this_process_blas_threads():
+    """Dask sets the BLAS thread counts of its workers to 1; OpenBLAS's results depend on them in the
+    last digit (a Radau solve of the work-precision study: 15th digit), so the cluster the package
+    starts gives its workers this process's settings, set or not."""
+    pytest.importorskip("dask.distributed")
+    from lcp.parameter_sweep import cluster
+
+    here = _blas_threads()  # before the cluster: Dask writes its own values into this process too
+    with cluster(workers=1) as client:
+        seen = list(client.run(_blas_threads).values())
+    assert seen == [here]
+
+
 def _dies_once(marker, **p):
     """A build that kills its worker process the first time it runs (a lost worker)."""
     if not os.path.exists(marker):
