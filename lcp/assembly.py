@@ -122,14 +122,12 @@ class StepAssembly:
         # the mass check found A's blocks already; with no damping or stiffness they are W_h's, and
         # A itself is not needed (each SciPy matrix built costs tens of microseconds on a fresh system)
         blocks = sys_.mass_blocks
-        compiled = blocks is not None and _have_numba()
-        A, K, C, H, gap, F0 = _sparse_step_data(sys_, need_mass=blocks is None, h_arrays=compiled)
-        if compiled and K is None and C is None:
-            return self._init_blocks(h, blocks, H, gap, F0)
-        if compiled:  # springs or dampers after all: the SciPy route below
-            Hc, Hr_, Hv = H
-            H = sp.csc_matrix((Hv, Hr_, Hc), shape=(self.rows, n))
-            H.eliminate_zeros()
+        A, K, C, Hccs, gap, F0 = _sparse_step_data(sys_, need_mass=blocks is None)
+        if blocks is not None and K is None and C is None and _have_numba():
+            return self._init_blocks(h, blocks, Hccs, gap, F0)
+        Hc, Hrow, Hv = Hccs
+        H = sp.csc_matrix((Hv, Hrow, Hc), shape=(self.rows, n))
+        H.eliminate_zeros()
         if K is not None or C is not None:
             blocks = None
             if A is None:
@@ -150,8 +148,6 @@ class StepAssembly:
             SHt = Sblk @ H.T
             SHt.eliminate_zeros()
         else:
-            if Wh is None:
-                Wh = sys_.sparse_mass(np.zeros(n))
             Ht = H.T.tocsc()
             try:
                 lu = splu(Wh.tocsc())
@@ -298,13 +294,12 @@ class StepAssembly:
         return S @ (B @ self.schedule.impulse(t, t + h) - seen)
 
 
-def _sparse_step_data(system, need_mass: bool = True, h_arrays: bool = False):
-    """(A, K, C, H, gap, F) of a system with constant matrices at (0, 0, 0): A, K = -dF/dq,
-    C = -dF/dv and H as SciPy CSC matrices of their nonzeros, the gaps and forces as arrays.
-    K and C are None when structurally empty (no springs, no damping: the usual case), and A is
-    None when not ``need_mass`` (the caller has the mass matrix's blocks from the check already).
-    With ``h_arrays`` H comes as CasADi's compressed-column arrays (pointers, rows, values) instead
-    of a SciPy matrix.
+def _sparse_step_data(system, need_mass: bool = True):
+    """(A, K, C, H, gap, F) of a system with constant matrices at (0, 0, 0): A, K = -dF/dq and
+    C = -dF/dv as SciPy CSC matrices of their nonzeros, H as compressed-column arrays (pointers,
+    rows, values; int64, float), the gaps and forces as arrays. K and C are None when all zero (no
+    springs, no damping: the usual case), and A is None when not ``need_mass`` (the caller has the
+    mass matrix's blocks from the check already).
 
     Structurally sparse outputs are read straight from :attr:`lcp.system.System.step_data_fn`'s
     buffers; a structurally dense one (a mass matrix written as a dense array has n^2 structural
@@ -325,7 +320,7 @@ def _sparse_step_data(system, need_mass: bool = True, h_arrays: bool = False):
                 out.append(None)  # all zero: no matrix to build (the caller tests for None)
                 continue
             colind, row = sps[i].get_ccs()
-            if i == 7 and h_arrays:
+            if i == 7:
                 out.append((np.array(colind, dtype=np.int64), np.array(row, dtype=np.int64), bufs[i]))
                 continue
             M = sp.csc_matrix((bufs[i], np.array(row, dtype=np.int32), np.array(colind, dtype=np.int32)),
@@ -347,8 +342,7 @@ def _sparse_step_data(system, need_mass: bool = True, h_arrays: bool = False):
         return sp.csc_matrix((np.array(x.nonzeros(), dtype=float), (r, c)), shape=x.shape)
 
     K, C, H = csc(K), csc(C), csc(H)
-    if h_arrays:
-        H = (H.indptr.astype(np.int64), H.indices.astype(np.int64), H.data)
+    H = (H.indptr.astype(np.int64), H.indices.astype(np.int64), H.data)
     return (csc(A), K if np.any(K.data) else None, C if np.any(C.data) else None, H, np.array(gap, dtype=float).ravel(),
             system.force(np.zeros(n), np.zeros(n)))
 

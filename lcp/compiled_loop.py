@@ -146,49 +146,15 @@ def _lu_parts(lu, n):
 
 
 def _interleaved(W, m):
-    """W (blocked: normals, then tangents) in contact-by-contact CSR, its diagonal 2 x 2 blocks
-    and the natural-map weights rho = 1/W_ii (as :class:`lcp.nsgs.InterleavedOperator`)."""
-    from .friction_contact import interleave
-
-    if hasattr(W, "tocsr"):
-        W = W.tocsr()
-        return _interleaved_csr(W.indptr, W.indices, W.data, m)
-    perm = interleave(m)
-    even = 2 * np.arange(m)
-    Wi = np.asarray(W, dtype=float)[np.ix_(perm, perm)]
-    indptr, indices, data = _csr(Wi)
-    d = np.diag(Wi)
-    off = (Wi[even, even + 1], Wi[even + 1, even])
-    return _blocks_and_weights(indptr, indices, data, d, off)
-
-
-def _interleaved_csr(Wp, Wi, Wx, m):
-    """:func:`_interleaved` of W given by its CSR arrays (blocked rows: normals, then tangents): the
-    permutation is applied to the nonzeros (SciPy's fancy indexing costs more than the rest of the
-    set-up)."""
-    from .friction_contact import interleave
-
-    perm = interleave(m)
-    inv = np.empty(2 * m, dtype=np.int64)
-    inv[perm] = np.arange(2 * m)
-    keep = Wx != 0.0
-    r = inv[np.repeat(np.arange(2 * m), np.diff(Wp))[keep]]
-    c = inv[Wi[keep]]
-    order = np.lexsort((c, r))
-    r, indices, data = r[order], c[order], np.array(Wx[keep][order], dtype=float)
-    indptr = np.zeros(2 * m + 1, dtype=np.int64)
-    np.cumsum(np.bincount(r, minlength=2 * m), out=indptr[1:])
-    B = np.zeros((m, 2, 2))  # the diagonal 2 x 2 blocks: entries whose row and column share a contact
-    own = r // 2 == indices // 2
-    B[r[own] // 2, r[own] % 2, indices[own] % 2] = data[own]
-    d = B[:, [0, 1], [0, 1]].ravel()
-    return _blocks_and_weights(indptr, indices, data, d, (B[:, 0, 1], B[:, 1, 0]))
+    """W (blocked: normals, then tangents; dense or sparse) in contact-by-contact CSR, its diagonal
+    2 x 2 blocks and the natural-map weights rho = 1/W_ii (as :class:`lcp.nsgs.InterleavedOperator`)."""
+    return _interleave_compiled(*_csr(W), m)
 
 
 @njit(cache=True)
 def _interleave_compiled(Wp, Wi, Wx, m):
-    """:func:`_interleaved_csr` in one compiled pass (the same arrays): blocked row or column r
-    becomes 2 r (normal) or 2 (r - m) + 1 (tangent), exact zeros dropped, columns sorted."""
+    """:func:`_interleaved` of W given by its CSR arrays, in one compiled pass: blocked row or column
+    r becomes 2 r (normal) or 2 (r - m) + 1 (tangent), exact zeros dropped, columns sorted."""
     rows = 2 * m
     ptr = np.zeros(rows + 1, dtype=np.int64)
     for r in range(rows):
@@ -232,12 +198,6 @@ def _interleave_compiled(Wp, Wi, Wx, m):
     return ptr, idx, val, blocks, rho
 
 
-def _blocks_and_weights(indptr, indices, data, d, off):
-    blocks = np.column_stack([d[0::2], off[0], off[1], d[1::2]]).astype(float)
-    rho = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 1.0)
-    return indptr, indices, data, np.ascontiguousarray(blocks), rho
-
-
 _PACKS = weakref.WeakKeyDictionary()  # system -> {(h, theta): packed data}: repeated runs pay nothing
 
 
@@ -275,12 +235,10 @@ def _pack_new(asm):
               np.asarray(asm.phi_t, dtype=float).ravel() if nb else z)
     arrays = getattr(asm, "arrays", None)  # independent bodies: the compressed arrays, no SciPy matrix
     if arrays is not None:
-        (Hp, Hi, Hx), SHtc = arrays["H"], arrays["SHt_csc"]
-        Wp, Wi, Wx, blocks, rho = _interleave_compiled(*arrays["W"], m)
+        (Hp, Hi, Hx), SHtc, Wc = arrays["H"], arrays["SHt_csc"], arrays["W"]
     else:
-        Hp, Hi, Hx = _csr(asm.H)
-        SHtc = _csc(asm.SHt)
-        Wp, Wi, Wx, blocks, rho = _interleaved(asm.W, m)
+        (Hp, Hi, Hx), SHtc, Wc = _csr(asm.H), _csc(asm.SHt), _csr(asm.W)
+    Wp, Wi, Wx, blocks, rho = _interleave_compiled(*Wc, m)
     end = Hp[m]  # |H_N|: the leading m rows of H's CSR arrays
     gap0 = np.asarray(asm.gap0, dtype=float).ravel()
     sysm = asm.sys

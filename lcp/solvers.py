@@ -16,7 +16,7 @@ solver implements one method, ``_solve``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import functools
 
 import numpy as np
@@ -63,6 +63,9 @@ class StepSolution:
     residual: float = 0.0
     ambiguous: bool = False
     error: float = float("nan")
+    #: ContactProblem.checks of ``p`` where the solver computed them already (its stopping test):
+    #: OneStepSolver.solve reuses them instead of a second pass over W
+    _checks: tuple | None = field(default=None, repr=False, compare=False)
 
     @property
     def success(self) -> bool:
@@ -113,7 +116,9 @@ class OneStepSolver:
         # (the contact-by-contact residual is the iterative solvers' stopping test: an exact
         # solver's pivoting rounds a contact whose free velocity is 1e-17 of the problem's to zero,
         # which that test, on the contact's own scale, would call a violation)
-        res, _, sol.error = problem.checks(sol.p)
+        if sol._checks is None:  # the same p and problem give the same checks: computed once
+            sol._checks = problem.checks(sol.p)
+        res, _, sol.error = sol._checks
         if sol.success:
             sol.residual = res
             # relative to the impulses at hand: an absolute floor would pass any answer to a problem
@@ -416,6 +421,7 @@ class _IterativeSolver(OneStepSolver):
         its = 0
         target, rtol = self.error_target, 0.1 * self.residual_tol
         rel, rel_scale = 0.0, 0.0
+        checked = None  # (p, its checks): the last iterate checked
         for _ in range(4):
             p, n, res, msg = self._run(pb, warm.op, p, tol, rel_scale)
             its += n
@@ -424,7 +430,8 @@ class _IterativeSolver(OneStepSolver):
             # the problem's impulse scale can be far above some contacts' impulses (redundant
             # contacts, bodies of very different masses): the residual contact by contact, on each
             # contact's own scale, and the error in Siconos's units decide whether it has finished
-            _, rel, err = pb.checks(p)
+            checked = (p, pb.checks(p))
+            _, rel, err = checked[1]
             if rel > rtol:
                 rel_scale = pb.scale  # go on with ContactProblem.stop_measure: every contact on its own scale
                 continue
@@ -432,12 +439,14 @@ class _IterativeSolver(OneStepSolver):
                 break
             tol *= 1e-2
         warm.store(p)
+        done = checked[1] if checked is not None and checked[0] is p else None
         if res > tol:
-            return StepSolution(p, -1, f"{self.name}: {msg}; residual {res:.3g} > tolerance {tol:.3g}", its)
+            return StepSolution(p, -1, f"{self.name}: {msg}; residual {res:.3g} > tolerance {tol:.3g}", its,
+                                _checks=done)
         if not rel <= rtol:
             return StepSolution(p, -1, f"{self.name}: {msg}; a contact's residual is {rel:.3g} of its own impulse "
-                                f"scale (> {rtol:.3g})", its)
-        return StepSolution(p, 0, "solved", its)
+                                f"scale (> {rtol:.3g})", its, _checks=done)
+        return StepSolution(p, 0, "solved", its, _checks=done)
 
     def _run(self, pb, op, p, tol, rel_scale):  # pragma: no cover - abstract
         raise NotImplementedError
