@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lcp import compiled
+from lcp.timestepping import compiled_step as compiled
 from lcp.batch import jean_pratt_constants, simulate_batch
 
 TARGET = 3e7  # scene-steps per second

@@ -11,7 +11,7 @@
    timed call is the first simulation of a fresh scene built by the scene function (the build is
    not timed); what the process keeps by structure (compiled kernels, numba, CasADi functions
    keyed by sparsity pattern) is warmed up on another scene first. ``auto`` and ``nsgs`` run the compiled
-   loop (:mod:`lcp.compiled_loop`) from two contacts on. Siconos (when its Python module is importable by
+   loop (:mod:`lcp.timestepping.compiled_loop`) from two contacts on. Siconos (when its Python module is importable by
    the system Python) solves the same per-step local problems (W once, the free velocity of every
    step from our trajectory), warm-started, tolerance 1e-10, with its fc2d NSGS on sparse-block
    storage; its time is the solver's alone.
@@ -42,13 +42,13 @@ import numpy as np
 import scipy.sparse as sp
 
 import lcp
-from lcp.assembly import StepAssembly
-from lcp.contact_problem import ContactProblem
+from lcp.timestepping.assembly import StepAssembly
+from lcp.contact.problem import ContactProblem
 from lcp.fclib import ContactFile, write_dat
-from lcp.friction_contact import interleave, natural_map_error
+from lcp.contact.law import interleave, natural_map_error
 from lcp.scenes import Scene
-from lcp.solvers import make_solver
-from lcp.system import Contact, System
+from lcp.contact.solvers import make_solver
+from lcp.model.system import Contact, System
 from studies import fc_benchmark
 from studies._common import write_csv
 

@@ -40,8 +40,8 @@ import numpy as np
 import scipy.sparse as sp
 
 import lcp
-from lcp.contact_problem import PY_OPS, SLIDE_NEG, SLIDE_POS, STICK, OPEN, planar_enum, planar_refine
-from lcp.assembly import StepAssembly
+from lcp.contact.problem import PY_OPS, SLIDE_NEG, SLIDE_POS, STICK, OPEN, planar_enum, planar_refine
+from lcp.timestepping.assembly import StepAssembly
 
 TARGETS = {"compiled": 1.0, "osqp": 60.0}  # microseconds per step
 
@@ -164,9 +164,9 @@ def osqp_profile(scene, h, steps=10_000):
         if "osqp" in fname.replace("\\", "/").split("/site-packages/")[-1][:5] or "ext_builtin" in func:
             return "osqp Python wrapper (update, solve bookkeeping)"
         if fname.endswith("contact_problem.py"):
-            return "lcp.contact_problem (problem objects, residual, branch solve)"
+            return "lcp.contact.problem (problem objects, residual, branch solve)"
         if fname.endswith("solvers.py"):
-            return "lcp.solvers (OsqpSolver: bounds, branch reading)"
+            return "lcp.contact.solvers (OsqpSolver: bounds, branch reading)"
         if fname.endswith("timestepping.py"):
             return "lcp.timestepping (loop body, assembly, Kahan sums)"
         if "numpy" in fname or func.startswith("<method") or func.startswith("<built-in method numpy"):

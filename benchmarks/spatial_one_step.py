@@ -32,10 +32,10 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from lcp.cone_problem import ConeContactProblem
-from lcp.cone_solvers import make_cone_solver
-from lcp.contact_problem import ContactProblem
-from lcp.solvers import make_solver
+from lcp.contact.spatial_problem import ConeContactProblem
+from lcp.contact.spatial_solvers import make_cone_solver
+from lcp.contact.problem import ContactProblem
+from lcp.contact.solvers import make_solver
 
 SPATIAL = ["local", "nsgs", "newton", "tresca", "faceted", "auto"]
 PLANAR = ["enum", "lemke", "osqp", "nsgs", "newton", "auto"]
@@ -94,7 +94,7 @@ def measure(solver, pb, budget_s: float, max_repeats: int):
 def loop_rows(repeats: int, t_end: float = 1.0, h: float = 1e-3):
     """Per-step cost of the Moreau-Jean loop with one spatial contact vs one planar contact."""
     import lcp
-    from lcp.spatial_scenes import jean_pratt_spatial, plane_slide
+    from lcp.scenes.spatial_systems import jean_pratt_spatial, plane_slide
 
     cases = [("loop spatial", "plane_slide:local", plane_slide(), {"solver": "local"}),
              ("loop spatial", "plane_slide:auto", plane_slide(), {"solver": "auto"}),

@@ -46,7 +46,7 @@ class SolverStats:
         Steps solved by a fallback solver after the chosen one failed.
     projections : int
         Steps whose positions were projected onto the constraints (Moreau-Jean with position
-        projection, :mod:`lcp.projection`).
+        projection, :mod:`lcp.timestepping.projection`).
     projection_iterations : int
         Newton iterations of those projections in total.
     """
@@ -118,7 +118,7 @@ class SimulationResult(StepImpulses):
         ``system.tangent_offsets[j + 1]``.
     modes : ndarray of int8, shape (n_points - 1, m)
         Contact mode per step: -1 inactive, 0 open, 1 stick, 2 slide+, 3 slide-, 4 slide (a spatial
-        contact sliding in its tangent plane; see :mod:`lcp.contact_problem`).
+        contact sliding in its tangent plane; see :mod:`lcp.contact.problem`).
     status : int
         0 success; negative values are failures (:data:`STATUS_MESSAGES`).
     message : str

@@ -5,11 +5,11 @@ import math
 
 import numpy as np
 
-from .events import event_driven
-from .result import SimulationResult
-from .scenes import Scene
-from .system import System
-from .timestepping import MoreauJeanOptions, moreau_jean
+from lcp.events import event_driven
+from lcp.result import SimulationResult
+from lcp.scenes.scene import Scene
+from lcp.model.system import System
+from lcp.timestepping.moreau_jean import MoreauJeanOptions, moreau_jean
 
 __all__ = ["METHODS", "simulate"]
 
@@ -23,7 +23,7 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
              solver_options: dict | None = None, fallback: bool = True, save_every: int = 1,
              fast: bool = True, allow_large_step: bool = False, control=None,
              projection="auto", projection_tol: float = 1e-12, **method_options) -> SimulationResult:
-    """Simulate a scene (or a bare :class:`~lcp.system.System` with ``q0`` and ``v0``).
+    """Simulate a scene (or a bare :class:`~lcp.model.system.System` with ``q0`` and ``v0``).
 
     Parameters
     ----------
@@ -38,7 +38,7 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
     solver : {"auto", "enum", "lemke", "osqp", "nsgs", "newton"}
         One-step contact solver. ``"auto"`` picks the fastest one that meets the tolerance
         (closed-form enumeration for a single contact, NSGS with a semismooth Newton finish for
-        several, Lemke retrying a failure); see :mod:`lcp.solvers`.
+        several, Lemke retrying a failure); see :mod:`lcp.contact.solvers`.
     method : {"moreau-jean", "event"}
         Integration method: Moreau-Jean time stepping, or event-driven integration with exact
         mode switches (:mod:`lcp.events`; ``h``, ``theta`` and ``solver`` are then ignored).
@@ -56,13 +56,13 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
         ``"enum"``); the results are the same.
     projection : {"auto", True, False}
         Moreau-Jean only: project the positions onto the constraints after each step
-        (:mod:`lcp.projection`); ``"auto"`` does it where a constraint is nonlinear in q.
+        (:mod:`lcp.timestepping.projection`); ``"auto"`` does it where a constraint is nonlinear in q.
     projection_tol : float
         Relative tolerance of that projection.
     allow_large_step : bool
         Moreau-Jean only: accept a step h larger than the horizon (one step then overshoots
         ``t_end``). Without it such an h is taken for a mistake and raises.
-    control : lcp.control.ControlSchedule, optional
+    control : lcp.model.control.ControlSchedule, optional
         The control of a controlled System (``System(..., control=u)``), replayed as
         ``system.with_control(control)``; required for a controlled system.
     **method_options
@@ -111,7 +111,7 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
         system = system.with_control(control)
     elif system.is_controlled:
         raise ValueError("the system has a control input u: pass control=ControlSchedule(...) "
-                         "(lcp.control) to simulate it")
+                         "(lcp.model.control) to simulate it")
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"unknown method {method!r}; known methods: {sorted(METHODS)}")
     if not isinstance(t_end, (int, float, np.floating)) or not np.isfinite(t_end) or t_end <= 0:
@@ -133,7 +133,7 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
 
 def _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, solver_options, fallback,
                          save_every, fast, allow_large_step, projection, projection_tol, method_options):
-    """The paths that run from a scene's :class:`~lcp.constant_model.ConstantModel` alone (no CasADi
+    """The paths that run from a scene's :class:`~lcp.timestepping.constant_model.ConstantModel` alone (no CasADi
     work): the compiled single-contact Moreau-Jean step and the closed-form single-contact event
     path. None when neither applies (the caller then builds the System and takes the general path),
     after the same validation of the options as the general path."""
@@ -150,7 +150,7 @@ def _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, 
                                  projection_tol=projection_tol)
     q0, v0 = _check_state(model, q0, v0)
     if method == "event":
-        from .events.single_contact import run_with_options
+        from lcp.events.single_contact import run_with_options
 
         return run_with_options(model, q0, v0, float(t_end), method_options)
     if method_options:
@@ -161,7 +161,7 @@ def _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, 
     if not (fast and opts.solver in ("auto", "enum") and not solver_options and model.m == 1 and not model.nb
             and opts.projection in ("auto", False)):
         return None
-    from .timestepping import moreau_jean_from_model
+    from lcp.timestepping.moreau_jean import moreau_jean_from_model
 
     return moreau_jean_from_model(model, q0, v0, float(t_end), opts)
 

@@ -19,7 +19,7 @@ import functools
 import importlib
 import sys
 
-from lcp.parameter_sweep import cluster, map_sets
+from lcp.sweeps.parameter_sweep import cluster, map_sets
 
 __all__ = ["add_options", "cluster", "pieces"]
 

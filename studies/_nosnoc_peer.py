@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import lcp
-from lcp.control import ControlSchedule
+from lcp.model.control import ControlSchedule
 from studies.optimal_control import (
     EVENT_SAMPLES,
     HOLD,

@@ -6,14 +6,14 @@ it, solves it with each applicable one-step solver and writes into OUT (default
 ``figures/fc_benchmark/``):
 
 - ``results.csv``: file, dimension, contacts, nnz(W), solver, status, time (s), iterations, the
-  independent natural-map error (:func:`lcp.friction_contact.natural_map_error`, normalised as
+  independent natural-map error (:func:`lcp.contact.law.natural_map_error`, normalised as
   Siconos normalises its fc2d error; the disk cone for spatial files) and the package's residual;
 - ``profile_time.png``, ``profile_accuracy.png``: Dolan-More performance profiles (fraction of
   problems a solver solves within a factor tau of the best time; of the best error), a problem
   counting as solved at error <= 1e-10 whatever the solver's status.
 
-Planar files (dimension 2) go to :func:`lcp.solvers.make_solver`'s solvers (:data:`SOLVER_LIMITS`),
-spatial files (dimension 3, the Coulomb disk) to :func:`lcp.cone_solvers.make_cone_solver`'s
+Planar files (dimension 2) go to :func:`lcp.contact.solvers.make_solver`'s solvers (:data:`SOLVER_LIMITS`),
+spatial files (dimension 3, the Coulomb disk) to :func:`lcp.contact.spatial_solvers.make_cone_solver`'s
 (:data:`CONE_SOLVER_LIMITS`). The faceted solver replaces each disk by a polygon: its rows are
 named ``faceted (approx.)``, keep its status 1 ("approximate") and count as solved only where the
 disk law's error meets the threshold.
@@ -42,10 +42,10 @@ from pathlib import Path
 
 import numpy as np
 
-from lcp.cone_solvers import make_cone_solver
+from lcp.contact.spatial_solvers import make_cone_solver
 from lcp.fclib import read_problem, write_dat
-from lcp.friction_contact import natural_map_error
-from lcp.solvers import make_solver
+from lcp.contact.law import natural_map_error
+from lcp.contact.solvers import make_solver
 from studies._common import out_dir, parse_args, save, write_csv
 
 import matplotlib.pyplot as plt  # noqa: E402  (studies._common selects the Agg backend first)
@@ -210,7 +210,7 @@ def warm_up_planar_solvers():
     _WARM_PLANAR.append(True)
     import scipy.sparse as sp
 
-    from lcp.contact_problem import ContactProblem
+    from lcp.contact.problem import ContactProblem
 
     for k in (2, 150):
         W = sp.csr_matrix(np.kron(np.eye(k), np.array([[2.0, 0.3], [0.3, 1.0]])))
@@ -234,7 +234,7 @@ def warm_up_cone_solvers():
     _WARM.append(True)
     import scipy.sparse as sp
 
-    from lcp.cone_problem import ConeContactProblem
+    from lcp.contact.spatial_problem import ConeContactProblem
 
     for k in (1, 4, 50):
         W = sp.csr_matrix(np.kron(np.eye(k), np.diag([2.0, 1.0, 1.0])) + 0.1 * np.eye(3 * k, k=3))

@@ -64,7 +64,7 @@ from studies._common import out_dir, parse_args, save, write_csv  # noqa: I001 (
 import matplotlib.pyplot as plt  # noqa: E402
 
 import lcp  # noqa: E402
-from lcp.contact_problem import MODE_NAMES, OPEN, SLIDE_NEG, SLIDE_POS, STICK  # noqa: E402
+from lcp.contact.problem import MODE_NAMES, OPEN, SLIDE_NEG, SLIDE_POS, STICK  # noqa: E402
 from lcp.ocp import OptimalControlProblem, add_control, effort, replay, tangential_push  # noqa: E402
 
 NAME = "optimal_control"

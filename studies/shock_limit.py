@@ -34,7 +34,7 @@ import time
 import numpy as np
 
 import lcp
-from lcp.exact import JeanPrattExact
+from lcp.scenes.jean_pratt_exact import JeanPrattExact
 from lem import series
 from studies._cluster import add_options, cluster, pieces
 from studies._common import floored, legend, out_dir, parse_args, save, write_csv

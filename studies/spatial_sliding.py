@@ -2,7 +2,7 @@
 
 ``python -m studies.spatial_sliding [--out DIR] [--quick]``
 
-Scenes (:mod:`lcp.spatial_scenes`), each with its exact solution (:mod:`lcp.spatial_exact`):
+Scenes (:mod:`lcp.scenes.spatial_systems`), each with its exact solution (:mod:`lcp.scenes.spatial_exact`):
 
 - an oblique launch on a horizontal plane (a straight path, a stop, then stick),
 - a horizontal launch across an incline with mu = tan(theta) (a curved path; v (1 + cos phi) is
@@ -17,7 +17,7 @@ planar scene.
 Methods: the exact solution, the event-driven method (``method="event"``), Moreau-Jean
 (theta = 1/2, several h) and the LEM engine on the sliding branch made polynomial
 (:mod:`lem.spatial_sliding`). The incline is also checked against a high-accuracy integration of
-the reduced equations (:func:`lcp.spatial_exact.reduced_reference`).
+the reduced equations (:func:`lcp.scenes.spatial_exact.reduced_reference`).
 
 Writes ``paths.png`` (trajectories in the plane), ``speed_incline.png`` (speed against time, with
 v0 (1 + cos phi0) / (1 + cos phi) from the invariant), ``work_precision.png`` (error against run
@@ -33,7 +33,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import lcp
-from lcp.spatial_scenes import incline_slide, jean_pratt_spatial, lateral_force_slide, plane_slide
+from lcp.scenes.spatial_systems import incline_slide, jean_pratt_spatial, lateral_force_slide, plane_slide
 
 from ._common import floored, legend, out_dir, parse_args, save, write_csv
 

@@ -34,9 +34,9 @@ import casadi as ca
 import numpy as np
 
 import lcp
-from lcp.compiled import applicable as compiled_applicable
+from lcp.timestepping.compiled_step import applicable as compiled_applicable
 from lcp.scenes import block_chain, jean_pratt
-from lcp.system import Contact, System
+from lcp.model.system import Contact, System
 
 from ._cluster import add_options, cluster, pieces
 from ._common import out_dir, parse_args, plt, save, write_csv

@@ -40,7 +40,7 @@ Methods:
 - MuJoCo (``import mujoco``), when installed: the same scene as a 3-joint model with the slide as a
   tendon equality, soft contact; skipped with a message otherwise.
 
-Errors (x is the block's position, exact solution :class:`lcp.exact.JeanPrattExact`):
+Errors (x is the block's position, exact solution :class:`lcp.scenes.jean_pratt_exact.JeanPrattExact`):
 
 - ``e_max``: max |x - exact| over the method's output times: every grid point for Moreau-Jean,
   ``n_out`` equally spaced times for the others (the printed series: only those up to its tau0);

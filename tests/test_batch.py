@@ -69,7 +69,7 @@ def test_batch_bad_input():
 def test_batch_records_the_path_and_warns_on_fallback(monkeypatch):
     import warnings
 
-    from lcp import compiled
+    from lcp.timestepping import compiled_step as compiled
 
     consts = jean_pratt_constants(1.0, 1.0, 0.6, np.array([0.3, 0.8]), 1.0, h=1e-3)
     ref = simulate_batch(consts, 0.1, h=1e-3, path="numpy")

@@ -1,4 +1,4 @@
-"""Block-diagonal structure (lcp.block_diagonal) and the sparse assembly of independent bodies.
+"""Block-diagonal structure (lcp.numerics.block_diagonal) and the sparse assembly of independent bodies.
 
 - the blocks gathered from the nonzeros put back together give the matrix, in every storage;
 - the block inverse is the inverse (checked against the dense one);
@@ -15,10 +15,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import lcp
-from lcp import assembly
-from lcp.block_diagonal import block_inverse, diagonal_blocks
+from lcp.timestepping import assembly
+from lcp.numerics.block_diagonal import block_inverse, diagonal_blocks
 from lcp.scenes import Scene
-from lcp.system import Contact, System
+from lcp.model.system import Contact, System
 
 
 def _random_blocks(seed, sizes, symmetric):

@@ -1,4 +1,4 @@
-"""The compiled set-up of independent bodies (lcp.block_products and the compressed-array paths).
+"""The compiled set-up of independent bodies (lcp.numerics.block_products and the compressed-array paths).
 
 - the operators S, S H', W, H, the constant free velocity and every array the compiled loop reads
   are the SciPy route's to the last bit, on bodies of one, two and three coordinates, numbered in
@@ -17,10 +17,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import lcp
-from lcp import assembly, block_diagonal, compiled_loop
-from lcp.nsgs import HAVE_NUMBA
+from lcp.timestepping import assembly
+from lcp.numerics import block_diagonal
+from lcp.timestepping import compiled_loop
+from lcp.numerics.jit import HAVE_NUMBA
 from lcp.scenes import Scene
-from lcp.system import Contact, System
+from lcp.model.system import Contact, System
 
 pytestmark = pytest.mark.skipif(not HAVE_NUMBA, reason="the compiled route needs numba")
 

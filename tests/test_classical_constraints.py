@@ -64,7 +64,7 @@ def test_painleve_rod_consistent_sliding():
     for h in hs:
         res = lcp.simulate(sc, h=h)
         assert res.success, res.message
-        assert np.all(res.modes[:, 0] == lcp.contact_problem.SLIDE_NEG)
+        assert np.all(res.modes[:, 0] == lcp.contact.problem.SLIDE_NEG)
         ok = res.t <= min(0.2, rod.t_valid)
         errs.append(float(np.max(np.abs(res.q[ok] - rod.reference(res.t[ok])))))
     assert 0.8 <= observed_order(hs, errs) <= 1.3 and errs[-1] <= 5e-5
@@ -82,7 +82,7 @@ def test_painleve_rod_paradox_gives_the_tangential_impact(omega0, regime):
         res = lcp.simulate(sc, h=h)
         assert res.success, res.message
         # the first step carries the impulse that stops A at once (plus O(h) of smooth forces)
-        assert res.modes[0, 0] == lcp.contact_problem.STICK
+        assert res.modes[0, 0] == lcp.contact.problem.STICK
         p = np.array([res.p_N[0, 0], res.p_T[0, 0]])
         err = float(np.max(np.abs(p - p_star)))
         assert err <= 10 * h * np.max(np.abs(p_star))
@@ -117,7 +117,7 @@ def test_painleve_rod_random_parameters(theta0, mu, u0, sign):
     assert res.success, res.message
     if rod.paradoxical:
         p_star, _ = rod.tangential_impact()
-        assert res.modes[0, 0] == lcp.contact_problem.STICK
+        assert res.modes[0, 0] == lcp.contact.problem.STICK
         assert np.max(np.abs([res.p_N[0, 0] - p_star[0], res.p_T[0, 0] - p_star[1]])) <= 10 * h * max(1.0, np.max(np.abs(p_star)))
         return
     T = min(0.05, rod.t_valid)

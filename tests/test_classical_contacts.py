@@ -9,13 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import lcp
-from lcp.classical import (
-    bouncing_ball,
-    box_on_corners,
-    incline,
-    rocking_block,
-    stacked_blocks,
-)
+from lcp.classical import bouncing_ball, box_on_corners, incline, rocking_block, stacked_blocks
 
 
 def observed_order(hs, errs):

@@ -8,9 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import lcp
-from lcp.constant_model import ConstantModel
+from lcp.timestepping.constant_model import ConstantModel
 from lcp.events import event_driven
-from lcp.timestepping import MoreauJeanOptions, moreau_jean
+from lcp.timestepping.moreau_jean import MoreauJeanOptions, moreau_jean
 
 params = st.fixed_dictionaries({
     # (M below 1e-6 but nonzero, e.g. 1e-158: the general path's QR underflows and it raises

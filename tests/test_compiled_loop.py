@@ -1,4 +1,4 @@
-"""The compiled Moreau-Jean loop (lcp.compiled_loop) against the Python loop (fast=False).
+"""The compiled Moreau-Jean loop (lcp.timestepping.compiled_loop) against the Python loop (fast=False).
 
 Same activation rule, same contact problems, same branch refinement: the trajectories agree to
 rounding (the sums run in another order than BLAS's), the modes, mode counts and impacts exactly.
@@ -10,10 +10,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import lcp
-from lcp import compiled_loop
+from lcp.timestepping import compiled_loop
 from lcp.classical import stacked_blocks
 from lcp.scenes import Scene, block_chain
-from lcp.system import Contact, System
+from lcp.model.system import Contact, System
 
 pytest.importorskip("numba")
 
@@ -149,9 +149,9 @@ def test_random_chains_equal_python_loop(K, mu, k_spring, push, h):
 
 
 def test_kernel_as_plain_python_equals_compiled():
-    from lcp.assembly import StepAssembly
-    from lcp.solvers import make_solver
-    from lcp.timestepping import CLOSE_ULPS, OPEN_ULPS, _ambiguity_note, _fallback_for
+    from lcp.timestepping.assembly import StepAssembly
+    from lcp.contact.solvers import make_solver
+    from lcp.timestepping.moreau_jean import CLOSE_ULPS, OPEN_ULPS, _ambiguity_note, _fallback_for
 
     sc = raised_floor_chain(3, e=0.5)
     asm = StepAssembly(sc.system, 1e-3, 0.5)

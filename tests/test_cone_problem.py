@@ -5,10 +5,10 @@ import scipy.sparse as sp
 from hypothesis import given
 from hypothesis import strategies as st
 
-from lcp import cone_problem
-from lcp.cone_problem import ConeContactProblem, cone_layout, local_disk
-from lcp.contact_problem import OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem
-from lcp.friction_contact import check_problem, natural_map_error
+from lcp.contact import spatial_problem as cone_problem
+from lcp.contact.spatial_problem import ConeContactProblem, cone_layout, local_disk
+from lcp.contact.problem import OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem
+from lcp.contact.law import check_problem, natural_map_error
 
 
 def spd(rng, n, cond=10.0):
@@ -372,7 +372,7 @@ def test_compiled_refinement_large_sparse():
 
 @given(seed=st.integers(0, 2**32 - 1))
 def test_solve3_matches_lapack(seed):
-    from lcp.cone_nsgs import _solve3
+    from lcp.contact.spatial_nsgs import _solve3
 
     rng = np.random.default_rng(seed)
     W = spd(rng, 3, cond=100.0) + rng.normal(size=(3, 3)) * 0.1

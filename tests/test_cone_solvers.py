@@ -5,16 +5,11 @@ import scipy.sparse as sp
 from hypothesis import given
 from hypothesis import strategies as st
 
-from lcp.cone_problem import ConeContactProblem
-from lcp.cone_solvers import (
-    CONE_SOLVERS,
-    ConeAutoSolver,
-    FacetedSolver,
-    make_cone_solver,
-)
-from lcp.contact_problem import ContactProblem
-from lcp.friction_contact import natural_map_error
-from lcp.solvers import make_solver
+from lcp.contact.spatial_problem import ConeContactProblem
+from lcp.contact.spatial_solvers import CONE_SOLVERS, ConeAutoSolver, FacetedSolver, make_cone_solver
+from lcp.contact.problem import ContactProblem
+from lcp.contact.law import natural_map_error
+from lcp.contact.solvers import make_solver
 
 from .test_cone_problem import constructed, spd
 
@@ -108,7 +103,7 @@ def test_random_spd_large_friction(dims, seed, mu_max):
 
 @given(k=st.integers(1, 15), seed=st.integers(0, 2**32 - 1))
 def test_planar_problems_match_planar_solvers(k, seed):
-    """dims all 1: the same answers as lcp.solvers' planar solvers (unique: small mu)."""
+    """dims all 1: the same answers as lcp.contact.solvers' planar solvers (unique: small mu)."""
     pb, _ = problem([1] * k, seed, mu_max=0.1, cond=3.0)
     planar = ContactProblem(pb.W, pb.q, pb.mu)
     ref = make_solver("lemke").solve(planar)

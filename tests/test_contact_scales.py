@@ -14,9 +14,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lcp import Contact, System, simulate
-from lcp.contact_problem import ContactProblem
-from lcp.friction_contact import natural_map_error
-from lcp.solvers import make_solver
+from lcp.contact.problem import ContactProblem
+from lcp.contact.law import natural_map_error
+from lcp.contact.solvers import make_solver
 
 EXACT_AND_ITERATIVE = ["auto", "nsgs", "newton", "lemke", "osqp", "enum"]
 

@@ -1,4 +1,4 @@
-"""The core-pivot finish (lcp.core_pivot): fixed settled modes, Lemke on the rest.
+"""The core-pivot finish (lcp.contact.core_pivot): fixed settled modes, Lemke on the rest.
 
 Checked by the independent natural-map error, against brute-force enumeration of all branches on
 small problems, and on problems with redundant contacts whose W is rounded to a few significant
@@ -13,10 +13,10 @@ import scipy.sparse as sp
 from hypothesis import given
 from hypothesis import strategies as st
 
-from lcp.contact_problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem
-from lcp.core_pivot import contact_errors, core_pivot_solve, natural_modes
-from lcp.friction_contact import natural_map_error
-from lcp.lemke import lemke
+from lcp.contact.problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem
+from lcp.contact.core_pivot import contact_errors, core_pivot_solve, natural_modes
+from lcp.contact.law import natural_map_error
+from lcp.contact.lemke import lemke
 
 TOL = 1e-10
 
@@ -242,7 +242,7 @@ def test_granular_file_after_stall(var):
     if not path or not os.path.exists(path):
         pytest.skip(f"set {var} to the problem file's path")
     from lcp.fclib import read_problem
-    from lcp.solvers import make_solver
+    from lcp.contact.solvers import make_solver
 
     pb = read_problem(path).problem(check=False)
     assert pb.k == FILES[var]

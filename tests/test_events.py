@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 
 import lcp
 from lcp.events import EventOptions, EventResult, event_driven
-from lcp.exact import JeanPrattExact
-from lcp.system import Contact, System
+from lcp.scenes.jean_pratt_exact import JeanPrattExact
+from lcp.model.system import Contact, System
 
 X_EXACT = 1e-13  # |x(t) - exact| at the output times
 T_STOP = 1e-14  # |t_stop - tau0| <= T_STOP * max(1, tau0)

@@ -15,13 +15,13 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 
 import lcp
-from lcp.control import ControlSchedule
+from lcp.model.control import ControlSchedule
 from lcp.events.event_location import first_descent
 from lcp.events.forcing import time_forcing
 from lcp.events.model import system_model
 from lcp.ocp import add_control, tangential_push
-from lcp.ocp.schedule import AffineSchedule
-from lcp.system import Contact, System
+from lcp.model.schedule import AffineSchedule
+from lcp.model.system import Contact, System
 
 U_MAX = 20.0
 G = 9.81

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 import lcp
 from lcp.events import event_driven
-from lcp.system import Contact, System
+from lcp.model.system import Contact, System
 
 
 def _block(m=1.0, mu=0.3, g=9.81, force=None, t=None):
@@ -149,7 +149,7 @@ def test_spatial_result_layout_and_options():
     sc = lcp.scenes.plane_slide()
     res = lcp.simulate(sc, 1.0, method="event", t_eval=[0.0, 0.1, 0.5, 1.0])
     assert res.p_T.shape == (3, 2) and res.force_T.shape == (4, 2) and res.modes.shape == (3, 1)
-    assert res.modes[0, 0] == lcp.contact_problem.SLIDE
+    assert res.modes[0, 0] == lcp.contact.problem.SLIDE
     # friction impulse over the slide opposes the velocity, |p_T| = mu p_N
     assert abs(np.linalg.norm(res.p_T[0]) - sc.system.mu[0] * res.p_N[0, 0]) <= 1e-12
     with pytest.raises(ValueError, match="smooth"):

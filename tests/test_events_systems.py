@@ -14,9 +14,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-from lcp.control import ControlSchedule
+from lcp.model.control import ControlSchedule
 from lcp.events import event_driven
-from lcp.system import Contact, System
+from lcp.model.system import Contact, System
 
 G = 9.81
 

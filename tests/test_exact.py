@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from lcp.exact import JeanPrattExact
+from lcp.scenes.jean_pratt_exact import JeanPrattExact
 from lcp.scenes import jean_pratt
 
 

@@ -2,7 +2,7 @@
 import numpy as np
 
 from lcp.fclib import ContactFile, write_dat
-from lcp.friction_contact import interleave
+from lcp.contact.law import interleave
 from studies import fc_benchmark
 from tests.test_fc_solvers import random_problem
 

@@ -8,10 +8,11 @@ import pytest
 import scipy.sparse as sp
 
 import lcp
-from lcp.contact_problem import ContactProblem
+from lcp.contact.problem import ContactProblem
 from lcp.fclib import ContactFile, read_problem, write_dat, write_hdf5
-from lcp.friction_contact import check_problem, interleave, natural_map_error
-from lcp.solvers import make_solver
+from lcp.contact.law import check_problem, interleave, natural_map_error
+from lcp.contact.solvers import make_solver
+from lcp.timestepping.assembly import one_step_fn
 
 SAMPLES = Path(__file__).resolve().parents[1] / ".." / "shared" / "fc2d"
 
@@ -66,10 +67,10 @@ def test_nsgs_without_numba_in_a_fresh_interpreter():
     code = (
         "import sys; sys.modules['numba'] = None\n"
         "import numpy as np\n"
-        "from lcp import nsgs\n"
+        "from lcp.contact import nsgs\n"
         "assert not nsgs.HAVE_NUMBA\n"
-        "from lcp.contact_problem import ContactProblem\n"
-        "from lcp.solvers import make_solver\n"
+        "from lcp.contact.problem import ContactProblem\n"
+        "from lcp.contact.solvers import make_solver\n"
         "W = np.array([[2, 0, .5, 0], [0, 2, 0, .5], [.5, 0, 1, 0], [0, .5, 0, 1.]])\n"
         "pb = ContactProblem(W, np.array([-1., -1., 2., -0.1]), np.array([0.3, 0.8]))\n"
         "s = make_solver('nsgs').solve(pb)\n"
@@ -81,8 +82,8 @@ def test_nsgs_without_numba_in_a_fresh_interpreter():
 
 
 def test_local_closed_form_matches_planar_enum():
-    from lcp.contact_problem import planar_enum
-    from lcp.nsgs import local_planar
+    from lcp.contact.problem import planar_enum
+    from lcp.contact.nsgs import local_planar
 
     rng = np.random.default_rng(5)
     for _ in range(200):
@@ -183,12 +184,12 @@ def test_sample_files_solve_to_1e_10():
 
 
 def test_sparse_assembly_matches_dense_and_chain_trajectories_agree():
-    import lcp.assembly as asm_mod
+    import lcp.timestepping.assembly as asm_mod
 
     sc = lcp.scenes.block_chain(110)  # 220 contact rows: the sparse assembly
     a = asm_mod.StepAssembly(sc.system, 1e-3, 0.5)
     assert a.sparse
-    dense = sc.system.one_step_fn(0.0, np.zeros(220), np.zeros(220), 1e-3, 0.5)
+    dense = one_step_fn(sc.system)(0.0, np.zeros(220), np.zeros(220), 1e-3, 0.5)
     Wd = np.array(dense[4], dtype=float)
     assert abs(a.W.toarray() - Wd).max() <= 1e-14 * abs(Wd).max()
     r1 = lcp.simulate(sc, 0.05, h=1e-3, solver="nsgs")
@@ -203,7 +204,7 @@ def test_auto_finishes_a_stalled_iteration_by_the_core_pivot(seed):
     """Where the iteration stops short (here: crippled to one round of two sweeps and one Newton
     step), auto finishes from its point with the core pivot, on the solver's own criteria and
     before any Lemke fallback; rounded, slightly indefinite W with redundant contacts."""
-    from lcp.solvers import AutoSolver, NewtonSolver
+    from lcp.contact.solvers import AutoSolver, NewtonSolver
 
     from .test_core_pivot import disc_chain, planted
 

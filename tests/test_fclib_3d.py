@@ -6,11 +6,11 @@ import scipy.sparse as sp
 from hypothesis import given
 from hypothesis import strategies as st
 
-from lcp.cone_problem import ConeContactProblem
-from lcp.cone_solvers import make_cone_solver
-from lcp.contact_problem import ContactProblem
+from lcp.contact.spatial_problem import ConeContactProblem
+from lcp.contact.spatial_solvers import make_cone_solver
+from lcp.contact.problem import ContactProblem
 from lcp.fclib import ContactFile, read_problem, write_dat, write_hdf5
-from lcp.friction_contact import natural_map_error
+from lcp.contact.law import natural_map_error
 
 h5py = pytest.importorskip("h5py")
 

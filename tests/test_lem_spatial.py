@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from lcp.spatial_exact import InclineSlideExact, LateralForceSlideExact, PlaneSlideExact
+from lcp.scenes.spatial_exact import InclineSlideExact, LateralForceSlideExact, PlaneSlideExact
 from lem.spatial_sliding import solve_spatial_sliding, spatial_sliding_field
 
 #: the LEM target on the incline with mu = tan(theta), horizontal launch, t <= 2 s

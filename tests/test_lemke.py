@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from lcp.lemke import lemke
+from lcp.contact.lemke import lemke
 
 
 def brute_force(M, q):
@@ -72,7 +72,7 @@ def test_ray_termination_is_reported():
 
 def test_copositive_contact_lcp():
     # the frictional contact LCP is not a P-matrix LCP; Lemke still solves it
-    from lcp.contact_problem import ContactProblem
+    from lcp.contact.problem import ContactProblem
 
     W = np.array([[2.0, 1.0], [1.0, 1.5]])
     for q in ([-1.0, 2.0], [-1.0, -0.1], [0.5, 1.0], [-3.0, 0.0]):

@@ -7,8 +7,8 @@ import pytest
 import lcp
 from lcp.classical import box_on_corners, stacked_blocks
 from lcp.scenes import block_chain
-from lcp.system import Contact, System
-from lcp.timestepping import CLOSE_ULPS, MoreauJeanOptions, _Activation, moreau_jean
+from lcp.model.system import Contact, System
+from lcp.timestepping.moreau_jean import CLOSE_ULPS, MoreauJeanOptions, _Activation, moreau_jean
 
 EPS = np.finfo(float).eps
 HS = [1e-2, 1e-3, 1e-4, 1e-5, 1e-6]
@@ -18,7 +18,7 @@ def _check_stack_at_rest(sc, res):
     """Every contact active and loaded in every step, the exact weights carried, no penetration
     beyond the rounding of the gaps, and none that grows."""
     assert res.success, res.message
-    assert not np.any(res.modes == lcp.contact_problem.ContactMode.INACTIVE)
+    assert not np.any(res.modes == lcp.contact.problem.ContactMode.INACTIVE)
     np.testing.assert_allclose(res.p_N / res.h, np.broadcast_to(sc.exact(0.0)["N"][0], res.p_N.shape), rtol=1e-9)
     gaps = np.array([sc.system.gaps(q) for q in res.q])
     size = sc.params["height"] * sc.params["K"]
@@ -76,7 +76,7 @@ def test_chain_on_a_raised_floor_keeps_every_contact(h):
 
 def test_activation_rule_tolerates_rounding_only():
     sc = block_chain(1)
-    asm = lcp.assembly.StepAssembly(sc.system, 1e-3, 0.5)
+    asm = lcp.timestepping.assembly.StepAssembly(sc.system, 1e-3, 0.5)
     act = _Activation(asm, 1)
     q = np.array([0.0, 0.0])
     H = asm.H
@@ -120,7 +120,7 @@ def test_pushed_box_does_not_chatter_before_it_tips():
     assert res.success, res.message
     assert res.impacts == []
     before = res.t[:-1] < t_tip - 2e-3
-    assert np.all(res.modes[before] == lcp.contact_problem.STICK)
+    assert np.all(res.modes[before] == lcp.contact.problem.STICK)
     assert np.all(res.p_N[before] > 0)
 
 

@@ -8,9 +8,9 @@ import pytest
 
 import lcp
 from lcp.classical import pendulum
-from lcp.projection import PositionProjection, needs_projection
+from lcp.timestepping.projection import PositionProjection, needs_projection
 from lcp.scenes import jean_pratt
-from lcp.system import Contact, System
+from lcp.model.system import Contact, System
 
 
 def _length_error(res, L=1.0):

@@ -1,5 +1,5 @@
 """What a Moreau-Jean result tells: named contact modes, impacts, constraint violation, and the
-generalized forces of lcp.forces (time-dependent ones against exact solutions)."""
+generalized forces of lcp.model.forces (time-dependent ones against exact solutions)."""
 import math
 
 import casadi as ca
@@ -8,18 +8,10 @@ import pytest
 
 import lcp
 from lcp.classical import bouncing_ball
-from lcp.contact_problem import (
-    MODE_NAMES,
-    OPEN,
-    SLIDE_NEG,
-    SLIDE_POS,
-    STICK,
-    ContactMode,
-    ModeArray,
-)
-from lcp.forces import applied_forces, point_force, point_velocity, torque
+from lcp.contact.problem import MODE_NAMES, OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactMode, ModeArray
+from lcp.model.forces import applied_forces, point_force, point_velocity, torque
 from lcp.scenes import jean_pratt
-from lcp.system import Contact, System
+from lcp.model.system import Contact, System
 
 
 # ----------------------------------------------------------------------------- modes

@@ -8,8 +8,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import lcp
-from lcp.spatial_scenes import incline_slide, jean_pratt_spatial, lateral_force_slide, plane_slide
-from lcp.system import Contact, System
+from lcp.scenes.spatial_systems import incline_slide, jean_pratt_spatial, lateral_force_slide, plane_slide
+from lcp.model.system import Contact, System
 
 EXACT_SOLVERS = ["auto", "local", "nsgs", "newton", "tresca"]
 

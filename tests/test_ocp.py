@@ -16,7 +16,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import lcp
-from lcp.control import ControlSchedule
+from lcp.model.control import ControlSchedule
 from lcp.ocp import (
     HomotopyOptions,
     OCPGuess,
@@ -29,7 +29,7 @@ from lcp.ocp import (
     tangential_push,
 )
 from lcp.ocp.guess import resample
-from lcp.ocp.schedule import AffineSchedule
+from lcp.model.schedule import AffineSchedule
 
 G = 9.81
 D_TARGET, U_MAX = 0.5, 20.0
@@ -93,7 +93,7 @@ def test_min_time_solution(min_time):
         # not better than the continuous bang-bang optimum, and close to it
         assert t_star() * (1 - 1e-9) <= res.T <= t_star() * (1 + 0.1 / N)
         # shape of the answer: slide forward all the way, stop in the last step
-        assert np.all(res.modes[:-1, 0] == lcp.contact_problem.SLIDE_POS)
+        assert np.all(res.modes[:-1, 0] == lcp.contact.problem.SLIDE_POS)
         assert np.all(res.N > 0)
         # piecewise-constant hold (the default): one control value per step
         assert res.t.shape == (N + 1,) and res.u.shape == (N, 1) and res.p_N.shape == (N, 1)
@@ -169,7 +169,7 @@ def test_min_effort():
         assert np.all(np.abs(res.u) <= U_MAX * (1 + 1e-12))
         assert j_star() <= res.cost <= j_star() * (1 + 1.0 / N)
         # the block sticks first and last: the optimizer does not push while it waits
-        assert res.modes[0, 0] == lcp.contact_problem.STICK and res.modes[-1, 0] == lcp.contact_problem.STICK
+        assert res.modes[0, 0] == lcp.contact.problem.STICK and res.modes[-1, 0] == lcp.contact.problem.STICK
         # u falls along the slide towards 0 (the last piece holds a ramp's tail: ~ 2c / slide steps)
         slide = res.u[_moving(res):, 0]
         assert np.all(np.diff(slide) < 0) and 0 <= slide[-1] < 0.2 * R_REST * 2 * G
@@ -231,8 +231,8 @@ def test_two_contacts_block_chain():
     assert res.success and res.complementarity_residual <= 1e-8
     assert res.p_N.shape == (20, 2)
     assert np.abs(res.q[-1, [0, 2]] - [0.3, 1.3]).max() <= 1e-8
-    assert set(np.unique(res.modes)) <= {lcp.contact_problem.STICK, lcp.contact_problem.SLIDE_POS,
-                                         lcp.contact_problem.SLIDE_NEG}
+    assert set(np.unique(res.modes)) <= {lcp.contact.problem.STICK, lcp.contact.problem.SLIDE_POS,
+                                         lcp.contact.problem.SLIDE_NEG}
     assert replay(res, refine=1).max_error_q <= 1e-9
     # springs: the theta = 1/2 step is not exact between switches, so the exact (event) replay
     # misses by the transcription's O(h^2) error, which success checks against replay_tol
@@ -392,7 +392,7 @@ def test_no_ringing_before_the_block_moves():
     the true discrete optimum of the linear-hold cost, an artefact of that parametrization."""
     const = rest_problem(20, "effort", steps="free").solve()
     k = _moving(const)
-    assert k >= 2 and const.modes[0, 0] == lcp.contact_problem.STICK
+    assert k >= 2 and const.modes[0, 0] == lcp.contact.problem.STICK
     assert np.max(np.abs(const.u[:k, 0])) <= 1e-8
     lin = rest_problem(20, "effort", hold="linear", replay_tol=None).solve()
     k = _moving(lin)
@@ -522,7 +522,7 @@ def test_affine_hold_min_effort_is_exact():
     assert abs(res.cost - j_star()) <= 1e-9 * j_star()
     assert res.replay.method == "event" and res.replay.final_miss <= 1e-10 and res.replay.node_miss <= 1e-10
     c, _ = _consts(R_REST)
-    slide = np.flatnonzero(res.modes[:, 0] == lcp.contact_problem.SLIDE_POS)
+    slide = np.flatnonzero(res.modes[:, 0] == lcp.contact.problem.SLIDE_POS)
     k0 = slide[0]
     assert res.u[2 * k0, 0] == pytest.approx(2 * c, rel=1e-7)  # the ramp starts at 2c
     assert np.all(np.abs(res.u[:2 * k0, 0]) <= 1e-8)  # no control (nor ringing) while it sticks first

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import lcp
-from lcp.parameter_sweep import BUILD_FAILED, parameter_sets
+from lcp.sweeps.parameter_sweep import BUILD_FAILED, parameter_sets
 
 pd = pytest.importorskip("pandas")
 
@@ -95,7 +95,7 @@ def test_workers_keep_this_process_blas_threads():
     last digit (a Radau solve of the work-precision study: 15th digit), so the cluster the package
     starts gives its workers this process's settings, set or not."""
     pytest.importorskip("dask.distributed")
-    from lcp.parameter_sweep import cluster
+    from lcp.sweeps.parameter_sweep import cluster
 
     here = _blas_threads()  # before the cluster: Dask writes its own values into this process too
     with cluster(workers=1) as client:

@@ -10,9 +10,9 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import lcp
-from lcp.contact_problem import ContactProblem
+from lcp.contact.problem import ContactProblem
 from lcp.scenes import jean_pratt
-from lcp.solvers import make_solver
+from lcp.contact.solvers import make_solver
 
 from .conftest import RESIDUAL_TOL
 

@@ -14,9 +14,10 @@ import pytest
 import scipy.sparse as sp
 
 import lcp
-from lcp import compiled
-from lcp.assembly import StepAssembly
-from lcp.system import Contact, System
+from lcp.timestepping import compiled_step as compiled
+from lcp.timestepping import assembly
+from lcp.timestepping.assembly import StepAssembly
+from lcp.model.system import Contact, System
 
 
 def _copies(K, blk=((2.0, -1.0), (-1.0, 1.0)), dense=False):
@@ -53,7 +54,7 @@ def test_constant_data_equal_those_of_the_one_step_function_to_the_bit(name, h, 
     s = SYSTEMS[name]()
     asm = StepAssembly(s, h, theta)
     assert asm.matrices_constant and not asm.sparse
-    assert "one_step_fn" not in s.__dict__  # the per-system Function was not built
+    assert s not in assembly.ONE_STEP_FUNCTIONS  # the per-system Function was not built
     z = np.zeros(s.n)
     _, S, T, SHt, W, gap, H = asm._eval(0.0, z, z)  # the general construction
     for got, ref in ((asm.S, S), (asm.T, T), (asm.SHt, SHt), (asm.W, W), (asm.gap0, gap), (asm.H, H)):
@@ -69,7 +70,7 @@ def test_constant_data_equal_those_of_the_one_step_function_to_the_bit(name, h, 
 
 
 def test_the_core_is_shared_by_systems_of_one_structure_and_not_by_others():
-    from lcp.assembly import _constant_core
+    from lcp.timestepping.assembly import _constant_core
 
     a, b = _copies(3), _copies(3, blk=((3.0, 0.5), (0.5, 2.0)))
     assert _constant_core(a) is _constant_core(b)

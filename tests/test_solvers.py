@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 import lcp
-from lcp.contact_problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem
-from lcp.solvers import make_solver
+from lcp.contact.problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem
+from lcp.contact.solvers import make_solver
 
 from .conftest import RESIDUAL_TOL
 
@@ -103,8 +103,8 @@ def test_failing_solver_falls_back_to_an_exact_one_and_says_so():
 
 def test_acceptance_is_relative_to_tiny_impulses():
     # a problem whose impulses are ~1e-15: an answer off by 50 % must not pass as solved
-    from lcp.contact_problem import ContactProblem
-    from lcp.solvers import OneStepSolver, StepSolution
+    from lcp.contact.problem import ContactProblem
+    from lcp.contact.solvers import OneStepSolver, StepSolution
 
     class Wrong(OneStepSolver):
         name = "wrong"

@@ -1,4 +1,4 @@
-"""Exact disk-friction slides in a plane (lcp.spatial_exact) against the reduced integration,
+"""Exact disk-friction slides in a plane (lcp.scenes.spatial_exact) against the reduced integration,
 invariants, stop formulas, straight-line limits and bad input."""
 import doctest
 import math
@@ -9,8 +9,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.integrate import quad
 
-import lcp.spatial_exact as se
-from lcp.spatial_exact import (
+import lcp.scenes.spatial_exact as se
+from lcp.scenes.spatial_exact import (
     ConstantLoadSlide,
     InclineSlideExact,
     LateralForceSlideExact,

@@ -5,7 +5,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import lcp
-from lcp.system import Contact, System
+from lcp.model.system import Contact, System
 
 
 def bowl(mu=0.0, radius=1.0, m=1.0, g=9.81):

@@ -7,7 +7,7 @@ import pytest
 
 import lcp
 from lcp.scenes import block_chain, jean_pratt
-from lcp.system import Contact, System
+from lcp.model.system import Contact, System
 from lem import jean_pratt as jean_pratt_parameters, series
 
 

@@ -42,7 +42,7 @@ resolved impact in ``EventResult.impacts`` (:mod:`~lcp.events.accumulation`).
 At each event the next mode comes from the **acceleration-level contact problem** of the closed
 contacts (:mod:`~lcp.events.modes`): the Coulomb law with forces and accelerations in place of
 impulses and velocities, sliding contacts folded in, so that the law itself stays in
-:class:`~lcp.contact_problem.ContactProblem`.
+:class:`~lcp.contact.problem.ContactProblem`.
 The problem is solved by enumerating every branch (open / stick / slide+ / slide- for stick
 candidates, open / closed for sliding contacts), which finds *all* solutions, or by Lemke's method
 for many contacts. Solutions with the same acceleration are one motion (ties at a mode boundary,
@@ -86,9 +86,9 @@ Modules
 - :mod:`~lcp.events.projection`: the projection onto the active constraints at events;
 - :mod:`~lcp.events.integrator`, :mod:`~lcp.events.driver`: the event loop and :func:`event_driven`.
 """
-from .driver import event_driven
-from .options import EVENT_STATUS_MESSAGES, EventOptions, ModeSolver, SmoothIntegrator
-from .records import Accumulation, Event, EventResult, Impact, Impulse, Phase
+from lcp.events.driver import event_driven
+from lcp.events.options import EVENT_STATUS_MESSAGES, EventOptions, ModeSolver, SmoothIntegrator
+from lcp.events.records import Accumulation, Event, EventResult, Impact, Impulse, Phase
 
 __all__ = ["EVENT_STATUS_MESSAGES", "SmoothIntegrator", "ModeSolver", "EventOptions", "Event", "Impulse",
            "Impact", "Accumulation", "Phase", "EventResult", "event_driven"]

@@ -27,9 +27,9 @@ import math
 
 import numpy as np
 
-from ..contact_problem import STICK
-from .model import EPS
-from .records import Accumulation, Event, Impulse
+from lcp.contact.problem import STICK
+from lcp.events.model import EPS
+from lcp.events.records import Accumulation, Event, Impulse
 
 __all__ = ["BounceSequence", "TailPhase", "aitken", "tail_impulse", "sum_up"]
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..nsgs import HAVE_NUMBA, njit
+from lcp.numerics.jit import HAVE_NUMBA, njit
 
 __all__ = ["HAVE_NUMBA", "piece_output", "piece_output_numpy", "warm"]
 

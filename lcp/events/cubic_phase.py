@@ -18,11 +18,11 @@ import math
 
 import numpy as np
 
-from ..contact_problem import ContactProblem
-from .event_location import first_descent
-from .model import EPS, coordinate_rows, mass_projection
-from .modes import AccelProblem
-from .phases import SmoothPhase
+from lcp.contact.problem import ContactProblem
+from lcp.events.event_location import first_descent
+from lcp.events.model import EPS, coordinate_rows, mass_projection
+from lcp.events.modes import AccelProblem
+from lcp.events.phases import SmoothPhase
 
 __all__ = ["CubicPhase"]
 

@@ -5,11 +5,11 @@ import math
 
 import numpy as np
 
-from .integrator import Integrator
-from .model import check_state
-from .options import EventOptions
-from .phases import closed_form_output
-from .records import EventResult
+from lcp.events.integrator import Integrator
+from lcp.events.model import check_state
+from lcp.events.options import EventOptions
+from lcp.events.phases import closed_form_output
+from lcp.events.records import EventResult
 
 __all__ = ["event_driven"]
 
@@ -26,7 +26,7 @@ def _transposed(rows):
 
 
 def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventResult:
-    """Integrate a :class:`~lcp.system.System` event by event, with exact mode switches.
+    """Integrate a :class:`~lcp.model.system.System` event by event, with exact mode switches.
 
     Usually called as ``lcp.simulate(scene, t_end, method="event", **options)``.
 
@@ -55,7 +55,7 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     Examples
     --------
     The Jean-Pratt block slides and sticks at tau0 = 0.152905... s (the exact solution,
-    :mod:`lcp.exact`):
+    :mod:`lcp.scenes.jean_pratt_exact`):
 
     >>> import lcp
     >>> sc = lcp.scenes.jean_pratt()
@@ -76,7 +76,7 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     t_inf = sqrt(2/g) (1 + 2 e / (1 - e)) = 4.0637... s, then rests exactly on the floor:
 
     >>> import casadi as ca
-    >>> from lcp.system import Contact, System
+    >>> from lcp.model.system import Contact, System
     >>> q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
     >>> ball = System(q, v, mass=ca.SX.eye(2), force=ca.vertcat(0, -9.81),
     ...               contacts=[Contact(gap=q[1], tangent=q[0], mu=0.3, e=0.8, name="floor")])
@@ -90,7 +90,7 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
     t_end = float(t_end)
     if getattr(system, "is_spatial", False):  # the Coulomb disk: its own integrator (lcp.events.spatial)
-        from .spatial import spatial_event_driven
+        from lcp.events.spatial import spatial_event_driven
 
         return spatial_event_driven(system, q0, v0, t_end, opts, frozenset(options), scene)
     q0, v0 = check_state(system, q0, v0)

@@ -21,7 +21,7 @@ import weakref
 import casadi as ca
 import numpy as np
 
-from ..control import ControlSchedule
+from lcp.model.control import ControlSchedule
 
 __all__ = ["TimeForcing", "time_forcing"]
 

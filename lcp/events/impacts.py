@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..contact_problem import ContactProblem
-from ..solvers import make_solver
-from .indeterminate import branch_forces
+from lcp.contact.problem import ContactProblem
+from lcp.contact.solvers import make_solver
+from lcp.events.indeterminate import branch_forces
 
 __all__ = ["ImpactLaw"]
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..contact_problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK
+from lcp.contact.problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK
 
 __all__ = ["BranchForces", "branch_forces", "admissibility_rows", "force_margin"]
 

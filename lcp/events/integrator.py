@@ -3,19 +3,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..contact_problem import OPEN, STICK
-from ..result import SolverStats
-from .accumulation import BounceSequence, sum_up
-from .cubic_phase import CubicPhase
-from .event_location import too_many_events
-from .impacts import ImpactLaw
-from .model import EPS, all_finite, system_model, zero_test_scales
-from .modes import ModeSelector
-from .ode_phase import OdePhase
-from .options import EVENT_STATUS_MESSAGES, EventOptions, SmoothIntegrator
-from .phases import ClosedFormPhase
-from .projection import StateProjector, check_initial
-from .records import Event, Impact, Impulse, Phase, make_record
+from lcp.contact.problem import OPEN, STICK
+from lcp.result import SolverStats
+from lcp.events.accumulation import BounceSequence, sum_up
+from lcp.events.cubic_phase import CubicPhase
+from lcp.events.event_location import too_many_events
+from lcp.events.impacts import ImpactLaw
+from lcp.events.model import EPS, all_finite, system_model, zero_test_scales
+from lcp.events.modes import ModeSelector
+from lcp.events.ode_phase import OdePhase
+from lcp.events.options import EVENT_STATUS_MESSAGES, EventOptions, SmoothIntegrator
+from lcp.events.phases import ClosedFormPhase
+from lcp.events.projection import StateProjector, check_initial
+from lcp.events.records import Event, Impact, Impulse, Phase, make_record
 
 __all__ = ["Inconsistent", "Integrator"]
 

@@ -13,7 +13,7 @@ import weakref
 import casadi as ca
 import numpy as np
 
-from .forcing import time_forcing
+from lcp.events.forcing import time_forcing
 
 __all__ = [
     "EPS",

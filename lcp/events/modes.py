@@ -11,7 +11,7 @@ acceleration level is, per closed contact j:
 
 - normal: 0 <= N_j  perp  a_N,j >= 0;
 - if u_T,j = 0 (stick candidate): |f_j| <= mu_j N_j and f_j = -mu_j N_j sign(a_T,j) if a_T,j != 0,
-  i.e. exactly the complementarity structure of :class:`~lcp.contact_problem.ContactProblem`
+  i.e. exactly the complementarity structure of :class:`~lcp.contact.problem.ContactProblem`
   with impulses replaced by forces and velocities by accelerations;
 - if u_T,j != 0 (sliding): f_j = -mu_j N_j sign(u_T,j), whatever a_T,j.
 
@@ -34,11 +34,11 @@ from itertools import product
 
 import numpy as np
 
-from ..contact_problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem
-from ..solvers import make_solver
-from .indeterminate import branch_forces
-from .model import EPS, StateData
-from .options import ModeSolver
+from lcp.contact.problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem
+from lcp.contact.solvers import make_solver
+from lcp.events.indeterminate import branch_forces
+from lcp.events.model import EPS, StateData
+from lcp.events.options import ModeSolver
 
 __all__ = ["AccelProblem", "ModeSolution", "ModeSelector", "enumerate_branches", "boundary_alternatives",
            "closed_variant",

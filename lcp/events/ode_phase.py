@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..contact_problem import ContactProblem
-from .event_location import event_functions, first_terminal_event
-from .indeterminate import admissibility_rows, branch_forces
-from .model import mass_projection
-from .modes import AccelProblem
-from .options import EventOptions
-from .phases import SmoothPhase
+from lcp.contact.problem import ContactProblem
+from lcp.events.event_location import event_functions, first_terminal_event
+from lcp.events.indeterminate import admissibility_rows, branch_forces
+from lcp.events.model import mass_projection
+from lcp.events.modes import AccelProblem
+from lcp.events.options import EventOptions
+from lcp.events.phases import SmoothPhase
 
 __all__ = ["OdePhase"]
 

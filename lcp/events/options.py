@@ -7,8 +7,8 @@ from enum import Enum
 
 import numpy as np
 
-from ..result import STATUS_MESSAGES
-from ..solvers import make_solver
+from lcp.result import STATUS_MESSAGES
+from lcp.contact.solvers import make_solver
 
 __all__ = ["EVENT_STATUS_MESSAGES", "EventOptions", "ModeSolver", "SmoothIntegrator", "checked_times", "times_inside"]
 
@@ -70,7 +70,7 @@ class EventOptions:
         Solver of the acceleration-level problem (:class:`ModeSolver`).
     impact_solver : str
         One-step solver of the velocity-level impact problem (``"auto"``, ``"enum"``, ``"lemke"``,
-        ``"osqp"``; see :func:`lcp.solvers.make_solver`).
+        ``"osqp"``; see :func:`lcp.contact.solvers.make_solver`).
     max_branches : int
         Largest number of branches enumerated by ``mode_solver="auto"``.
     max_events : int

@@ -15,11 +15,11 @@ import math
 
 import numpy as np
 
-from ..contact_problem import MODE_NAMES, OPEN, SLIDE_NEG, SLIDE_POS
-from .event_location import first_landing, first_stop
-from .indeterminate import branch_forces, force_margin
-from .model import EPS, coordinate_rows, mass_projection
-from .modes import AccelProblem
+from lcp.contact.problem import MODE_NAMES, OPEN, SLIDE_NEG, SLIDE_POS
+from lcp.events.event_location import first_landing, first_stop
+from lcp.events.indeterminate import branch_forces, force_margin
+from lcp.events.model import EPS, coordinate_rows, mass_projection
+from lcp.events.modes import AccelProblem
 
 __all__ = ["phase_static", "SmoothPhase", "ClosedFormPhase", "closed_form_output"]
 

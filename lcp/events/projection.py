@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .model import coordinate_rows, mass_projection
+from lcp.events.model import coordinate_rows, mass_projection
 
 __all__ = ["StateProjector", "check_initial"]
 

@@ -5,7 +5,7 @@ from dataclasses import MISSING, dataclass, field, fields
 
 import numpy as np
 
-from ..result import Impact, SimulationResult  # one Impact for both methods
+from lcp.result import Impact, SimulationResult  # one Impact for both methods
 
 __all__ = ["Accumulation", "Event", "EventResult", "Impact", "Impulse", "Phase", "make_record", "new_event_result"]
 

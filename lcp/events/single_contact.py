@@ -23,11 +23,11 @@ import math
 
 import numpy as np
 
-from ..contact_problem import MODE_NAMES, SLIDE_NEG, SLIDE_POS, STICK
-from ..result import STATUS_MESSAGES, SolverStats
-from .event_location import first_stop
-from .options import EventOptions, checked_times, times_inside
-from .records import Event, EventResult, Phase, make_record, new_event_result
+from lcp.contact.problem import MODE_NAMES, SLIDE_NEG, SLIDE_POS, STICK
+from lcp.result import STATUS_MESSAGES, SolverStats
+from lcp.events.event_location import first_stop
+from lcp.events.options import EventOptions, checked_times, times_inside
+from lcp.events.records import Event, EventResult, Phase, make_record, new_event_result
 
 __all__ = ["applicable", "event_options", "run_with_options", "single_contact_run"]
 
@@ -98,7 +98,7 @@ _OUTPUT = []
 def _output():
     """The output writer (:mod:`.closed_form_kernels`, imported on first use: numba loads there)."""
     if not _OUTPUT:
-        from .closed_form_kernels import piece_output
+        from lcp.events.closed_form_kernels import piece_output
 
         _OUTPUT.append(piece_output)
     return _OUTPUT[0]
@@ -134,7 +134,7 @@ def single_contact_run(model, q0, v0, t_end: float, opts: EventOptions) -> Event
 
     Parameters
     ----------
-    model : lcp.constant_model.ConstantModel
+    model : lcp.timestepping.constant_model.ConstantModel
         With one contact, no bilateral constraints, constant forces (:func:`applicable`).
     q0, v0 : ndarray (n,)
         Initial state, finite (checked by the caller).

@@ -45,13 +45,13 @@ import math
 
 import numpy as np
 
-from ..contact_problem import MODE_NAMES, OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, STICK
-from ..result import SolverStats
-from .event_location import approach_gap, first_terminal_event, too_many_events
-from .model import EPS, coordinate_rows, mass_projection
-from .options import EVENT_STATUS_MESSAGES
-from .records import Event, EventResult, Impact, Impulse, Phase
-from .spatial_modes import AccelDisk, SpatialModel, group_motions, impact_impulse
+from lcp.contact.problem import MODE_NAMES, OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, STICK
+from lcp.result import SolverStats
+from lcp.events.event_location import approach_gap, first_terminal_event, too_many_events
+from lcp.events.model import EPS, coordinate_rows, mass_projection
+from lcp.events.options import EVENT_STATUS_MESSAGES
+from lcp.events.records import Event, EventResult, Impact, Impulse, Phase
+from lcp.events.spatial_modes import AccelDisk, SpatialModel, group_motions, impact_impulse
 
 __all__ = ["SpatialIntegrator", "SpatialPhase", "spatial_event_driven"]
 

@@ -12,7 +12,7 @@ the bilateral constraints eliminated).
   one small linear solve per evaluation (:meth:`SpatialModel.phase_accel`).
 - At an event, the acceleration-level disk problem (:class:`AccelDisk`) is the Coulomb disk law
   with forces and accelerations in place of impulses and velocities, in the layout of
-  :class:`lcp.cone_problem.ConeContactProblem`; a sliding contact keeps its direction and enters
+  :class:`lcp.contact.spatial_problem.ConeContactProblem`; a sliding contact keeps its direction and enters
   with friction 0 in the problem (its friction is in its normal column). A contact at rest may
   stick, open, or start to slide: it then slides along its tangential acceleration, a_T = lambda d
   with lambda > 0, and d is the new slip direction.
@@ -20,7 +20,7 @@ the bilateral constraints eliminated).
 One closed contact is solved by enumerating every case (open, stick, and every slide direction:
 the roots of the parallelism condition on the circle), so that no solution and several solutions
 (Painleve) are detected. Several closed contacts are solved by nonsmooth Gauss-Seidel with the
-exact local disk solve (:func:`lcp.cone_nsgs.cone_nsgs`), refined on the branch of its modes; one
+exact local disk solve (:func:`lcp.contact.spatial_nsgs.cone_nsgs`), refined on the branch of its modes; one
 solution, without a uniqueness check.
 """
 from __future__ import annotations
@@ -29,8 +29,8 @@ import math
 
 import numpy as np
 
-from ..contact_problem import OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, STICK
-from .model import ContactKinematics, accel_function
+from lcp.contact.problem import OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, STICK
+from lcp.events.model import ContactKinematics, accel_function
 
 __all__ = ["AccelDisk", "DiskSolution", "Frame", "SpatialModel", "impact_impulse"]
 
@@ -50,7 +50,7 @@ class SpatialModel(ContactKinematics):
 
     Parameters
     ----------
-    system : lcp.system.System
+    system : lcp.model.system.System
 
     Examples
     --------
@@ -197,7 +197,7 @@ class AccelDisk:
 
     ``dirs[i]`` is the sliding direction U/|U| of closed contact i, or None when it is at rest.
     W, b and mu' (0 for sliding contacts) are in the blocked layout of
-    :class:`lcp.cone_problem.ConeContactProblem`.
+    :class:`lcp.contact.spatial_problem.ConeContactProblem`.
     """
 
     def __init__(self, model: SpatialModel, fr: Frame, idx, dirs):
@@ -325,8 +325,8 @@ class AccelDisk:
         return out
 
     def _nsgs(self):
-        from ..cone_nsgs import ConeOperator, cone_nsgs
-        from ..cone_problem import ConeContactProblem
+        from lcp.contact.spatial_nsgs import ConeOperator, cone_nsgs
+        from lcp.contact.spatial_problem import ConeContactProblem
 
         pb = ConeContactProblem(self.W, self.b, self.mu, self.dims)
         op = ConeOperator(pb)
@@ -400,15 +400,15 @@ def impact_impulse(model: SpatialModel, fr: Frame, v, contacts, restitution: boo
             return None
         q_solve = qv + (1e-8 * umax / bmax if umax > 0 else 1.0) * b
     if k == 1:
-        from ..cone_problem import local_disk
+        from lcp.contact.spatial_problem import local_disk
 
         P, mode = local_disk(W, q_solve, float(mu[0]))
         if mode < 0 or not np.all(np.isfinite(P)):
             return None
         modes = [mode]
     else:
-        from ..cone_nsgs import ConeOperator, cone_nsgs
-        from ..cone_problem import ConeContactProblem
+        from lcp.contact.spatial_nsgs import ConeOperator, cone_nsgs
+        from lcp.contact.spatial_problem import ConeContactProblem
 
         pb = ConeContactProblem(W, q_solve, mu, dims)
         r, _, _res, _ = cone_nsgs(ConeOperator(pb), pb.interleave(q_solve), mu, tol=1e-14, max_sweeps=10000)

@@ -8,7 +8,7 @@ control_bounds=...)``, the force affine in u); :class:`OptimalControlProblem` op
   deterministic multi-start);
 - :mod:`~lcp.ocp.transcription`: the NLP (uniform or free steps, piecewise-constant, linear or
   affine control hold, the cross complementarity that puts switches on nodes);
-- :mod:`~lcp.ocp.schedule`: :class:`AffineSchedule`, the control of the affine hold (affine on each
+- :mod:`~lcp.model.schedule`: :class:`AffineSchedule`, the control of the affine hold (affine on each
   step, jumps at the nodes);
 - :mod:`~lcp.ocp.complementarity`: the Scholtes homotopy, polishing and the independent checks;
 - :mod:`~lcp.ocp.replay`: open-loop replay and the replay miss every result carries;
@@ -23,21 +23,13 @@ M. Jean, The non-smooth contact dynamics method, CMAME 177 (1999) 235-257.
 A. Nurkanovic, M. Sperl, S. Albrecht, M. Diehl, Finite elements with switch detection for direct
 optimal control of nonsmooth systems, Numer. Math. 156 (2024) 1115-1162.
 """
-from ..contact_problem import MODE_NAMES
-from .model import add_control, controlled_system, tangential_push
-from .options import OCP_STATUS_MESSAGES, HomotopyOptions
-from .problem import OCP_HOLDS, OptimalControlProblem
-from .replay import replay, replay_check
-from .results import (
-           HomotopyStage,
-           OCPGuess,
-           OCPResult,
-           ReplayCheck,
-           ReplayResult,
-           Step,
-           effort,
-)
-from .schedule import AffineSchedule
+from lcp.contact.problem import MODE_NAMES
+from lcp.ocp.model import add_control, controlled_system, tangential_push
+from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions
+from lcp.ocp.problem import OCP_HOLDS, OptimalControlProblem
+from lcp.ocp.replay import replay, replay_check
+from lcp.ocp.results import HomotopyStage, OCPGuess, OCPResult, ReplayCheck, ReplayResult, Step, effort
+from lcp.model.schedule import AffineSchedule
 
 __all__ = [
            "MODE_NAMES",

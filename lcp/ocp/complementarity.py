@@ -4,7 +4,7 @@ The pairs a perp w of the transcription (:mod:`lcp.ocp.transcription`) are relax
 (2001): a >= 0, w >= 0, a w <= sigma. The relaxation parameter goes down geometrically; each NLP
 (one IPOPT instance, built once, sigma a parameter) is warm-started from the previous solution,
 until the Coulomb residual, recomputed independently from the optimizer's states with
-:meth:`~lcp.contact_problem.ContactProblem.residual`, is below the requested tolerance. A final
+:meth:`~lcp.contact.problem.ContactProblem.residual`, is below the requested tolerance. A final
 polishing solve fixes, pair by pair, the smaller member at zero (the active set the homotopy has
 identified), which makes the complementarity exact; it is kept only if IPOPT converges and the
 residual does not grow.
@@ -26,10 +26,10 @@ from dataclasses import replace
 import casadi as ca
 import numpy as np
 
-from ..contact_problem import ContactProblem
-from .options import OCP_STATUS_MESSAGES, HomotopyOptions
-from .results import HomotopyStage
-from .transcription import PAIRS
+from lcp.contact.problem import ContactProblem
+from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions
+from lcp.ocp.results import HomotopyStage
+from lcp.ocp.transcription import PAIRS
 
 __all__ = ["diagnose", "fixed_mode_bounds", "ipopt_solver", "run_fixed_modes", "run_homotopy", "run_phases"]
 

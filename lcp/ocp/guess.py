@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .options import HomotopyOptions
-from .results import OCPGuess
+from lcp.ocp.options import HomotopyOptions
+from lcp.ocp.results import OCPGuess
 
 __all__ = ["multistart", "resample", "simulate_guess", "x0_from_guess"]
 
@@ -17,8 +17,8 @@ def _interp(a, told, tnew):
 
 def _old_schedule(res, t_old, M):
     """The control of a solution or guess as a schedule on its own grid (its hold from its rows)."""
-    from ..control import ControlSchedule
-    from .schedule import AffineSchedule
+    from lcp.model.control import ControlSchedule
+    from lcp.model.schedule import AffineSchedule
 
     u = np.asarray(res.u, dtype=float)
     hold = getattr(res, "hold", None)
@@ -101,7 +101,7 @@ def x0_from_guess(pb, tr, gs: OCPGuess) -> np.ndarray:
 
 def simulate_guess(pb, u, T: float, solver: str = "auto") -> OCPGuess:
     """The simulation of the control ``u`` (constant, per interval/node, or a function of t) on pb's grid."""
-    from ..simulation import simulate
+    from lcp.simulation import simulate
 
     t = np.linspace(0.0, T, pb.N + 1)
     rows = pb.control_rows

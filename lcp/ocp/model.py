@@ -6,8 +6,8 @@ import warnings
 import casadi as ca
 import numpy as np
 
-from ..control import ControlSchedule
-from ..system import System
+from lcp.model.control import ControlSchedule
+from lcp.model.system import System
 
 __all__ = ["add_control", "controlled_system", "tangential_push"]
 
@@ -117,7 +117,7 @@ def controlled_system(system: System, control_matrix, t_nodes, u_nodes) -> Syste
     array([ 10.  , -19.62])
     """
     warnings.warn("controlled_system is deprecated: use lcp.ocp.add_control(system, B).with_control("
-                  "lcp.control.ControlSchedule(t, u, hold='linear'))", DeprecationWarning, stacklevel=2)
+                  "lcp.model.control.ControlSchedule(t, u, hold='linear'))", DeprecationWarning, stacklevel=2)
     B = _control_matrix(system, control_matrix)
     t_nodes = np.asarray(t_nodes, dtype=float).ravel()
     u_nodes = np.asarray(u_nodes, dtype=float)

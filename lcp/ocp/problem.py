@@ -7,21 +7,21 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..control import HOLDS, ControlSchedule
-from ..system import System
-from .complementarity import run_homotopy, run_phases
-from .guess import multistart, resample, simulate_guess, x0_from_guess
-from .model import add_control
-from .options import OCP_STATUS_MESSAGES, HomotopyOptions, positive
-from .replay import replay_check
-from .results import OCPGuess, OCPResult, Step
-from .schedule import AffineSchedule
-from .transcription import Transcription
+from lcp.model.control import HOLDS, ControlSchedule
+from lcp.model.system import System
+from lcp.ocp.complementarity import run_homotopy, run_phases
+from lcp.ocp.guess import multistart, resample, simulate_guess, x0_from_guess
+from lcp.ocp.model import add_control
+from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions, positive
+from lcp.ocp.replay import replay_check
+from lcp.ocp.results import OCPGuess, OCPResult, Step
+from lcp.model.schedule import AffineSchedule
+from lcp.ocp.transcription import Transcription
 
 __all__ = ["OCP_HOLDS", "OptimalControlProblem"]
 
-#: control holds of the transcription: those of :class:`lcp.control.ControlSchedule` and the
-#: discontinuous piecewise-affine hold (:class:`lcp.ocp.schedule.AffineSchedule`)
+#: control holds of the transcription: those of :class:`lcp.model.control.ControlSchedule` and the
+#: discontinuous piecewise-affine hold (:class:`lcp.model.schedule.AffineSchedule`)
 OCP_HOLDS = HOLDS + ("affine",)
 
 
@@ -61,7 +61,7 @@ class OptimalControlProblem:
     hold : {"constant", "linear", "affine"}
         The control between nodes: piecewise constant (one value per step, the default), piecewise
         linear and continuous (one value per node), or affine on each step and free to jump at the
-        nodes (a start and an end value per step, :class:`~lcp.ocp.schedule.AffineSchedule`). The
+        nodes (a start and an end value per step, :class:`~lcp.model.schedule.AffineSchedule`). The
         control's impulse is integrated exactly by every hold; the affine hold also corrects the
         trapezoidal position update for forces affine in t (theta = 1/2 only), so that with free
         steps a smooth optimal control within a contact phase is represented and integrated
@@ -118,7 +118,7 @@ class OptimalControlProblem:
                  terminal_constraints: Callable | None = None, path_constraints: Callable | None = None,
                  path_equalities: Callable | None = None, max_cost: Callable | None = None, control_rate_weight: float = 0.0,
                  replay_tol: float | None = 1e-6):
-        from ..scenes import Scene
+        from lcp.scenes.scene import Scene
 
         if isinstance(system, Scene):
             q0 = system.q0 if q0 is None else q0

@@ -1,6 +1,6 @@
 """Open-loop replay of an optimal control on the same System, and the replay miss of a solution.
 
-The control of a solution is a :class:`lcp.control.ControlSchedule`; the replay simulates the
+The control of a solution is a :class:`lcp.model.control.ControlSchedule`; the replay simulates the
 problem's own controlled System with it (``System.with_control``), so there is no second model:
 
 - ``method="moreau-jean"`` at the optimizer's step (``refine=1``, uniform steps) repeats the
@@ -21,14 +21,14 @@ import dataclasses
 import casadi as ca
 import numpy as np
 
-from ..control import ControlSchedule
-from .results import OCPResult, ReplayCheck, ReplayResult
+from lcp.model.control import ControlSchedule
+from lcp.ocp.results import OCPResult, ReplayCheck, ReplayResult
 
 __all__ = ["replay", "replay_check"]
 
 
 def _event_available() -> bool:
-    from .. import simulation
+    from lcp import simulation
 
     return "event" in simulation.METHODS
 
@@ -51,7 +51,7 @@ def _closed_form_system(result: OCPResult, options: dict):
     """The problem's System under the solution's whole control schedule when the event integrator
     integrates it in closed form over [0, T] (constant system, piecewise-polynomial force) and only
     ``n_eval`` is asked for; else None."""
-    from ..events.model import system_model
+    from lcp.events.model import system_model
 
     if set(options) - {"n_eval"} or result.control is None:
         return None
@@ -79,7 +79,7 @@ def _shifted(records, t0: float, t1: float, last: bool, *names):
 def _cut(sim, nodes, counts):
     """The per-interval views of one event integration whose output times hold the nodes: interval
     k has ``counts[k]`` output times from node k to node k + 1, its times shifted to start at 0."""
-    from ..events.records import new_event_result
+    from lcp.events.records import new_event_result
 
     pieces, i = [], 0
     K = len(nodes) - 1
@@ -104,7 +104,7 @@ def _replay_event_whole(result: OCPResult, sysw, n_eval: int = 1000):
     """Event-driven replay of the whole schedule in one integration (closed-form phases): (q, v) at
     the nodes and the per-interval views (``n_eval`` output times per interval, as the restarted
     replay gives)."""
-    from ..simulation import simulate
+    from lcp.simulation import simulate
 
     if not isinstance(n_eval, (int, np.integer)) or isinstance(n_eval, bool) or n_eval < 2:
         raise ValueError(f"n_eval must be an integer >= 2, got {n_eval!r}")
@@ -127,7 +127,7 @@ def _replay_event_pieces(result: OCPResult, **options):
     """Event-driven replay: (q, v) at the nodes, the piece results. One integration over the whole
     schedule when its phases have closed forms (exact, so a restart at the nodes changes nothing
     but the cost); else restarted at every node with that interval's schedule."""
-    from ..simulation import simulate
+    from lcp.simulation import simulate
 
     sysw = _closed_form_system(result, options)
     if sysw is not None:
@@ -185,7 +185,7 @@ def replay(result: OCPResult, refine: int = 10, method: str = "moreau-jean", sol
     >>> replay(res, refine=1).max_error_q < 1e-12
     True
     """
-    from ..simulation import simulate
+    from lcp.simulation import simulate
 
     if not isinstance(result, OCPResult) or result.problem is None:
         raise ValueError("result must be an OCPResult returned by OptimalControlProblem.solve")

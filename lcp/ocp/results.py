@@ -6,8 +6,8 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from ..control import ControlSchedule
-from ..result import StepImpulses
+from lcp.model.control import ControlSchedule
+from lcp.result import StepImpulses
 
 __all__ = ["HomotopyStage", "OCPGuess", "OCPResult", "ReplayCheck", "ReplayResult", "Step", "effort"]
 
@@ -167,7 +167,7 @@ class OCPResult(StepImpulses):
         States at the nodes.
     u : ndarray, shape (N, nu) for the constant hold, (N + 1, nu) for the linear hold
         The control values (per interval, or per node).
-    control : lcp.control.ControlSchedule
+    control : lcp.model.control.ControlSchedule
         The control as a function of time (``control(t)``, ``control.impulse(t0, t1)``,
         ``control.breakpoints``); :attr:`hold` says how it is held.
     hold : str
@@ -177,7 +177,7 @@ class OCPResult(StepImpulses):
     p_N, p_T : ndarray, shape (N, m)
         Contact impulses per step; :attr:`N` and :attr:`f` are the mean forces p / h.
     modes : ndarray of int8, shape (N, m)
-        Contact mode per step (:data:`lcp.contact_problem.MODE_NAMES`).
+        Contact mode per step (:data:`lcp.contact.problem.MODE_NAMES`).
     T, h : float
         Final time and (mean) step size T / N.
     cost : float

@@ -13,12 +13,12 @@ impulses, lifted into the complementarity pairs of the discrete Coulomb law; and
 
 where F = F0 + B u is the system's force (affine in u), int u dt over the step is h_k u_k for the
 constant hold and h_k (u_k + u_{k+1}) / 2 for the linear hold, W_h = A + h theta C + (h theta)^2 K
-with K = -dF/dq, C = -dF/dv at the step's start. :class:`lcp.assembly.StepAssembly` integrates a
-:class:`lcp.control.ControlSchedule` the same way, so a replay at the same steps repeats the
+with K = -dF/dq, C = -dF/dv at the step's start. :class:`lcp.timestepping.assembly.StepAssembly` integrates a
+:class:`lcp.model.control.ControlSchedule` the same way, so a replay at the same steps repeats the
 optimizer's trajectory to round-off.
 
 The discrete Coulomb law of each contact is the LCP of
-:meth:`lcp.contact_problem.ContactProblem.to_lcp`, with p_T = h (beta+ - beta-):
+:meth:`lcp.contact.problem.ContactProblem.to_lcp`, with p_T = h (beta+ - beta-):
 
     0 <= N      perp  wN = u_N + e min(u_N-, 0)    >= 0,
     0 <= beta+  perp  wp = lambda + u_T            >= 0,

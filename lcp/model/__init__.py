@@ -1,0 +1,8 @@
+"""The mechanical model: what a user writes down.
+
+Modules: :mod:`~lcp.model.system` (:class:`System`, :class:`Contact`: coordinates, mass matrix,
+forces, bilateral constraints and point contacts, as CasADi expressions and Functions),
+:mod:`~lcp.model.control` (control inputs and their piecewise schedules),
+:mod:`~lcp.model.schedule` (the affine hold of a control), :mod:`~lcp.model.forces` (force helpers).
+Imports :mod:`lcp.numerics` only; knows nothing of contact solvers, time stepping or events.
+"""

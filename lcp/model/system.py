@@ -1,0 +1,582 @@
+"""The mechanical system: generalized coordinates, mass matrix, forces, bilateral constraints and contacts.
+
+Everything is written with CasADi symbols, so that every Jacobian (contact normals and tangents,
+bilateral constraints, force derivatives for the implicit step) comes from automatic
+differentiation. The model follows docs/models.md:
+
+    A(t, q) qdd = F(t, q, v) + G(t, q)' lambda + H_N(q)' N + H_T(q)' f,
+    phi(t, q) = 0 (bilateral, frictionless),
+    0 <= N_j  perp  g_j(q) >= 0,   |f_j| <= mu_j N_j,  f_j = -mu_j N_j sign(u_T,j) if u_T,j != 0.
+
+A contact is planar (one tangent direction: the 2D Coulomb law, exactly a linear complementarity
+problem) or spatial (two tangent directions: the sliding velocity U_j and the friction force f_j are
+vectors of the tangent plane, |f_j| <= mu_j N_j, f_j = -mu_j N_j U_j/|U_j| while U_j != 0: the
+Coulomb disk). Both kinds can be mixed in one system. The contact Jacobian H stacks the normal rows
+of all contacts first, then the tangent rows contact by contact (one or two each):
+``[H_N,1..H_N,m, H_T,1 (d_1 rows), .., H_T,m (d_m rows)]``; for planar contacts only this is
+``[H_N; H_T]`` with m rows each.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import casadi as ca
+import numpy as np
+
+from lcp.model.control import check_schedule, split_control
+
+__all__ = ["Contact", "System"]
+
+
+def _finite_nonneg(name: str, value) -> float:
+    if isinstance(value, (str, bytes)) or np.ndim(value) != 0:  # float("0.3") would pass a typo'd string through
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    value = float(value)
+    if not np.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    if value < 0:
+        raise ValueError(f"{name} must be >= 0, got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A point contact with Coulomb friction, planar (one tangent) or spatial (two tangents).
+
+    Parameters
+    ----------
+    gap : casadi.SX
+        Scalar expression g(q) >= 0 of the system's coordinates; its gradient is the normal
+        Jacobian row H_N.
+    tangent : casadi.SX, optional
+        Tangent coordinate s(q) whose rate is the sliding velocity (H_T = ds/dq): a scalar for a
+        planar contact, or two coordinates ``ca.vertcat(s1, s2)`` for a spatial contact, whose
+        rates are the two components of the sliding velocity U in the tangent plane.
+    tangent_jacobian : casadi.SX, optional
+        Or the tangent Jacobian itself, possibly depending on q: one row (1 x n, or an n-vector)
+        for a planar contact, two rows (2 x n) for a spatial one. Give exactly one of ``tangent``
+        and ``tangent_jacobian``. The tangent rows must be independent of each other and of the
+        normal row (checked where the system is built, or at the initial state when they depend
+        on q).
+    mu : float
+        Coulomb friction coefficient (the paper's R), >= 0.
+    e : float
+        Newton restitution coefficient in [0, 1].
+    name : str
+        Label used in messages.
+    """
+
+    gap: ca.SX
+    tangent: ca.SX | None = None
+    tangent_jacobian: ca.SX | None = None
+    mu: float = 0.0
+    e: float = 0.0
+    name: str = "contact"
+
+    def __post_init__(self):
+        object.__setattr__(self, "mu", _finite_nonneg(f"mu of {self.name}", self.mu))
+        object.__setattr__(self, "e", _finite_nonneg(f"e of {self.name}", self.e))
+        if self.e > 1:
+            raise ValueError(f"e of {self.name} must lie in [0, 1], got {self.e!r}")
+        if (self.tangent is None) == (self.tangent_jacobian is None):
+            raise ValueError(f"{self.name}: give exactly one of 'tangent' and 'tangent_jacobian'")
+        if ca.SX(self.gap).numel() != 1:
+            raise ValueError(f"gap of {self.name} must be a scalar expression")
+
+
+def _float_array(name: str, x) -> np.ndarray:
+    try:
+        return np.asarray(x, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be an array of numbers, got {x!r}") from exc
+
+
+def _sx(expr, shape_name: str, shape: tuple[int, int]) -> ca.SX:
+    """Turn numbers or expressions into an SX of the expected shape, or raise naming it."""
+    try:
+        x = ca.SX(expr) if not isinstance(expr, ca.SX) else expr
+    except Exception as exc:  # noqa: BLE001 - CasADi raises NotImplementedError/RuntimeError variously
+        raise ValueError(f"{shape_name} must be a CasADi SX expression or numeric array") from exc
+    if x.shape != shape:
+        if x.numel() == shape[0] * shape[1]:
+            x = ca.reshape(x, *shape)
+        else:
+            raise ValueError(f"{shape_name} must have shape {shape}, got {x.shape}")
+    if not x.is_symbolic() and x.is_constant():
+        vals = np.array(ca.DM(x), dtype=float)
+        if not np.all(np.isfinite(vals)):
+            raise ValueError(f"{shape_name} must be finite")
+    return x
+
+
+class System:
+    """A rigid-body system with bilateral constraints and frictional point contacts (planar or spatial).
+
+    Parameters
+    ----------
+    q, v : casadi.SX
+        Column symbols (n x 1) for the coordinates and the velocities.
+    mass : casadi.SX or array_like
+        Mass matrix A(t, q), n x n, symmetric positive definite (on the constraint manifold).
+    force : casadi.SX or array_like
+        Generalized forces F(t, q, v), n x 1.
+    contacts : sequence of Contact
+        The unilateral contacts (may be empty).
+    constraints : casadi.SX, optional
+        Bilateral holonomic constraints phi(t, q) = 0, n_b x 1.
+    t : casadi.SX, optional
+        Time symbol, if any expression depends on time.
+    names : sequence of str, optional
+        Names of the coordinates.
+    breakpoints : array_like, optional
+        Times at which a time-dependent force is discontinuous (e.g. the switches of a
+        piecewise-constant control); stored sorted and unique as :attr:`breakpoints` (empty by
+        default), so that an event integrator can end its phases exactly there.
+    control : casadi.SX, optional
+        Column of control symbols u (nu x 1). The force must be affine in u,
+        F(t, q, v, u) = F0(t, q, v) + B(t, q) u (checked: B may not depend on u or v), and the
+        mass, constraints and contacts may not depend on u. A controlled system is simulated
+        with a control schedule (:meth:`with_control`, or ``lcp.simulate(..., control=...)``) and
+        optimised by :class:`lcp.ocp.OptimalControlProblem`. Its ``force_expr``, ``force_fn`` and
+        the step functions are those of the drift F0 (u = 0); ``control_matrix_expr`` is B.
+    control_bounds : (array_like, array_like), optional
+        Lower and upper bounds of u (broadcast to (nu,); +-inf allowed; -inf..inf by default).
+
+    Notes
+    -----
+    On construction the system compiles CasADi Functions for everything a time stepper needs, and
+    finds out which parts are constant (mass matrix, Jacobians, forces), so that a stepper can
+    assemble them once and never call CasADi inside its loop when nothing varies.
+
+    Examples
+    --------
+    A block of mass 2 on a frictional floor (coordinates x, y; gap y):
+
+    >>> import casadi as ca
+    >>> from lcp.model.system import System, Contact
+    >>> q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
+    >>> s = System(q, v, mass=2 * ca.SX.eye(2), force=ca.vertcat(0, -2 * 9.81),
+    ...            contacts=[Contact(gap=q[1], tangent=q[0], mu=0.3)])
+    >>> s.n, s.n_contacts, s.is_constant
+    (2, 1, True)
+    """
+
+    def __init__(self, q, v, mass, force, contacts: Sequence[Contact] = (), constraints=None,
+                 t=None, names: Sequence[str] | None = None, breakpoints=None, control=None,
+                 control_bounds=None):
+        self.breakpoints = _breakpoints(breakpoints)
+        self.control_schedule = None  # set by with_control
+        if not isinstance(q, ca.SX) or not q.is_symbolic() or q.shape[1] != 1:
+            raise ValueError("q must be a column of CasADi SX symbols (casadi.SX.sym('q', n))")
+        if not isinstance(v, ca.SX) or not v.is_symbolic() or v.shape != q.shape:
+            raise ValueError("v must be a column of CasADi SX symbols with the shape of q")
+        self.n = n = q.shape[0]
+        self.t_sym = t if t is not None else ca.SX.sym("t")
+        if not isinstance(self.t_sym, ca.SX) or not self.t_sym.is_symbolic() or self.t_sym.numel() != 1:
+            raise ValueError("t must be a scalar CasADi SX symbol")
+        self.q_sym, self.v_sym = q, v
+        self.mass_expr = _sx(mass, "mass", (n, n))
+        self.force_expr = _sx(force, "force", (n, 1))
+        self._init_control(control, control_bounds, q, v, t)
+        if isinstance(contacts, Contact):
+            raise ValueError("contacts must be a list of Contact objects, got a single Contact")
+        self.contacts = tuple(contacts)
+        for c in self.contacts:
+            if not isinstance(c, Contact):
+                raise ValueError(f"contacts must be Contact objects, got {type(c).__name__}")
+        self.names = tuple(names) if names is not None else tuple(f"q{i}" for i in range(n))
+        if len(self.names) != n:
+            raise ValueError(f"names must have {n} entries, got {len(self.names)}")
+        tq = ca.vertcat(self.t_sym, q)
+        if ca.depends_on(self.mass_expr, v):
+            raise ValueError("mass may depend on t and q only, not on v")
+
+        # bilateral constraints phi(t, q) = 0
+        if constraints is None:
+            self.constraints_expr = ca.SX.zeros(0, 1)
+        else:
+            # a list of scalar expressions is accepted as well as a column
+            c = ca.vertcat(*constraints) if isinstance(constraints, (list, tuple)) else ca.SX(constraints)
+            self.constraints_expr = ca.reshape(c, c.numel(), 1)
+            if ca.depends_on(self.constraints_expr, v):
+                raise ValueError("constraints must depend on t and q only")
+        self.n_bilateral = self.constraints_expr.shape[0]
+        G = ca.jacobian(self.constraints_expr, q)
+        phi_t = ca.jacobian(self.constraints_expr, self.t_sym)
+
+        # contact kinematics: normal and tangent Jacobian rows
+        m = len(self.contacts)
+        self.n_contacts = m
+        gaps, HN, HT = [], [], []
+        for c in self.contacts:
+            g = _sx(c.gap, f"gap of {c.name}", (1, 1))
+            if ca.depends_on(g, v) or ca.depends_on(g, self.t_sym):
+                raise ValueError(f"gap of {c.name} must depend on q only")
+            gaps.append(g)
+            HN.append(ca.jacobian(g, q))
+            HT.append(_tangent_rows(c, q, v, self.t_sym, n))
+        self.mu = np.array([c.mu for c in self.contacts], dtype=float)
+        self.e = np.array([c.e for c in self.contacts], dtype=float)
+        #: tangent dimension of each contact: 1 (planar) or 2 (spatial, the Coulomb disk)
+        self.tangent_dims = np.array([r.shape[0] for r in HT], dtype=np.int64)
+        #: contact j's tangent rows of H are m + tangent_offsets[j] .. m + tangent_offsets[j + 1]
+        self.tangent_offsets = np.concatenate([[0], np.cumsum(self.tangent_dims)]).astype(np.int64)
+        self.n_tangent = int(self.tangent_offsets[-1])
+        #: rows of H (and of the Delassus operator): m normals, then the tangent rows
+        self.n_contact_rows = m + self.n_tangent
+        self.is_spatial = bool(np.any(self.tangent_dims == 2))
+        gap = ca.vertcat(*gaps) if m else ca.SX.zeros(0, 1)
+        H = ca.vertcat(*(HN + HT)) if m else ca.SX.zeros(0, n)
+        self.gap_expr, self.H_expr = gap, H
+        self._contact_rows_checked = False
+        #: diagonal blocks of a constant sparse mass matrix, found by its check (lcp.numerics.block_diagonal)
+        self.mass_blocks = None
+
+        # -dF/dq and -dF/dv: the implicit (theta) step linearizes the forces with them
+        K = -ca.jacobian(self.force_expr, q)
+        C = -ca.jacobian(self.force_expr, v)
+        self.force_is_affine = not ca.depends_on(ca.vertcat(ca.vec(K), ca.vec(C)), ca.vertcat(self.t_sym, q, v))
+        self.force_depends_on_t = ca.depends_on(self.force_expr, self.t_sym)
+        self.force_depends_on_state = ca.depends_on(self.force_expr, ca.vertcat(q, v))
+
+        # constancy: decides whether a stepper may assemble once and skip CasADi in its loop
+        self.mass_is_constant = not ca.depends_on(self.mass_expr, tq)
+        self.kinematics_is_constant = not ca.depends_on(ca.vertcat(ca.vec(H), ca.vec(G), ca.vec(phi_t)), tq)
+        self.gap_is_affine = self.kinematics_is_constant
+        self.is_constant = (self.mass_is_constant and self.kinematics_is_constant
+                            and self.force_is_affine and not self.force_depends_on_t)
+
+        args = [self.t_sym, q, v]
+        self.mass_fn = ca.Function("mass", [self.t_sym, q], [self.mass_expr])
+        self.force_fn = ca.Function("force", args, [self.force_expr])
+        self.force_jac_fn = ca.Function("force_jac", args, [K, C])
+        self.constraints_fn = ca.Function("constraints", [self.t_sym, q], [self.constraints_expr, G, phi_t])
+        self.gap_fn = ca.Function("gap", [q], [gap])
+        self.H_fn = ca.Function("H", [q], [H])
+        if m and not ca.depends_on(ca.vec(H), q):
+            self._check_contact_rows(np.zeros(n))  # constant kinematics: checked once, here
+        # everything one Moreau-Jean step needs at (t, q, v), in one call
+        self.step_data_fn = ca.Function(
+            "step_data", [self.t_sym, q, v],
+            [self.mass_expr, self.force_expr, K, C, G, phi_t, gap, H])
+        # energy bookkeeping needs a potential only when the user gives one; kinetic energy is general
+        self.kinetic_fn = ca.Function("kinetic", [self.t_sym, q, v], [0.5 * ca.mtimes([v.T, self.mass_expr, v])])
+
+    def _init_control(self, control, control_bounds, q, v, t):
+        """Split F = F0 + B u for a control u (:func:`lcp.model.control.split_control`)."""
+        split = split_control(self.force_expr, self.mass_expr, control, control_bounds, q, v, self.t_sym)
+        self.control_sym, self.nu, self.control_bounds = split.symbol, split.nu, split.bounds
+        self.control_matrix_expr = split.matrix
+        if split.nu:
+            self.controlled_force_expr = self.force_expr
+            self.force_expr = split.free_force
+            self.control_matrix_fn = ca.Function("control_matrix", [self.t_sym, q], [split.matrix])
+
+    @property
+    def is_controlled(self) -> bool:
+        """True when the system has a control input that no schedule fixes yet."""
+        return self.nu > 0
+
+    def with_control(self, schedule) -> "System":
+        """This system with its control fixed to a schedule: F(t) = F0(t, q, v) + B(t, q) u(t).
+
+        Parameters
+        ----------
+        schedule : lcp.model.control.ControlSchedule
+            With ``nu`` components, within ``control_bounds`` (checked).
+
+        Returns
+        -------
+        System
+            Uncontrolled, its force a known function of time; ``breakpoints`` are the schedule's
+            discontinuities (merged with this system's), and ``control_schedule`` is the schedule,
+            so that a Moreau-Jean step integrates the control's impulse over the step exactly
+            (:class:`lcp.timestepping.assembly.StepAssembly`).
+
+        Examples
+        --------
+        >>> import casadi as ca, lcp
+        >>> from lcp.model.control import ControlSchedule
+        >>> q, v, u = ca.SX.sym("q", 1), ca.SX.sym("v", 1), ca.SX.sym("u", 1)
+        >>> s = System(q, v, mass=1.0, force=u, control=u, control_bounds=(-1, 1))
+        >>> r = lcp.simulate(s, 1.0, h=0.25, q0=[0.0], v0=[0.0],
+        ...                  control=ControlSchedule([0, 0.5, 1.0], [1.0, -1.0]))
+        >>> float(r.v[2, 0]), float(r.v[-1, 0]), float(r.q[-1, 0])
+        (0.5, 0.0, 0.25)
+        """
+        check_schedule(schedule, self.nu, self.control_bounds)
+        t = self.t_sym
+        force = self.force_expr + ca.mtimes(self.control_matrix_expr, schedule.expression(t))
+        out = System(self.q_sym, self.v_sym, self.mass_expr, force, contacts=self.contacts,
+                     constraints=self.constraints_expr if self.n_bilateral else None, t=t, names=self.names,
+                     breakpoints=np.concatenate([self.breakpoints, schedule.breakpoints]))
+        out.control_schedule = schedule
+        out.control_matrix_fn = self.control_matrix_fn
+        out.control_force_fn = ca.Function("control_force", [t, self.q_sym],
+                                           [ca.mtimes(self.control_matrix_expr, schedule.expression(t))])
+        return out
+
+    # ------------------------------------------------------------------ numeric helpers
+    def mass(self, q, t: float = 0.0) -> np.ndarray:
+        """Mass matrix A(t, q) as an n x n array."""
+        return np.array(self.mass_fn(t, q), dtype=float)
+
+    def force(self, q, v, t: float = 0.0) -> np.ndarray:
+        """Generalized forces F(t, q, v) as an n-vector."""
+        return np.array(self.force_fn(t, q, v), dtype=float).ravel()
+
+    def gaps(self, q) -> np.ndarray:
+        """Contact gaps g(q), one per contact."""
+        return np.array(self.gap_fn(q), dtype=float).ravel()
+
+    def contact_jacobian(self, q) -> np.ndarray:
+        """H(q): rows [H_N,1..H_N,m, then the tangent rows contact by contact], shape (m + n_tangent, n)
+        ((2m, n) when every contact is planar)."""
+        return np.array(self.H_fn(q), dtype=float).reshape(self.n_contact_rows, self.n)
+
+    def contact_rows(self, active) -> np.ndarray:
+        """Rows of H (and of the Delassus operator) of the contacts ``active``: their normal rows,
+        then their tangent rows contact by contact (the layout of the one-step problem).
+
+        Examples
+        --------
+        >>> import casadi as ca
+        >>> q, v = ca.SX.sym("q", 3), ca.SX.sym("v", 3)
+        >>> s = System(q, v, mass=ca.SX.eye(3), force=ca.vertcat(0, 0, -9.81),
+        ...            contacts=[Contact(gap=q[2], tangent=q[0], mu=0.3, name="edge"),
+        ...                      Contact(gap=q[2] + 1, tangent=ca.vertcat(q[0], q[1]), mu=0.3, name="foot")])
+        >>> s.tangent_dims.tolist(), s.contact_rows([1]).tolist()
+        ([1, 2], [1, 3, 4])
+        """
+        active = np.asarray(active, dtype=np.int64)
+        m, off = self.n_contacts, self.tangent_offsets
+        if not self.is_spatial:
+            return np.concatenate([active, m + active])
+        tang = [np.arange(m + off[j], m + off[j + 1]) for j in active.tolist()]
+        return np.concatenate([active] + tang).astype(np.int64)
+
+    def require_planar(self, what: str) -> None:
+        """Raise a ValueError naming the first spatial contact when ``what`` handles planar contacts only."""
+        if self.is_spatial:
+            name = self.contacts[int(np.flatnonzero(self.tangent_dims == 2)[0])].name
+            raise ValueError(f"{what} handles planar contacts only; contact {name!r} is spatial "
+                             "(two tangent directions)")
+
+    def _check_contact_rows(self, q) -> None:
+        """The tangent rows of each contact must be independent of each other and of its normal."""
+        H = self.contact_jacobian(q)
+        m, off = self.n_contacts, self.tangent_offsets
+        for j, c in enumerate(self.contacts):
+            rows = H[np.r_[j, m + off[j]:m + off[j + 1]]]
+            s = np.linalg.svd(rows, compute_uv=False)
+            if not np.all(np.isfinite(s)):
+                raise ValueError(f"contact {c.name!r}: its Jacobian rows are not finite at q = {q}")
+            if s[-1] <= 1e-10 * max(s[0], 1e-300):
+                which = "normal" if s[0] == 0 else ("tangent rows" if rows.shape[0] > 2 else "tangent row")
+                raise ValueError(f"contact {c.name!r}: its {which} must be independent of each other and of "
+                                 f"the normal (the rows [H_N; H_T] are rank deficient, singular values {s})")
+        self._contact_rows_checked = True
+
+    def constraint_residual(self, q, t: float = 0.0) -> np.ndarray:
+        """phi(t, q), the bilateral constraint values (zero on the manifold)."""
+        return np.array(self.constraints_fn(t, q)[0], dtype=float).ravel()
+
+    def kinetic_energy(self, q, v, t: float = 0.0) -> float:
+        """1/2 v' A(t, q) v."""
+        return float(self.kinetic_fn(t, q, v))
+
+    def check_state(self, q0, v0, t0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Validate an initial state: finite, right shape, mass matrix positive definite there."""
+        q0, v0 = _float_array("q0", q0), _float_array("v0", v0)
+        for name, x in (("q0", q0), ("v0", v0)):
+            if x.shape != (self.n,):
+                raise ValueError(f"{name} must have shape ({self.n},), got {x.shape}")
+            if not np.all(np.isfinite(x)):
+                raise ValueError(f"{name} must be finite, got {x}")
+        if self.__dict__.get("_mass_checked_constant"):
+            return q0, v0
+        if self.n_contacts and not self._contact_rows_checked:
+            self._check_contact_rows(q0)  # a constant mass matrix (and constraints) passed the check below once
+        if not self.n_bilateral and self.n > 32 and self.mass_expr.nnz() <= self.n * self.n // 8:
+            self._check_sparse_mass(q0, t0)
+        else:
+            self._check_dense_mass(q0, t0)
+        # the check does not depend on the state when nothing in it does: done once (it costs a
+        # dense factorization or eigenvalue decomposition)
+        self._mass_checked_constant = self.mass_is_constant and self.kinematics_is_constant
+        return q0, v0
+
+    def _check_dense_mass(self, q0, t0) -> None:
+        """The test of :meth:`check_state` on the dense mass matrix (on the constraint manifold)."""
+        A = self._dense_mass(q0, t0)
+        if not np.all(np.isfinite(A)):
+            raise ValueError("mass matrix is not finite at q0")
+        if np.max(np.abs(A - A.T)) > 1e-12 * max(1.0, np.max(np.abs(A))):
+            raise ValueError("mass matrix must be symmetric")
+        if self.n_bilateral:
+            _, G, _ = (np.array(x, dtype=float) for x in self.constraints_fn(t0, q0))
+            Z = _null_space(G.reshape(self.n_bilateral, self.n))
+            A = Z.T @ A @ Z
+        As = 0.5 * (A + A.T)
+        _check_definite([As] if A.size else [], As.shape[0],
+                        1e-14 * max(1.0, float(np.max(np.sum(np.abs(As), axis=1), initial=0.0))))
+
+    def _check_sparse_mass(self, q0, t0) -> None:
+        """The test of :meth:`check_state` for a sparse mass matrix without bilateral constraints,
+        on its nonzeros: where A is block diagonal (up to a permutation) with small blocks, its
+        eigenvalues (n <= 200) are those of the blocks and the Cholesky factorization of A - s I
+        (larger n) is that of each block (batched), so the dense matrix is never formed and the
+        verdicts are the dense test's; otherwise the dense test. A constant mass matrix keeps its
+        blocks (:attr:`mass_blocks`): the sparse assembly inverts them instead of finding them again.
+        Everything is read from CasADi's compressed arrays (no SciPy matrix unless the blocks are
+        large): on a fresh system the conversions would cost more than the test."""
+        from lcp.numerics.block_diagonal import compressed_diagonal_blocks
+
+        n = self.n
+        data, row, colind = self._mass_ccs_values(q0, t0)
+        if not np.all(np.isfinite(data)):
+            raise ValueError("mass matrix is not finite at q0")
+        scale = max(1.0, float(np.max(np.abs(data), initial=0.0)))
+        # symmetry on the nonzeros: CCS order sorts the keys col * n + row, so each entry's mirror
+        # (row * n + col) is found by bisection; a missing mirror is a zero
+        col = np.repeat(np.arange(n), np.diff(colind))
+        row64 = row.astype(np.int64)  # row * n in int32 would overflow past 46340 coordinates
+        keys = col * n + row64
+        mkeys = row64 * n + col
+        at = np.minimum(np.searchsorted(keys, mkeys), keys.size - 1)
+        mirror = np.where(keys[at] == mkeys, data[at], 0.0)
+        if np.max(np.abs(data - mirror), initial=0.0) > 1e-12 * scale:
+            raise ValueError("mass matrix must be symmetric")
+        shift = 1e-14 * max(1.0, float(np.max(np.bincount(row, np.abs(data), minlength=n), initial=0.0)))
+        blocks = compressed_diagonal_blocks(n, colind, row, data, True)
+        if blocks is None:
+            from scipy.sparse import csc_matrix
+
+            A = csc_matrix((data, row, colind), shape=(n, n))
+            As = 0.5 * (A + A.T)
+            _check_definite([As.toarray()], n, shift)
+            return
+        _check_definite([0.5 * (B + B.transpose(0, 2, 1)) for _, B in blocks], n, shift)
+        if self.mass_is_constant:
+            self.mass_blocks = blocks
+
+    def _dense_mass(self, q, t) -> np.ndarray:
+        """:meth:`mass` for a validated q, evaluated into NumPy buffers (the check of a fresh small
+        system pays CasADi's matrix conversion otherwise)."""
+        n = self.n
+        sparsity = self.mass_fn.sparsity_out(0)
+        data = np.empty(sparsity.nnz())
+        evaluate_into(self.mass_fn, [np.array([float(t)]), np.asarray(q, dtype=float)], [data])
+        flat = np.zeros(n * n)
+        flat[np.array(sparsity.find(), dtype=np.int64)] = data  # column-major positions
+        return np.ascontiguousarray(flat.reshape(n, n).T)
+
+    def sparse_mass(self, q, t: float = 0.0):
+        """The mass matrix A(t, q) as a SciPy CSC matrix of its structural nonzeros (never dense).
+
+        Examples
+        --------
+        >>> import lcp
+        >>> A = lcp.scenes.block_chain(3).system.sparse_mass([0.0] * 3)
+        >>> A.shape, A.nnz
+        ((3, 3), 3)
+        """
+        from scipy.sparse import csc_matrix
+
+        data, row, colind = self._mass_ccs_values(q, t)
+        return csc_matrix((data, row, colind), shape=(self.n, self.n))
+
+    def _mass_ccs_values(self, q, t):
+        """(nonzeros, row indices, column pointers) of A(t, q), CasADi's CCS arrays (int32 indices)."""
+        sparsity = self.mass_fn.sparsity_out(0)
+        if "_mass_ccs" not in self.__dict__:
+            colind, row = sparsity.get_ccs()
+            self._mass_ccs = (np.array(row, dtype=np.int32), np.array(colind, dtype=np.int32))
+        data = np.empty(sparsity.nnz())
+        evaluate_into(self.mass_fn, [np.array([float(t)]), np.asarray(q, dtype=float)], [data])
+        row, colind = self._mass_ccs
+        return data, row, colind
+
+
+def evaluate_into(fn: ca.Function, args, results) -> None:
+    """Evaluate ``fn`` on NumPy arrays (the nonzeros of each argument and result, column-major):
+    converting arguments and results to CasADi matrices would cost more than small evaluations."""
+    buf, run = fn.buffer()
+    for i, x in enumerate(args):
+        buf.set_arg(i, memoryview(x))
+    for i, x in enumerate(results):
+        buf.set_res(i, memoryview(x))
+    run()
+
+
+def _check_definite(blocks, size: int, shift: float) -> None:
+    """The positive-definiteness test of a symmetric mass matrix of ``size`` rows given as diagonal
+    ``blocks`` (arrays (..., k, k); the whole matrix as one block, or none when it is empty), or
+    ValueError. Up to 200 rows: the eigenvalues, all above 1e-14 of the largest. Larger: a Cholesky
+    factorization of each block minus ``shift`` I, which succeeds iff every eigenvalue exceeds the
+    shift; with the shift above 1e-14 of the largest eigenvalue (the infinity norm bounds it) that
+    is the same test at a tenth of the cost (seconds for thousands of coordinates)."""
+    if size <= 200:
+        eigs = [np.linalg.eigvalsh(B) for B in blocks]  # ascending along the last axis
+        low = min((float(e[..., 0].min()) for e in eigs if e.size), default=1.0)
+        high = max((max(-float(e[..., 0].min()), float(e[..., -1].max())) for e in eigs if e.size), default=1.0)
+        if low <= 1e-14 * max(1.0, high):
+            eig = np.sort(np.concatenate([e.ravel() for e in eigs]))
+            raise ValueError("mass matrix is singular or not positive definite (on the constraint manifold) "
+                             f"at q0: eigenvalues {eig}")
+        return
+    for B in blocks:
+        try:
+            np.linalg.cholesky(B - shift * np.eye(B.shape[-1]))
+        except np.linalg.LinAlgError:
+            raise ValueError("mass matrix is singular or not positive definite (on the constraint manifold) "
+                             f"at q0: an eigenvalue is below {shift:.3g}") from None
+
+
+def _tangent_rows(c: Contact, q, v, t, n: int) -> ca.SX:
+    """The tangent Jacobian rows of contact c: one (planar) or two (spatial), n columns each."""
+    if c.tangent is not None:
+        s = _sx_any(c.tangent, f"tangent of {c.name}")
+        if s.numel() not in (1, 2):
+            raise ValueError(f"tangent of {c.name} must be a scalar (planar contact) or two coordinates "
+                             f"(spatial contact), got {s.numel()} entries")
+        s = ca.reshape(s, s.numel(), 1)
+        if ca.depends_on(s, v):
+            raise ValueError(f"tangent of {c.name} must depend on t and q only")
+        return ca.jacobian(s, q)
+    J = _sx_any(c.tangent_jacobian, f"tangent_jacobian of {c.name}")
+    if J.numel() == n:  # a row or a column: one tangent
+        return _sx(J, f"tangent_jacobian of {c.name}", (1, n))
+    if J.shape == (2, n):
+        return _sx(J, f"tangent_jacobian of {c.name}", (2, n))
+    raise ValueError(f"tangent_jacobian of {c.name} must have one row (1, {n}) or two rows (2, {n}), "
+                     f"got {J.shape}")
+
+
+def _sx_any(expr, name: str) -> ca.SX:
+    try:
+        return ca.SX(expr) if not isinstance(expr, ca.SX) else expr
+    except Exception as exc:  # noqa: BLE001 - CasADi raises NotImplementedError/RuntimeError variously
+        raise ValueError(f"{name} must be a CasADi SX expression or numeric array") from exc
+
+
+def _breakpoints(values) -> np.ndarray:
+    """Sorted, unique, finite 1-D array of times (empty for None), or ValueError naming it."""
+    if values is None:
+        return np.zeros(0)
+    b = np.asarray(values, dtype=float).ravel()
+    if not np.all(np.isfinite(b)):
+        raise ValueError(f"breakpoints must be finite, got {b}")
+    return np.unique(b)
+
+
+def _null_space(G: np.ndarray) -> np.ndarray:
+    """Orthonormal basis of the null space of G (for the bilateral constraints)."""
+    if G.shape[0] == 0:
+        return np.eye(G.shape[1])
+    u, s, vt = np.linalg.svd(G)
+    rank = int(np.sum(s > 1e-12 * max(1.0, s.max())))
+    if rank < G.shape[0]:
+        raise ValueError("bilateral constraints are redundant (their Jacobian G is rank deficient)")
+    return vt[rank:].T
