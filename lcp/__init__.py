@@ -25,6 +25,7 @@ _EXPORTS = {
     "EventResult": ("lcp.events", "EventResult"),
     "SOLVERS": ("lcp.contact.solvers", "SOLVERS"),
     "make_solver": ("lcp.contact.solvers", "make_solver"),
+    "interleave": ("lcp.contact.law", "interleave"),
     "sweep": ("lcp.sweeps.parameter_sweep", "sweep"),
     "ConeContactProblem": ("lcp.contact.spatial_problem", "ConeContactProblem"),
     "CONE_SOLVERS": ("lcp.contact.spatial_solvers", "CONE_SOLVERS"),

@@ -79,7 +79,7 @@ def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 
     >>> import lcp
     >>> scene = lcp.scenes.jean_pratt()
     >>> res = lcp.simulate(scene, 0.3, h=1e-3)
-    >>> res.success, round(res.q[-1, 0], 6), round(scene.x_stop, 6)
+    >>> res.success, round(float(res.q[-1, 0]), 6), round(scene.x_stop, 6)
     (True, 0.076453, 0.076453)
     """
     model = None

@@ -108,7 +108,7 @@ def test_phases_needs_far_fewer_iterations_than_the_homotopy():
     r = ocp.solve(first, method="phases")
     h = OptimalControlProblem.__new__(OptimalControlProblem)
     h.__dict__.update(ocp.__dict__)
-    h._solvers = {}
+    h.nlp_solvers = {}
     rh = h.solve(first, sigma0=1e-4, factor=1e-2, max_iter=3000)
     assert r.success and rh.success
     assert abs(r.cost - J) <= 1e-9 * J and abs(rh.cost - J) <= 1e-8 * J

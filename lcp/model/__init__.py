@@ -3,6 +3,7 @@
 Modules: :mod:`~lcp.model.system` (:class:`System`, :class:`Contact`: coordinates, mass matrix,
 forces, bilateral constraints and point contacts, as CasADi expressions and Functions),
 :mod:`~lcp.model.control` (control inputs and their piecewise schedules),
-:mod:`~lcp.model.schedule` (the affine hold of a control), :mod:`~lcp.model.forces` (force helpers).
+:mod:`~lcp.model.schedule` (the affine hold of a control), :mod:`~lcp.model.forces` (force helpers),
+:mod:`~lcp.model.state_checks` (the checks of a start: mass matrix and contact rows).
 Imports :mod:`lcp.numerics` only; knows nothing of contact solvers, time stepping or events.
 """

@@ -24,6 +24,7 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
+from lcp.model import state_checks
 from lcp.model.control import check_schedule, split_control
 
 __all__ = ["Contact", "System"]
@@ -229,7 +230,7 @@ class System:
         gap = ca.vertcat(*gaps) if m else ca.SX.zeros(0, 1)
         H = ca.vertcat(*(HN + HT)) if m else ca.SX.zeros(0, n)
         self.gap_expr, self.H_expr = gap, H
-        self._contact_rows_checked = False
+        self.contact_rows_checked = False
         #: diagonal blocks of a constant sparse mass matrix, found by its check (lcp.numerics.block_diagonal)
         self.mass_blocks = None
 
@@ -255,7 +256,7 @@ class System:
         self.gap_fn = ca.Function("gap", [q], [gap])
         self.H_fn = ca.Function("H", [q], [H])
         if m and not ca.depends_on(ca.vec(H), q):
-            self._check_contact_rows(np.zeros(n))  # constant kinematics: checked once, here
+            state_checks.check_contact_rows(self, np.zeros(n))  # constant kinematics: checked once, here
         # everything one Moreau-Jean step needs at (t, q, v), in one call
         self.step_data_fn = ca.Function(
             "step_data", [self.t_sym, q, v],
@@ -363,21 +364,6 @@ class System:
             raise ValueError(f"{what} handles planar contacts only; contact {name!r} is spatial "
                              "(two tangent directions)")
 
-    def _check_contact_rows(self, q) -> None:
-        """The tangent rows of each contact must be independent of each other and of its normal."""
-        H = self.contact_jacobian(q)
-        m, off = self.n_contacts, self.tangent_offsets
-        for j, c in enumerate(self.contacts):
-            rows = H[np.r_[j, m + off[j]:m + off[j + 1]]]
-            s = np.linalg.svd(rows, compute_uv=False)
-            if not np.all(np.isfinite(s)):
-                raise ValueError(f"contact {c.name!r}: its Jacobian rows are not finite at q = {q}")
-            if s[-1] <= 1e-10 * max(s[0], 1e-300):
-                which = "normal" if s[0] == 0 else ("tangent rows" if rows.shape[0] > 2 else "tangent row")
-                raise ValueError(f"contact {c.name!r}: its {which} must be independent of each other and of "
-                                 f"the normal (the rows [H_N; H_T] are rank deficient, singular values {s})")
-        self._contact_rows_checked = True
-
     def constraint_residual(self, q, t: float = 0.0) -> np.ndarray:
         """phi(t, q), the bilateral constraint values (zero on the manifold)."""
         return np.array(self.constraints_fn(t, q)[0], dtype=float).ravel()
@@ -396,81 +382,16 @@ class System:
                 raise ValueError(f"{name} must be finite, got {x}")
         if self.__dict__.get("_mass_checked_constant"):
             return q0, v0
-        if self.n_contacts and not self._contact_rows_checked:
-            self._check_contact_rows(q0)  # a constant mass matrix (and constraints) passed the check below once
+        if self.n_contacts and not self.contact_rows_checked:
+            state_checks.check_contact_rows(self, q0)  # a constant mass matrix (and constraints) passed the check below once
         if not self.n_bilateral and self.n > 32 and self.mass_expr.nnz() <= self.n * self.n // 8:
-            self._check_sparse_mass(q0, t0)
+            state_checks.check_sparse_mass(self, q0, t0)
         else:
-            self._check_dense_mass(q0, t0)
+            state_checks.check_dense_mass(self, q0, t0)
         # the check does not depend on the state when nothing in it does: done once (it costs a
         # dense factorization or eigenvalue decomposition)
         self._mass_checked_constant = self.mass_is_constant and self.kinematics_is_constant
         return q0, v0
-
-    def _check_dense_mass(self, q0, t0) -> None:
-        """The test of :meth:`check_state` on the dense mass matrix (on the constraint manifold)."""
-        A = self._dense_mass(q0, t0)
-        if not np.all(np.isfinite(A)):
-            raise ValueError("mass matrix is not finite at q0")
-        if np.max(np.abs(A - A.T)) > 1e-12 * max(1.0, np.max(np.abs(A))):
-            raise ValueError("mass matrix must be symmetric")
-        if self.n_bilateral:
-            _, G, _ = (np.array(x, dtype=float) for x in self.constraints_fn(t0, q0))
-            Z = _null_space(G.reshape(self.n_bilateral, self.n))
-            A = Z.T @ A @ Z
-        As = 0.5 * (A + A.T)
-        _check_definite([As] if A.size else [], As.shape[0],
-                        1e-14 * max(1.0, float(np.max(np.sum(np.abs(As), axis=1), initial=0.0))))
-
-    def _check_sparse_mass(self, q0, t0) -> None:
-        """The test of :meth:`check_state` for a sparse mass matrix without bilateral constraints,
-        on its nonzeros: where A is block diagonal (up to a permutation) with small blocks, its
-        eigenvalues (n <= 200) are those of the blocks and the Cholesky factorization of A - s I
-        (larger n) is that of each block (batched), so the dense matrix is never formed and the
-        verdicts are the dense test's; otherwise the dense test. A constant mass matrix keeps its
-        blocks (:attr:`mass_blocks`): the sparse assembly inverts them instead of finding them again.
-        Everything is read from CasADi's compressed arrays (no SciPy matrix unless the blocks are
-        large): on a fresh system the conversions would cost more than the test."""
-        from lcp.numerics.block_diagonal import compressed_diagonal_blocks
-
-        n = self.n
-        data, row, colind = self._mass_ccs_values(q0, t0)
-        if not np.all(np.isfinite(data)):
-            raise ValueError("mass matrix is not finite at q0")
-        scale = max(1.0, float(np.max(np.abs(data), initial=0.0)))
-        # symmetry on the nonzeros: CCS order sorts the keys col * n + row, so each entry's mirror
-        # (row * n + col) is found by bisection; a missing mirror is a zero
-        col = np.repeat(np.arange(n), np.diff(colind))
-        row64 = row.astype(np.int64)  # row * n in int32 would overflow past 46340 coordinates
-        keys = col * n + row64
-        mkeys = row64 * n + col
-        at = np.minimum(np.searchsorted(keys, mkeys), keys.size - 1)
-        mirror = np.where(keys[at] == mkeys, data[at], 0.0)
-        if np.max(np.abs(data - mirror), initial=0.0) > 1e-12 * scale:
-            raise ValueError("mass matrix must be symmetric")
-        shift = 1e-14 * max(1.0, float(np.max(np.bincount(row, np.abs(data), minlength=n), initial=0.0)))
-        blocks = compressed_diagonal_blocks(n, colind, row, data, True)
-        if blocks is None:
-            from scipy.sparse import csc_matrix
-
-            A = csc_matrix((data, row, colind), shape=(n, n))
-            As = 0.5 * (A + A.T)
-            _check_definite([As.toarray()], n, shift)
-            return
-        _check_definite([0.5 * (B + B.transpose(0, 2, 1)) for _, B in blocks], n, shift)
-        if self.mass_is_constant:
-            self.mass_blocks = blocks
-
-    def _dense_mass(self, q, t) -> np.ndarray:
-        """:meth:`mass` for a validated q, evaluated into NumPy buffers (the check of a fresh small
-        system pays CasADi's matrix conversion otherwise)."""
-        n = self.n
-        sparsity = self.mass_fn.sparsity_out(0)
-        data = np.empty(sparsity.nnz())
-        evaluate_into(self.mass_fn, [np.array([float(t)]), np.asarray(q, dtype=float)], [data])
-        flat = np.zeros(n * n)
-        flat[np.array(sparsity.find(), dtype=np.int64)] = data  # column-major positions
-        return np.ascontiguousarray(flat.reshape(n, n).T)
 
     def sparse_mass(self, q, t: float = 0.0):
         """The mass matrix A(t, q) as a SciPy CSC matrix of its structural nonzeros (never dense).
@@ -478,60 +399,11 @@ class System:
         Examples
         --------
         >>> import lcp
-        >>> A = lcp.scenes.block_chain(3).system.sparse_mass([0.0] * 3)
+        >>> A = lcp.scenes.block_chain(3).system.sparse_mass([0.0] * 6)
         >>> A.shape, A.nnz
-        ((3, 3), 3)
+        ((6, 6), 6)
         """
-        from scipy.sparse import csc_matrix
-
-        data, row, colind = self._mass_ccs_values(q, t)
-        return csc_matrix((data, row, colind), shape=(self.n, self.n))
-
-    def _mass_ccs_values(self, q, t):
-        """(nonzeros, row indices, column pointers) of A(t, q), CasADi's CCS arrays (int32 indices)."""
-        sparsity = self.mass_fn.sparsity_out(0)
-        if "_mass_ccs" not in self.__dict__:
-            colind, row = sparsity.get_ccs()
-            self._mass_ccs = (np.array(row, dtype=np.int32), np.array(colind, dtype=np.int32))
-        data = np.empty(sparsity.nnz())
-        evaluate_into(self.mass_fn, [np.array([float(t)]), np.asarray(q, dtype=float)], [data])
-        row, colind = self._mass_ccs
-        return data, row, colind
-
-
-def evaluate_into(fn: ca.Function, args, results) -> None:
-    """Evaluate ``fn`` on NumPy arrays (the nonzeros of each argument and result, column-major):
-    converting arguments and results to CasADi matrices would cost more than small evaluations."""
-    buf, run = fn.buffer()
-    for i, x in enumerate(args):
-        buf.set_arg(i, memoryview(x))
-    for i, x in enumerate(results):
-        buf.set_res(i, memoryview(x))
-    run()
-
-
-def _check_definite(blocks, size: int, shift: float) -> None:
-    """The positive-definiteness test of a symmetric mass matrix of ``size`` rows given as diagonal
-    ``blocks`` (arrays (..., k, k); the whole matrix as one block, or none when it is empty), or
-    ValueError. Up to 200 rows: the eigenvalues, all above 1e-14 of the largest. Larger: a Cholesky
-    factorization of each block minus ``shift`` I, which succeeds iff every eigenvalue exceeds the
-    shift; with the shift above 1e-14 of the largest eigenvalue (the infinity norm bounds it) that
-    is the same test at a tenth of the cost (seconds for thousands of coordinates)."""
-    if size <= 200:
-        eigs = [np.linalg.eigvalsh(B) for B in blocks]  # ascending along the last axis
-        low = min((float(e[..., 0].min()) for e in eigs if e.size), default=1.0)
-        high = max((max(-float(e[..., 0].min()), float(e[..., -1].max())) for e in eigs if e.size), default=1.0)
-        if low <= 1e-14 * max(1.0, high):
-            eig = np.sort(np.concatenate([e.ravel() for e in eigs]))
-            raise ValueError("mass matrix is singular or not positive definite (on the constraint manifold) "
-                             f"at q0: eigenvalues {eig}")
-        return
-    for B in blocks:
-        try:
-            np.linalg.cholesky(B - shift * np.eye(B.shape[-1]))
-        except np.linalg.LinAlgError:
-            raise ValueError("mass matrix is singular or not positive definite (on the constraint manifold) "
-                             f"at q0: an eigenvalue is below {shift:.3g}") from None
+        return state_checks.sparse_mass(self, q, t)
 
 
 def _tangent_rows(c: Contact, q, v, t, n: int) -> ca.SX:
@@ -569,14 +441,3 @@ def _breakpoints(values) -> np.ndarray:
     if not np.all(np.isfinite(b)):
         raise ValueError(f"breakpoints must be finite, got {b}")
     return np.unique(b)
-
-
-def _null_space(G: np.ndarray) -> np.ndarray:
-    """Orthonormal basis of the null space of G (for the bilateral constraints)."""
-    if G.shape[0] == 0:
-        return np.eye(G.shape[1])
-    u, s, vt = np.linalg.svd(G)
-    rank = int(np.sum(s > 1e-12 * max(1.0, s.max())))
-    if rank < G.shape[0]:
-        raise ValueError("bilateral constraints are redundant (their Jacobian G is rank deficient)")
-    return vt[rank:].T

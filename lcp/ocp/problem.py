@@ -2,21 +2,18 @@
 from __future__ import annotations
 
 import copy
-import time
 from collections.abc import Callable
 
 import numpy as np
 
 from lcp.model.control import HOLDS, ControlSchedule
 from lcp.model.system import System
-from lcp.ocp.complementarity import run_homotopy, run_phases
-from lcp.ocp.guess import multistart, resample, simulate_guess, x0_from_guess
+from lcp.ocp.guess import multistart, simulate_guess
 from lcp.ocp.model import add_control
-from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions, positive
-from lcp.ocp.replay import replay_check
+from lcp.ocp.options import HomotopyOptions, positive
 from lcp.ocp.results import OCPGuess, OCPResult, Step
+from lcp.ocp.solve import solve_problem
 from lcp.model.schedule import AffineSchedule
-from lcp.ocp.transcription import Transcription
 
 __all__ = ["OCP_HOLDS", "OptimalControlProblem"]
 
@@ -181,8 +178,9 @@ class OptimalControlProblem:
         self.max_cost = max_cost
         self.control_rate_weight = positive("control_rate_weight", control_rate_weight, allow_zero=True)
         self.replay_tol = None if replay_tol is None else positive("replay_tol", replay_tol)
-        self._tr = None
-        self._solvers = {}
+        self.transcription = None  # the NLP (lcp.ocp.transcription), built on the first solve, then reused
+        # IPOPT solvers per (method, options), reused across solves of this problem
+        self.nlp_solvers = {}
 
     def _check_node_times(self, node_times) -> dict:
         if node_times is None:
@@ -205,7 +203,7 @@ class OptimalControlProblem:
 
     @property
     def build_time(self) -> float:
-        return 0.0 if self._tr is None else self._tr.build_time
+        return 0.0 if self.transcription is None else self.transcription.build_time
 
     @staticmethod
     def make_step(k, t0, h, q0, q1, v0, v1, u0, u1, p_N, p_T) -> Step:
@@ -237,18 +235,6 @@ class OptimalControlProblem:
             One-step contact solver of the simulation.
         """
         return simulate_guess(self, u, self.T if T is None else positive("T", T), solver)
-
-    def _guess_from(self, guess) -> OCPGuess:
-        if guess is None:
-            mid = np.where(np.isfinite(self.u_min) & np.isfinite(self.u_max), 0.5 * (self.u_min + self.u_max),
-                           np.clip(0.0, self.u_min, self.u_max))
-            return self.guess(u=mid)
-        if isinstance(guess, (OCPResult, OCPGuess)):
-            rows = self.control_rows
-            if guess.q.shape != (self.N + 1, self.system.n) or guess.u.shape != (rows, self.nu):
-                return resample(guess, self.N, self.hold)
-            return guess
-        raise ValueError(f"guess must be None, an OCPGuess or an OCPResult, got {type(guess).__name__}")
 
     # ------------------------------------------------------------------ solve
     def solve(self, guess=None, options: HomotopyOptions | None = None, method: str = "homotopy",
@@ -292,55 +278,7 @@ class OptimalControlProblem:
         >>> r.success, round(r.cost, 6), r.homotopy[-1].iterations < 200
         (True, 86.905749, True)
         """
-        if options is None:
-            options = HomotopyOptions(**option_kw)
-        elif option_kw:
-            raise ValueError("give either options or keyword options, not both")
-        if not isinstance(options, HomotopyOptions):
-            raise ValueError(f"options must be HomotopyOptions, got {type(options).__name__}")
-        if method not in ("homotopy", "phases"):
-            raise ValueError(f"method must be 'homotopy' or 'phases', got {method!r}")
-        if self._tr is None:
-            self._tr = Transcription(self)
-        t0 = time.perf_counter()
-        first_pass = []
-        if method == "phases" and guess is None:
-            guess = self.phase_guess()
-            first_pass = list(guess.homotopy)
-        gs = self._guess_from(guess)
-        P0 = np.concatenate([[0.0], self.q0, self.v0])
-        x0 = x0_from_guess(self, self._tr, gs)
-        run = run_phases if method == "phases" else run_homotopy
-        x, cost, diag, status, message, history = run(self._tr, x0, P0, options, self._solvers)
-        history = first_pass + history
-        res = self._result(x, cost, diag, status, message, history, time.perf_counter() - t0)
-        if method == "phases" and self.steps == "free":
-            res.message += self._bound_steps_note(res)
-        if self.replay_tol is not None and np.all(np.isfinite(res.q)):
-            try:
-                res.replay = replay_check(res, self.replay_tol)
-            except RuntimeError as exc:
-                res.status = -3
-                res.message = f"{OCP_STATUS_MESSAGES[-3]} The replay failed: {exc} (Solve: {res.message})"
-                return res
-            if res.status >= 0 and not res.replay.ok:
-                res.status = -3
-                res.message = (f"{OCP_STATUS_MESSAGES[-3]} Final-state miss {res.replay.final_miss:.2e}, path "
-                               f"violation {res.replay.path_violation:.2e} > {self.replay_tol:.1e} "
-                               f"({res.replay.method} replay). (Solve: {res.message})")
-        return res
-
-    def _bound_steps_note(self, res) -> str:
-        """A note naming the free steps that end at a length bound: with the phase sequence fixed,
-        such a step can hold the solution at a local optimum of that sequence (a slide that needs
-        more room than one step's upper bound, a control slope stuck on a shortest step)."""
-        T = res.T
-        hi = self.step_bounds[1] * T / self.N
-        at_hi = np.flatnonzero(res.steps >= hi * (1 - 1e-6))
-        if not at_hi.size:
-            return ""
-        return (f" Steps {at_hi.tolist()} end at their upper length bound (step_bounds): the phase sequence may "
-                f"be held at a local optimum; compare with method='homotopy'.")
+        return solve_problem(self, guess, options, method, option_kw)
 
     def phase_guess(self, options: HomotopyOptions | None = None) -> OCPResult:
         """The phase sequence of a first pass: this problem on uniform steps with the constant hold
@@ -356,7 +294,7 @@ class OptimalControlProblem:
             Default: ``tol=1e-4, factor=1e-2`` (the modes, not the optimum, are wanted).
         """
         twin = copy.copy(self)
-        twin.steps, twin.hold, twin.replay_tol, twin._tr, twin._solvers = "uniform", "constant", None, None, {}
+        twin.steps, twin.hold, twin.replay_tol, twin.transcription, twin.nlp_solvers = "uniform", "constant", None, None, {}
         try:
             twin.node_times = twin._check_node_times(self.node_times)
         except ValueError as exc:
@@ -384,20 +322,6 @@ class OptimalControlProblem:
             the MPCC: different optima mean the answer is the best found, not a proven global one.
         """
         return multistart(self, guesses, options, rtol, **option_kw)
-
-    def _result(self, x, cost, diag, status, message, history, solve_time) -> OCPResult:
-        T, hs, q, v, u, pN, pT = self._tr.unpack(x)
-        t = np.concatenate([[0.0], np.cumsum(hs)])
-        t[-1] = T
-        peak = float(x[self._tr.ix["z"]].ravel()[0]) if self.max_cost is not None else float("nan")
-        return OCPResult(t=t, q=q, v=v, u=u, control=self.schedule(t, u), hold=self.hold, steps=hs,
-                         p_N=pN, p_T=pT, modes=diag["modes"], T=T, h=T / self.N, cost=cost, peak=peak,
-                         complementarity_residual=diag["residual"], lcp_residual=diag["lcp"],
-                         dynamics_residual=diag["dynamics"], inactive_conflicts=diag["conflicts"],
-                         status=status, message=message, homotopy=history,
-                         iterations=sum(s.iterations for s in history), solve_time=solve_time,
-                         build_time=self.build_time, problem=self)
-
 
 def _pair(name, value) -> tuple[float, float]:
     try:

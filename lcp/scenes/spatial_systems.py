@@ -158,7 +158,7 @@ def incline_slide(theta: float = 0.3, v0: float = 1.0, g: float = 9.81, m: float
     --------
     >>> from lcp.scenes.spatial_systems import incline_slide
     >>> sc = incline_slide(theta=0.3, v0=1.0)
-    >>> sc.v0.tolist(), round(sc.system.mu[0] - __import__("math").tan(0.3), 15)
+    >>> sc.v0.tolist(), round(float(sc.system.mu[0]) - __import__("math").tan(0.3), 15)
     ([0.0, 1.0, 0.0], 0.0)
     """
     _finite(theta=theta, v0=v0, phi0=phi0)

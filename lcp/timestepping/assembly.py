@@ -10,7 +10,7 @@ import casadi as ca
 import numpy as np
 from lcp.numerics.lazy import sparse as sp
 from lcp.numerics.block_diagonal import block_inverse
-from lcp.model.system import evaluate_into
+from lcp.numerics.casadi_eval import evaluate_into
 
 __all__ = ["StepAssembly", "kahan_add", "SPARSE_MIN_CONTACT_ROWS", "SPARSE_DROP_TOL"]
 

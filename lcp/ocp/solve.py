@@ -1,0 +1,101 @@
+"""Solving an optimal control problem: guess, transcription, homotopy or fixed phases, replay check.
+
+:meth:`OptimalControlProblem.solve <lcp.ocp.problem.OptimalControlProblem.solve>` runs
+:func:`solve_problem`; the problem object holds the data, this module the procedure. Imports the
+other :mod:`lcp.ocp` modules below the problem (complementarity, guesses, replay, results).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from lcp.ocp.complementarity import run_homotopy, run_phases
+from lcp.ocp.guess import resample, x0_from_guess
+from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions
+from lcp.ocp.replay import replay_check
+from lcp.ocp.results import OCPGuess, OCPResult
+from lcp.ocp.transcription import Transcription
+
+__all__ = ["bound_steps_note", "guess_from", "result_of", "solve_problem"]
+
+
+def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
+    """The procedure of :meth:`OptimalControlProblem.solve <lcp.ocp.problem.OptimalControlProblem.solve>`."""
+    if options is None:
+        options = HomotopyOptions(**option_kw)
+    elif option_kw:
+        raise ValueError("give either options or keyword options, not both")
+    if not isinstance(options, HomotopyOptions):
+        raise ValueError(f"options must be HomotopyOptions, got {type(options).__name__}")
+    if method not in ("homotopy", "phases"):
+        raise ValueError(f"method must be 'homotopy' or 'phases', got {method!r}")
+    if problem.transcription is None:
+        problem.transcription = Transcription(problem)
+    t0 = time.perf_counter()
+    first_pass = []
+    if method == "phases" and guess is None:
+        guess = problem.phase_guess()
+        first_pass = list(guess.homotopy)
+    gs = guess_from(problem, guess)
+    P0 = np.concatenate([[0.0], problem.q0, problem.v0])
+    x0 = x0_from_guess(problem, problem.transcription, gs)
+    run = run_phases if method == "phases" else run_homotopy
+    x, cost, diag, status, message, history = run(problem.transcription, x0, P0, options, problem.nlp_solvers)
+    history = first_pass + history
+    res = result_of(problem, x, cost, diag, status, message, history, time.perf_counter() - t0)
+    if method == "phases" and problem.steps == "free":
+        res.message += bound_steps_note(problem, res)
+    if problem.replay_tol is not None and np.all(np.isfinite(res.q)):
+        try:
+            res.replay = replay_check(res, problem.replay_tol)
+        except RuntimeError as exc:
+            res.status = -3
+            res.message = f"{OCP_STATUS_MESSAGES[-3]} The replay failed: {exc} (Solve: {res.message})"
+            return res
+        if res.status >= 0 and not res.replay.ok:
+            res.status = -3
+            res.message = (f"{OCP_STATUS_MESSAGES[-3]} Final-state miss {res.replay.final_miss:.2e}, path "
+                           f"violation {res.replay.path_violation:.2e} > {problem.replay_tol:.1e} "
+                           f"({res.replay.method} replay). (Solve: {res.message})")
+    return res
+
+
+def guess_from(problem, guess) -> OCPGuess:
+    if guess is None:
+        mid = np.where(np.isfinite(problem.u_min) & np.isfinite(problem.u_max), 0.5 * (problem.u_min + problem.u_max),
+                       np.clip(0.0, problem.u_min, problem.u_max))
+        return problem.guess(u=mid)
+    if isinstance(guess, (OCPResult, OCPGuess)):
+        rows = problem.control_rows
+        if guess.q.shape != (problem.N + 1, problem.system.n) or guess.u.shape != (rows, problem.nu):
+            return resample(guess, problem.N, problem.hold)
+        return guess
+    raise ValueError(f"guess must be None, an OCPGuess or an OCPResult, got {type(guess).__name__}")
+
+
+def bound_steps_note(problem, res) -> str:
+    """A note naming the free steps that end at a length bound: with the phase sequence fixed,
+    such a step can hold the solution at a local optimum of that sequence (a slide that needs
+    more room than one step's upper bound, a control slope stuck on a shortest step)."""
+    T = res.T
+    hi = problem.step_bounds[1] * T / problem.N
+    at_hi = np.flatnonzero(res.steps >= hi * (1 - 1e-6))
+    if not at_hi.size:
+        return ""
+    return (f" Steps {at_hi.tolist()} end at their upper length bound (step_bounds): the phase sequence may "
+            f"be held at a local optimum; compare with method='homotopy'.")
+
+
+def result_of(problem, x, cost, diag, status, message, history, solve_time) -> OCPResult:
+    T, hs, q, v, u, pN, pT = problem.transcription.unpack(x)
+    t = np.concatenate([[0.0], np.cumsum(hs)])
+    t[-1] = T
+    peak = float(x[problem.transcription.ix["z"]].ravel()[0]) if problem.max_cost is not None else float("nan")
+    return OCPResult(t=t, q=q, v=v, u=u, control=problem.schedule(t, u), hold=problem.hold, steps=hs,
+                     p_N=pN, p_T=pT, modes=diag["modes"], T=T, h=T / problem.N, cost=cost, peak=peak,
+                     complementarity_residual=diag["residual"], lcp_residual=diag["lcp"],
+                     dynamics_residual=diag["dynamics"], inactive_conflicts=diag["conflicts"],
+                     status=status, message=message, homotopy=history,
+                     iterations=sum(s.iterations for s in history), solve_time=solve_time,
+                     build_time=problem.build_time, problem=problem)
