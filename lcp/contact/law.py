@@ -58,7 +58,8 @@ def blocked(k: int) -> np.ndarray:
 def planar_cone_projection(zN, zT, mu):
     """Projection of (zN, zT) onto {|r_T| <= mu r_N}, contact by contact (arrays)."""
     aT = np.abs(zT)
-    inside = aT <= mu * zN
+    # zN >= 0 too: with mu = 0 the test aT <= mu zN alone holds for any zN < 0 when zT = 0
+    inside = (aT <= mu * zN) & (zN >= 0)
     polar = mu * aT <= -zN  # in the polar cone: projects to the apex
     rN = (zN + mu * aT) / (1.0 + mu * mu)
     pN = np.where(inside, zN, np.where(polar, 0.0, rN))
@@ -123,7 +124,7 @@ def natural_map_error(W, q, mu, r, order: str = "blocked", dims=None) -> float:
 def _disk_cone_projection(zN, zT, mu):
     """Projection of (zN, zT) onto {|r_T| <= mu r_N}, zT of shape (k, 2) (rows padded with 0)."""
     aT = np.hypot(zT[:, 0], zT[:, 1])
-    inside = aT <= mu * zN
+    inside = (aT <= mu * zN) & (zN >= 0)  # zN >= 0: see planar_cone_projection
     polar = mu * aT <= -zN
     rN = (zN + mu * aT) / (1.0 + mu * mu)
     f = np.where(inside | polar, 0.0, mu * rN / np.where(aT > 0, aT, 1.0))

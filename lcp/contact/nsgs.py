@@ -198,7 +198,7 @@ def _contact_checks(pN, pT, uN, uT, qN, qT, mu, rhoN, rhoT, aN, aT, floor):
     zN = pN - uN - mu * abs(uT)
     zT = pT - uT
     az = abs(zT)
-    if az <= mu * zN:
+    if az <= mu * zN and zN >= 0.0:  # zN >= 0: mu = 0 would accept any zN < 0 with zT = 0
         xN, xT = zN, zT
     elif mu * az <= -zN:
         xN, xT = 0.0, 0.0

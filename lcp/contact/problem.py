@@ -368,7 +368,7 @@ class ContactProblem:
             uN, uT = W00 * rN + W01 * rT + qN, W10 * rN + W11 * rT + qT
             zN, zT = rN - uN - mu * abs(uT), rT - uT
             aT = abs(zT)
-            if aT <= mu * zN:
+            if aT <= mu * zN and zN >= 0.0:  # zN >= 0: mu = 0 would accept zN < 0 with zT = 0
                 pN, pT = zN, zT
             elif mu * aT <= -zN:
                 pN = pT = 0.0

@@ -56,7 +56,9 @@ class ImpactLaw:
         Hc, SH, W, b = cached
         u = Hc @ v
         qv = u.copy()
-        qv[:k] += self.e[idx] * u[:k]  # Newton restitution, as in the Moreau-Jean step
+        # Newton restitution on the approaching contacts, as in the Moreau-Jean step: a separating
+        # contact only must not approach (u_N+ >= 0); restitution would pull it back
+        qv[:k] += self.e[idx] * np.minimum(u[:k], 0.0)
         # Moreau-Jean's problem for a vanishing step h = delta: free velocity u + delta b
         umax, bmax = float(np.max(np.abs(qv))), float(np.max(np.abs(b)))
         delta = 1e-8 * (umax / bmax if umax > 0 and bmax > 0 else self.t_end)
