@@ -12,6 +12,11 @@ it, solves it with each applicable one-step solver and writes into OUT (default
   problems a solver solves within a factor tau of the best time; of the best error), a problem
   counting as solved at error <= 1e-10 whatever the solver's status.
 
+Every file gets at least one row: a file the reader rejects (:func:`lcp.fclib.read_problem`'s
+ValueError names the file and what is wrong), a problem that fails its checks, or a solver that
+raises is a row of status -9 (:data:`FAILED`) with the message, a file left out by ``--quick`` one
+of status 2 (:data:`SKIPPED`); the study goes on to the next file and always writes its table.
+
 Planar files (dimension 2) go to :func:`lcp.contact.solvers.make_solver`'s solvers (:data:`SOLVER_LIMITS`),
 spatial files (dimension 3, the Coulomb disk) to :func:`lcp.contact.spatial_solvers.make_cone_solver`'s
 (:data:`CONE_SOLVER_LIMITS`). The faceted solver replaces each disk by a polygon: its rows are
@@ -64,6 +69,8 @@ APPROXIMATE = {"faceted": "faceted (approx.)"}
 #: a spatial solve shorter than SHORT seconds is repeated (REPEATS runs in all, cold each time) and
 #: timed by its fastest run, ours and Siconos's alike: single sub-millisecond runs are mostly noise
 REPEATS, SHORT = 3, 0.1
+#: status of a row whose file could not be read or whose solver raised; of a file left out by --quick
+FAILED, SKIPPED = -9, 2
 
 _SICONOS_FILES = r'''
 import json, sys, time
@@ -139,18 +146,21 @@ def problem_files(folder) -> list[Path]:
     return sorted(p for p in folder.iterdir() if p.suffix in (".dat", ".hdf5", ".h5"))
 
 
-def solve_file(path, solvers=None, quick: bool = False):
+def solve_file(path, solvers=None, quick: bool = False, cf=None):
     """Solve one file with each applicable solver: list of result dicts (see the module doc).
 
     ``solvers``: names to try (None: every solver of :data:`SOLVER_LIMITS` for a planar file, of
-    :data:`CONE_SOLVER_LIMITS` for a spatial one); names of the other family are skipped.
+    :data:`CONE_SOLVER_LIMITS` for a spatial one); names of the other family are skipped. ``cf``:
+    the file already read (None: read here; a malformed file raises ValueError). A solver that
+    raises gives a row of status -9 with the exception as its message.
     """
-    cf = read_problem(path)
+    if cf is None:
+        cf = read_problem(path)
     rep = cf.check()
     base = dict(file=Path(path).name, dim=cf.dim, contacts=cf.n_contacts, nnz=int(cf.W.nnz), form=cf.form,
                 warnings="; ".join(rep.warnings))
     if rep.errors:
-        return [dict(base, solver="-", status=-9, message="; ".join(rep.errors), time=np.nan, iterations=0,
+        return [dict(base, solver="-", status=FAILED, message="; ".join(rep.errors), time=np.nan, iterations=0,
                      error=np.nan, residual=np.nan)]
     if cf.n_contacts == 0:
         return [dict(base, solver="-", status=0, message="no contacts", time=0.0, iterations=0, error=0.0,
@@ -182,20 +192,35 @@ def solve_file(path, solvers=None, quick: bool = False):
                 opts["max_sweeps"] = 2000
             solver = make_solver(name, **opts)
             pb = cf.problem(check=False)  # fresh: no branch factorization cached by another solver
-        t0 = time.perf_counter()
-        sol = solver.solve(pb)
-        dt = time.perf_counter() - t0
-        for _ in range(REPEATS - 1 if spatial and dt < SHORT else 0):
-            # a fresh solver and problem: no warm start nor cached operator from the first run
-            again, pb_again = make_cone_solver(name, **opts), cf.problem(check=False)
+        label = APPROXIMATE.get(name, name) if spatial else name
+        try:
             t0 = time.perf_counter()
-            again.solve(pb_again)
-            dt = min(dt, time.perf_counter() - t0)
-        err = natural_map_error(pb.W, pb.q, pb.mu, sol.p, dims=pb.dims if spatial else None)
-        rows.append(dict(base, solver=APPROXIMATE.get(name, name) if spatial else name, status=sol.status,
+            sol = solver.solve(pb)
+            dt = time.perf_counter() - t0
+            for _ in range(REPEATS - 1 if spatial and dt < SHORT else 0):
+                # a fresh solver and problem: no warm start nor cached operator from the first run
+                again, pb_again = make_cone_solver(name, **opts), cf.problem(check=False)
+                t0 = time.perf_counter()
+                again.solve(pb_again)
+                dt = min(dt, time.perf_counter() - t0)
+            err = natural_map_error(pb.W, pb.q, pb.mu, sol.p, dims=pb.dims if spatial else None)
+        except Exception as exc:  # noqa: BLE001 - one solver's crash is its row, not the end of the table
+            rows.append(dict(base, solver=label, status=FAILED, message=f"{type(exc).__name__}: {exc}", time=np.nan,
+                             iterations=0, error=np.nan, residual=np.nan))
+            continue
+        rows.append(dict(base, solver=label, status=sol.status,
                          message=sol.message, time=dt, iterations=sol.iterations, error=err,
                          residual=sol.residual))
     return rows
+
+
+def _failed_row(path, solver, exc, cf=None) -> dict:
+    """The row of a file (or a solver on it) that failed: status -9, the exception as message."""
+    msg = str(exc) if isinstance(exc, ValueError) else f"{type(exc).__name__}: {exc}"
+    info = dict(dim=cf.dim, contacts=cf.n_contacts, nnz=int(cf.W.nnz), form=cf.form) if cf is not None else \
+        dict(dim=0, contacts=0, nnz=0, form="-")
+    return dict(file=Path(path).name, **info, warnings="", solver=solver, status=FAILED, message=msg, time=np.nan,
+                iterations=0, error=np.nan, residual=np.nan)
 
 
 _WARM: list = []
@@ -264,13 +289,23 @@ def run(folder, out=None, quick: bool = False, siconos: bool = True) -> dict:
     files = problem_files(folder)
     rows = []
     for path in files:
+        # a bad file is a row of the table, not the end of the study: the reader's ValueError (it
+        # names the file and what is wrong) and anything else raised on the way
         try:
-            if quick and read_problem(path).n_contacts > 500:
-                continue
-            rows.extend(solve_file(path, quick=quick))
-        except ValueError as exc:  # a bad file is a row of the table, not the end of the study
-            rows.append(dict(file=path.name, dim=0, contacts=0, nnz=0, form="-", warnings="", solver="-", status=-9,
-                             message=str(exc), time=np.nan, iterations=0, error=np.nan, residual=np.nan))
+            cf = read_problem(path)
+        except Exception as exc:  # noqa: BLE001
+            rows.append(_failed_row(path, "-", exc))
+            continue
+        if quick and cf.n_contacts > 500:
+            rows.append(dict(file=path.name, dim=cf.dim, contacts=cf.n_contacts, nnz=int(cf.W.nnz), form=cf.form,
+                             warnings="", solver="-", status=SKIPPED,
+                             message=f"skipped: {cf.n_contacts} contacts > 500 (--quick)", time=np.nan,
+                             iterations=0, error=np.nan, residual=np.nan))
+            continue
+        try:
+            rows.extend(solve_file(path, quick=quick, cf=cf))
+        except Exception as exc:  # noqa: BLE001
+            rows.append(_failed_row(path, "-", exc, cf))
     note = ""
     if siconos and siconos_available():
         todo = [p for p in files if any(r["file"] == p.name and r["solver"] != "-" for r in rows)]
@@ -280,7 +315,7 @@ def run(folder, out=None, quick: bool = False, siconos: bool = True) -> dict:
             # rewritten in sparse-block storage
             given = {}
             for p in todo:
-                cf = read_problem(p)
+                cf = read_problem(p)  # read above without error
                 if cf.form == "global" or cf.storage not in ("dense", "sparse-block"):
                     # Siconos takes a file named .hdf5 for FCLib's format: the text copy ends in .dat
                     q = Path(tmp) / (p.name if p.suffix == ".dat" else p.name + ".dat")
@@ -293,12 +328,18 @@ def run(folder, out=None, quick: bool = False, siconos: bool = True) -> dict:
             except (RuntimeError, subprocess.TimeoutExpired) as exc:
                 peer, note = [], f"Siconos peer failed: {exc}"
         for rec in peer:
-            if rec.get("info") == -99:
+            if rec.get("info") == -99:  # the peer could not take the file: its row says so
+                path = Path(given.get(rec["path"], rec["path"]))
+                rows.append(dict(_failed_row(path, rec["solver"], RuntimeError(rec.get("error_text", "")))))
                 continue
             rec["path"] = str(given[rec["path"]])
             cf = read_problem(rec["path"])
             r = np.asarray(rec["r"])
-            err = natural_map_error(cf.W, cf.q, cf.mu, r, order="interleaved", dims=None if cf.dim == 2 else cf.dims)
+            try:
+                err = natural_map_error(cf.W, cf.q, cf.mu, r, order="interleaved",
+                                        dims=None if cf.dim == 2 else cf.dims)
+            except ValueError:  # e.g. a wrong-sized answer
+                err = np.nan
             rows.append(dict(file=Path(rec["path"]).name, dim=cf.dim, contacts=cf.n_contacts, nnz=int(cf.W.nnz),
                              form=cf.form,
                              warnings="", solver=rec["solver"], status=0 if rec["info"] == 0 else -1,
@@ -312,7 +353,8 @@ def run(folder, out=None, quick: bool = False, siconos: bool = True) -> dict:
         header = ["file", "dim", "contacts", "nnz", "form", "solver", "status", "time", "iterations", "error",
                   "residual", "message", "warnings"]
         res["files"].append(write_csv(d / "results.csv", header, ([r[h] for h in header] for r in rows)))
-        res["files"].extend(_profiles(rows, d))
+        if any(r["solver"] != "-" for r in rows):  # no profile of nothing (every file failed)
+            res["files"].extend(_profiles(rows, d))
     res["seconds"] = time.perf_counter() - t_start
     return res
 

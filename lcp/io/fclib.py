@@ -23,10 +23,22 @@ M, H, then q, b and mu. FCLib HDF5 layout: groups ``/fclib_local`` (``spacedim``
 ``vectors/f``, ``vectors/w``, ``vectors/mu``); each matrix has ``m``, ``n``, ``nz`` (triplet
 count, -1 CSC, -2 CSR), ``nzmax``, ``p``, ``i``, ``x`` as CSparse stores them.
 
-A malformed or truncated file raises ``ValueError`` naming the file and where reading stopped
-(line of a ``.dat`` file, dataset of an HDF5 file); :meth:`ContactFile.check` reports sizes that
-disagree, negative or non-finite friction coefficients, non-finite entries (with the first one's
-place) and an unsymmetric or indefinite W before any solve.
+The readers validate before they convert or allocate (:mod:`lcp.io.fclib_checks`): dtypes (numbers;
+integers for sizes and indices), shapes, every declared size against the data present and the
+file's size, CSR/CSC pointers (from 0, never decreasing, within the stored entries), indices
+within range; then, unless called with ``check=False``, the values: finite data, finite mu >= 0,
+W symmetric (to :data:`~lcp.io.fclib_checks.SYM_TOL` = 1e-2 of max |W|) and positive semi-definite
+(no eigenvalue below -:data:`~lcp.io.fclib_checks.PSD_TOL` ||W||_inf = -1e-5 ||W||_inf, by a sparse
+LDL' factorization). A malformed, truncated or invalid file raises ``ValueError`` naming the file,
+the place (line of a ``.dat`` file, dataset of an HDF5 file) and what is wrong;
+:meth:`ContactFile.check` reports sizes that disagree, negative or non-finite friction
+coefficients, non-finite entries (with the first one's place) and an unsymmetric or indefinite W
+(warnings at the tighter tolerances 1e-5 and 1e-9 of max |W|) before any solve.
+
+:func:`write_dat` writes every number so that it reads back to the same double (``%.17e``,
+``%.17g``, ``repr``), vectors never as bare integers; the reader tells the local form from the
+global one by the count of numbers after the first matrix (exactly d k + k for q and mu, plus the
+closing integer some Siconos files carry), so files of whole numbers round-trip too.
 
 Examples
 --------
@@ -60,6 +72,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from lcp.io import fclib_checks as _checks
 from lcp.contact.spatial_problem import ConeContactProblem
 from lcp.contact.problem import ContactProblem
 from lcp.contact.law import blocked, check_problem
@@ -132,7 +145,7 @@ class ContactFile:
         if M.shape != (nv, nv) or H.shape != (nv, dim * mu.size) or w.shape != (dim * mu.size,):
             raise ValueError(f"global sizes disagree: M {M.shape}, H {H.shape}, f {f.shape}, w {w.shape} for "
                              f"{mu.size} contacts of dimension {dim}")
-        return _from_global(M, H, f, w, mu, name or "problem", "", dim)
+        return _from_global(M, H, f, w, mu, name or "problem", "", dim, check=False)
 
     @property
     def n_contacts(self) -> int:
@@ -146,10 +159,15 @@ class ContactFile:
     def check(self):
         """Sizes, signs, finiteness, symmetry and PSD-ness (:func:`lcp.contact.law.check_problem`).
 
-        A non-finite entry of W or q is reported with the place of the first one (file order).
+        A non-finite entry of W or q is reported with the place of the first one (file order). W not
+        positive semi-definite is a warning when (W + W')/2 + 1e-9 max |W| I has a non-positive
+        pivot in a sparse LDL' factorization (:func:`lcp.io.fclib_checks.shifted_pivots`; the
+        tolerance of ``check_problem``'s dense eigenvalue test, at the cost of one factorization).
         """
         name = self.name or "problem"
-        rep = check_problem(self.W, self.q, self.mu, name=name, dims=None if self.dim == 2 else self.dims)
+        # psd_tol=inf, dense_limit=0: no dense eigenvalue decomposition there, the PSD test is below
+        rep = check_problem(self.W, self.q, self.mu, name=name, dims=None if self.dim == 2 else self.dims,
+                            psd_tol=np.inf, dense_limit=0)
         for i, msg in enumerate(rep.errors):
             if msg == f"{name}: W has non-finite entries":
                 Wc = sp.coo_matrix(self.W)
@@ -159,8 +177,13 @@ class ContactFile:
                 bad = np.flatnonzero(~np.isfinite(self.q))[0]
                 rep.errors[i] = f"{msg} (first: q[{bad}] = {self.q[bad]})"
             elif msg.startswith(f"{name}: friction coefficients must be"):
-                bad = np.flatnonzero(~(self.mu >= 0))[0]  # NaN included
+                bad = np.flatnonzero(~(np.isfinite(self.mu) & (self.mu >= 0)))[0]  # NaN and inf included
                 rep.errors[i] = f"{msg} (first: mu[{bad}] = {self.mu[bad]}, contact {bad})"
+        if not rep.errors and self.W.nnz:
+            _, neg = _checks.symmetry_and_psd(self.W, psd_tol=1e-9, scale="max")
+            if neg:
+                rep.warnings.append(f"{name}: W is not positive semi-definite ((W + W')/2 + 1e-9 max |W| I has "
+                                    f"{neg} non-positive pivot(s) in its LDL' factorization)")
         return rep
 
     def problem(self, check: bool = True) -> ContactProblem | ConeContactProblem:
@@ -182,18 +205,40 @@ class ContactFile:
 
 # --------------------------------------------------------------------------- text (.dat)
 class _Tokens:
-    """Whitespace tokens of a text file, with the line of each, for error messages."""
+    """Whitespace tokens of a text file, with the line of each, for error messages, and the count of
+    tokens left (declared sizes are checked against it before anything is allocated)."""
 
     def __init__(self, path, text):
         self.path = path
         self.lines = text.splitlines()
+        self.split = [ln.split() for ln in self.lines]
+        # after[i]: tokens on lines i, i + 1, ...
+        self.after = np.concatenate([np.cumsum([len(w) for w in self.split][::-1])[::-1], [0]]).astype(np.int64)
         self.line, self.words, self.pos = 0, [], 0
+
+    def remaining(self) -> int:
+        """Tokens not yet read."""
+        return len(self.words) - self.pos + int(self.after[self.line])
+
+    def last_word(self):
+        """The file's last token (None for a file without tokens)."""
+        for words in reversed(self.split):
+            if words:
+                return words[-1]
+        return None
+
+    def need(self, count, what):
+        """Fail unless ``count`` more tokens are left: a declared size the file cannot hold."""
+        left = self.remaining()
+        if count > left:
+            raise _checks.FileError(f"{self.path}: line {self.line}: {what} needs {count} more numbers but the "
+                                    f"file holds only {left}: truncated or a wrong size")
 
     def _fill(self):
         while self.pos >= len(self.words):
             if self.line >= len(self.lines):
                 raise ValueError(f"{self.path}: file ends early (line {self.line}): truncated")
-            self.words = self.lines[self.line].split()
+            self.words = self.split[self.line]
             self.line += 1
             self.pos = 0
 
@@ -201,7 +246,7 @@ class _Tokens:
         try:
             self._fill()
         except ValueError as exc:
-            raise ValueError(f"{exc} while reading {what}") from None
+            raise _checks.FileError(f"{exc} while reading {what}") from None
         w = self.words[self.pos]
         self.pos += 1
         return w
@@ -211,9 +256,10 @@ class _Tokens:
         try:
             v = int(w)
         except ValueError:
-            raise ValueError(f"{self.path}: line {self.line}: expected an integer for {what}, got {w!r}") from None
+            raise _checks.FileError(f"{self.path}: line {self.line}: expected an integer for {what}, "
+                                    f"got {w!r}") from None
         if v < low:
-            raise ValueError(f"{self.path}: line {self.line}: {what} must be >= {low}, got {v}")
+            raise _checks.FileError(f"{self.path}: line {self.line}: {what} must be >= {low}, got {v}")
         return v
 
     def float(self, what):
@@ -221,13 +267,18 @@ class _Tokens:
         try:
             return float(w)
         except ValueError:
-            raise ValueError(f"{self.path}: line {self.line}: expected a number for {what}, got {w!r}") from None
+            raise _checks.FileError(f"{self.path}: line {self.line}: expected a number for {what}, got {w!r}") from None
 
     def floats(self, n, what):
+        self.need(n, what)
         out = np.empty(n)
         for i in range(n):
             out[i] = self.float(f"{what}[{i}]")
         return out
+
+    def ints(self, n, what, low=0):
+        self.need(n, what)
+        return np.array([self.int(what, low) for _ in range(n)], dtype=np.int64)
 
     def rest_of_line(self):
         """The unread words of the current line, then move to the next line."""
@@ -237,46 +288,58 @@ class _Tokens:
 
     def next_line(self, what):
         if self.line >= len(self.lines):
-            raise ValueError(f"{self.path}: file ends early (line {self.line}) while reading {what}: truncated")
+            raise _checks.FileError(f"{self.path}: file ends early (line {self.line}) while reading {what}: truncated")
         s = self.lines[self.line]
         self.line += 1
         self.words, self.pos = [], 0
         return s
 
 
-def _read_matrix(tk: _Tokens, what: str):
+def _read_matrix(tk: _Tokens, what: str, check: bool = True):
     storage = tk.int(f"{what} storage type")
     n0 = tk.int(f"{what} rows")
     n1 = tk.int(f"{what} columns")
+    # every size of a problem's matrix is the length of a vector that follows it in the file
+    tk.need(max(n0, n1), f"{what} of size {n0}x{n1} (a vector of that length follows it)")
     if storage == 0:
         r0, r1 = tk.int(f"{what} rows (dense)"), tk.int(f"{what} columns (dense)")
         if (r0, r1) != (n0, n1):
-            raise ValueError(f"{tk.path}: line {tk.line}: {what} sizes disagree ({n0}x{n1} then {r0}x{r1})")
-        vals = tk.floats(n0 * n1, f"{what} entries")
-        return sp.csr_matrix(vals.reshape(n1, n0).T), "dense"  # column-major
+            raise _checks.FileError(f"{tk.path}: line {tk.line}: {what} sizes disagree ({n0}x{n1} then {r0}x{r1})")
+        A = tk.floats(n0 * n1, f"{what} entries").reshape(n1, n0).T  # column-major
+        # keep -0.0 entries: the written file is read back bit for bit
+        rows, cols = np.nonzero((A != 0) | np.signbit(A))
+        return sp.csr_matrix((A[rows, cols], (rows, cols)), shape=(n0, n1)), "dense"
     if storage == 1:
         return _read_sbm(tk, what, n0, n1), "sparse-block"
     if storage == 2:
-        return _read_csparse(tk, what, n0, n1)
-    raise ValueError(f"{tk.path}: line {tk.line}: unknown storage type {storage} for {what}")
+        return _read_csparse(tk, what, n0, n1, check)
+    raise _checks.FileError(f"{tk.path}: line {tk.line}: unknown storage type {storage} for {what}")
 
 
 def _read_sbm(tk, what, n0, n1):
     nb = tk.int(f"{what} number of blocks")
     if nb == 0:
         return sp.csr_matrix((n0, n1))
+    tk.need(nb, f"{what} block count")
     b0, b1 = tk.int(f"{what} block rows"), tk.int(f"{what} block columns")
-    s0 = np.array([tk.int(f"{what} row block sizes") for _ in range(b0)])
-    s1 = np.array([tk.int(f"{what} column block sizes") for _ in range(b1)])
-    if (b0 and s0[-1] != n0) or (b1 and s1[-1] != n1) or np.any(np.diff(s0) <= 0) or np.any(np.diff(s1) <= 0):
-        raise ValueError(f"{tk.path}: line {tk.line}: {what} block sizes disagree with its {n0}x{n1} size")
+    s0 = tk.ints(b0, f"{what} row block sizes")
+    s1 = tk.ints(b1, f"{what} column block sizes")
+    if (not b0 or not b1 or s0[-1] != n0 or s1[-1] != n1 or s0[0] <= 0 or s1[0] <= 0 or np.any(np.diff(s0) <= 0)
+            or np.any(np.diff(s1) <= 0)):
+        raise _checks.FileError(f"{tk.path}: line {tk.line}: {what} block sizes disagree with its {n0}x{n1} size")
     f1, f2 = tk.int(f"{what} filled1"), tk.int(f"{what} filled2")
     if f1 != b0 + 1 or f2 != nb:
-        raise ValueError(f"{tk.path}: line {tk.line}: {what} block index sizes disagree ({f1}, {f2})")
-    rowptr = np.array([tk.int(f"{what} block row pointers") for _ in range(f1)])
-    colidx = np.array([tk.int(f"{what} block column indices") for _ in range(f2)])
-    if rowptr[-1] != nb or np.any(np.diff(rowptr) < 0) or np.any(colidx >= b1):
-        raise ValueError(f"{tk.path}: line {tk.line}: {what} block indices out of range")
+        raise _checks.FileError(f"{tk.path}: line {tk.line}: {what} block index sizes disagree ({f1}, {f2})")
+    rowptr = tk.ints(f1, f"{what} block row pointers")
+    colidx = tk.ints(f2, f"{what} block column indices")
+    rowdiff = np.diff(rowptr)
+    if rowptr[0] != 0 or rowptr[-1] != nb or np.any(rowdiff < 0) or np.any(colidx >= b1):
+        raise _checks.FileError(f"{tk.path}: line {tk.line}: {what} block indices out of range or unordered")
+    # block columns strictly increase within a block row (Siconos's sparse-block storage is sorted)
+    same_row = np.repeat(np.arange(b0), rowdiff)
+    if np.any((np.diff(colidx) <= 0) & (np.diff(same_row) == 0)):
+        raise _checks.FileError(f"{tk.path}: line {tk.line}: {what} block column indices repeat or are unordered "
+                                "within a block row")
     start0 = np.concatenate([[0], s0[:-1]])
     start1 = np.concatenate([[0], s1[:-1]])
     rows, cols, vals = [], [], []
@@ -285,120 +348,160 @@ def _read_sbm(tk, what, n0, n1):
             bj = colidx[blk]
             num = tk.int(f"{what} block number")
             if num != blk:
-                raise ValueError(f"{tk.path}: line {tk.line}: {what} block {blk} is numbered {num}")
+                raise _checks.FileError(f"{tk.path}: line {tk.line}: {what} block {blk} is numbered {num}")
             nr, nc = s0[bi] - start0[bi], s1[bj] - start1[bj]
             v = tk.floats(nr * nc, f"{what} block {blk}")
             rows.append(start0[bi] + np.tile(np.arange(nr), nc))  # column-major blocks
             cols.append(start1[bj] + np.repeat(np.arange(nc), nr))
             vals.append(v)
-    if not rows:
-        return sp.csr_matrix((n0, n1))
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n0, n1))
 
 
-def _read_csparse(tk, what, n0, n1):
+def _read_csparse(tk, what, n0, n1, check=True):
     tk.int(f"{what} sparse origin")
     tk.rest_of_line()
     head = tk.next_line(f"{what} CSparse banner")
     if "CSparse" not in head:
-        raise ValueError(f"{tk.path}: line {tk.line}: expected the CSparse banner for {what}, got {head[:40]!r}")
+        raise _checks.FileError(f"{tk.path}: line {tk.line}: expected the CSparse banner for {what}, got {head[:40]!r}")
     desc = tk.next_line(f"{what} CSparse header").split()
     kind = "triplet" if desc[:1] == ["triplet:"] else ("csr" if desc[:1] == ["csr:"] else "csc")
-    size = desc[1] if kind != "csc" else desc[0]
     try:
+        size = desc[1] if kind != "csc" else desc[0]
         m, n = (int(x) for x in size.rstrip(",").split("-by-"))
         nnz = int(desc[desc.index("nnz:") + 1].rstrip(","))
     except (ValueError, IndexError):
-        raise ValueError(f"{tk.path}: line {tk.line}: cannot read the CSparse header of {what}: "
-                         f"{' '.join(desc)!r}") from None
+        raise _checks.FileError(f"{tk.path}: line {tk.line}: cannot read the CSparse header of {what}: "
+                                f"{' '.join(desc)!r}") from None
     if (m, n) != (n0, n1):
-        raise ValueError(f"{tk.path}: line {tk.line}: {what} sizes disagree ({n0}x{n1} then {m}x{n})")
+        raise _checks.FileError(f"{tk.path}: line {tk.line}: {what} sizes disagree ({n0}x{n1} then {m}x{n})")
+    if nnz < 0:
+        raise _checks.FileError(f"{tk.path}: line {tk.line}: {what}: negative entry count nnz = {nnz}")
+    where = f"line {tk.line}: {what}"
     if kind == "triplet":
-        rows, cols, vals = np.empty(nnz, int), np.empty(nnz, int), np.empty(nnz)
+        tk.need(4 * nnz, f"{what}'s {nnz} triplets")
+        rows, cols, vals = np.empty(nnz, np.int64), np.empty(nnz, np.int64), np.empty(nnz)
         for p in range(nnz):
-            rows[p] = tk.int(f"{what} entry {p} row")
-            cols[p] = tk.int(f"{what} entry {p} column")
+            rows[p] = tk.int(f"{what} entry {p} row", low=-2 ** 62)
+            cols[p] = tk.int(f"{what} entry {p} column", low=-2 ** 62)
             if tk.word(f"{what} entry {p}") != ":":
-                raise ValueError(f"{tk.path}: line {tk.line}: malformed triplet entry {p} of {what}")
+                raise _checks.FileError(f"{tk.path}: line {tk.line}: malformed triplet entry {p} of {what}")
             vals[p] = tk.float(f"{what} entry {p} value")
-        if nnz and (rows.max() >= m or cols.max() >= n):
-            raise ValueError(f"{tk.path}: line {tk.line}: {what} entry index out of range")
-        return sp.csr_matrix((vals, (rows, cols)), shape=(m, n)), "csparse-triplet"
+        # non-finite values are the value checks' (check=True) business, with the entry's place
+        return _checks.triplet_matrix(tk.path, where, m, n, rows, cols, vals, check=False), "csparse-triplet"
     outer = n if kind == "csc" else m
-    ptr = np.zeros(outer + 1, int)
+    tk.need(nnz, f"{what}'s {nnz} entries")
+    ptr = np.zeros(outer + 1, np.int64)
     idx, vals = [], []
     for j in range(outer):
         words = tk.next_line(f"{what} {'column' if kind == 'csc' else 'row'} {j}").split()
         try:  # "col j : locations a to b"
             a, b = int(words[4]), int(words[6])
         except (ValueError, IndexError):
-            raise ValueError(f"{tk.path}: line {tk.line}: malformed CSparse column header of {what}") from None
-        ptr[j], ptr[j + 1] = a, b + 1
+            raise _checks.FileError(f"{tk.path}: line {tk.line}: malformed CSparse column header of {what}") from None
+        if a != ptr[j] or b + 1 < a or b + 1 > nnz:
+            raise _checks.FileError(f"{tk.path}: line {tk.line}: {what}: locations {a} to {b} do not continue "
+                                    f"from {ptr[j]} within the {nnz} entries")
+        ptr[j + 1] = b + 1
         for _ in range(a, b + 1):
             words = tk.next_line(f"{what} entries").split()
             try:
                 idx.append(int(words[0]))
                 vals.append(float(words[2]))
             except (ValueError, IndexError):
-                raise ValueError(f"{tk.path}: line {tk.line}: malformed CSparse entry of {what}") from None
-    cls = sp.csc_matrix if kind == "csc" else sp.csr_matrix
-    try:
-        mat = cls((np.array(vals), np.array(idx, dtype=int), ptr), shape=(m, n))
-        mat.check_format(full_check=True)
-    except ValueError as exc:
-        raise ValueError(f"{tk.path}: {what}: inconsistent CSparse data: {exc}") from None
-    return sp.csr_matrix(mat), kind
+                raise _checks.FileError(f"{tk.path}: line {tk.line}: malformed CSparse entry of {what}") from None
+    if ptr[-1] != nnz:
+        raise _checks.FileError(f"{tk.path}: line {tk.line}: {what}: {ptr[-1]} entries listed, header says {nnz}")
+    mat = _checks.compressed_matrix(tk.path, where, kind, m, n, ptr, np.array(idx, dtype=np.int64),
+                                    np.array(vals, dtype=float), check=False)
+    return mat, kind
 
 
-def read_dat(path) -> ContactFile:
+def read_dat(path, check: bool = True) -> ContactFile:
     """Read a Siconos ``.dat`` friction-contact problem (local or global form, dimension 2 or 3);
     see the module doc.
 
-    The form is the one the file's content implies: a second matrix after the first one makes it
-    global; otherwise the first matrix must be square of size d k (local).
+    The form is the one the file's content implies: the local form's W is followed by exactly
+    d k + k numbers (q and mu); anything else after the first matrix must be the global form's H.
+    ``check``: also the value checks of :mod:`lcp.io.fclib_checks` (finite data, mu >= 0, W symmetric
+    and positive semi-definite); the structure (sizes, indices, numbers) is always checked.
     """
     path = os.fspath(path)
     name = os.path.basename(path)
     try:
-        with open(path) as fh:
+        with open(path, encoding="utf-8") as fh:
             text = fh.read()
     except UnicodeDecodeError:
-        raise ValueError(f"{path}: not a text file") from None
+        raise _checks.FileError(f"{path}: not a text file (not UTF-8)") from None
+    except OSError as exc:
+        raise _checks.FileError(f"{path}: cannot read: {exc}") from None
+    if not text.strip():
+        raise _checks.FileError(f"{path}: empty file")
     tk = _Tokens(path, text)
     dim = tk.int("dimension", low=1)
     if dim not in DIMENSIONS:
-        raise ValueError(f"{path}: line 1: only planar and spatial problems (dimension 2 or 3) are supported, "
-                         f"got {dim}")
+        raise _checks.FileError(f"{path}: line 1: only planar and spatial problems (dimension 2 or 3) are "
+                                f"supported, got {dim}")
     k = tk.int("number of contacts")
     n = dim * k
-    A, storage = _read_matrix(tk, "first matrix")
-    if not _global_follows(tk, A):
-        if A.shape != (n, n):
-            raise ValueError(f"{path}: line {tk.line}: sizes disagree: W is {A.shape[0]}x{A.shape[1]} for {k} "
-                             f"contacts of dimension {dim} (expected {n}x{n})")
+    tk.need(n + k, f"{k} contacts (q and mu)")
+    A, storage = _read_matrix(tk, "first matrix", check)
+    # files of Siconos's collection end with one more integer line after mu, which its readers ignore
+    tail = 1 if _is_int(tk.last_word()) else 0
+    if A.shape == (n, n) and tk.remaining() in (n + k, n + k + tail):
+        local = True
+    elif _global_follows(tk):
+        local = False
+    elif A.shape != (n, n):
+        raise _checks.FileError(f"{path}: line {tk.line}: sizes disagree: W is {A.shape[0]}x{A.shape[1]} for {k} "
+                                f"contacts of dimension {dim} (expected {n}x{n})")
+    else:
+        left = tk.remaining()
+        if left < n + k:
+            raise _checks.FileError(f"{path}: file ends early (line {tk.line}): q and mu need {n + k} numbers, "
+                                    f"{left} left: truncated")
+        raise _checks.FileError(f"{path}: line {tk.line}: q and mu need {n + k} numbers, the file holds {left} "
+                                "more: unexpected words after mu (and no matrix H follows)")
+    if local:
         q = tk.floats(n, "q")
         mu = tk.floats(k, "mu")
+        _end(tk, tail)
+        if check:
+            _checks.check_values(path, A, q, mu, f"W (line {tk.line})", "q", "mu")
         return ContactFile(A, q, mu, "local", name=name, storage=storage, dim=dim)
     M = A
-    H, _ = _read_matrix(tk, "H")
+    H, _ = _read_matrix(tk, "H", check)
     nv = M.shape[0]
     if M.shape != (nv, nv) or H.shape != (nv, n):
-        raise ValueError(f"{path}: line {tk.line}: global sizes disagree: M {M.shape}, H {H.shape} "
-                         f"for {k} contacts of dimension {dim}")
+        raise _checks.FileError(f"{path}: line {tk.line}: global sizes disagree: M {M.shape}, H {H.shape} "
+                                f"for {k} contacts of dimension {dim}")
+    tk.need(nv + n + k, "q (global), b and mu")
     f = tk.floats(nv, "q (global)")
     w = tk.floats(n, "b")
     mu = tk.floats(k, "mu")
-    return _from_global(M, H, f, w, mu, name, storage, dim)
+    _end(tk, tail)
+    return _from_global(M, H, f, w, mu, name, storage, dim, path=path, check=check)
 
 
-def _global_follows(tk, A):
-    """Whether another matrix follows the first one (the global form): peek at the next tokens."""
-    save = (tk.line, list(tk.words), tk.pos)
+def _is_int(word) -> bool:
     try:
-        first = tk.word("next")
-        # a matrix header is an integer storage type 0-2 followed by two integer sizes;
-        # q starts with a float written with a decimal point or exponent
-        if first not in ("0", "1", "2"):
+        int(word)
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
+def _end(tk, tail):
+    """Nothing may follow mu but Siconos's closing integer (``tail`` 1 where the file has one)."""
+    if tk.remaining() > tail:
+        raise _checks.FileError(f"{tk.path}: line {tk.line}: {tk.remaining()} unexpected words after mu")
+
+
+def _global_follows(tk):
+    """Whether another matrix follows the first one (the global form): peek at the next tokens."""
+    save = (tk.line, tk.words, tk.pos)
+    try:
+        # a matrix header is an integer storage type 0-2 followed by two integer sizes
+        if tk.word("next") not in ("0", "1", "2"):
             return False
         int(tk.word("next"))
         int(tk.word("next"))
@@ -409,23 +512,25 @@ def _global_follows(tk, A):
         tk.line, tk.words, tk.pos = save
 
 
-def _from_global(M, H, f, w, mu, name, storage, dim=2):
+def _from_global(M, H, f, w, mu, name, storage, dim=2, path=None, check=True,
+                 labels=("M", "H", "q (global)", "b", "mu")):
     from scipy.sparse.linalg import splu
 
-    n = dim * mu.size
+    path = path or name
     # non-finite data would reach W only as a NaN of the reduction: name its place in the file
-    for what, x in (("M", M), ("H", H), ("q (global)", f), ("b", w)):
+    for what, x in zip(labels, (M, H, f, w)):
         data = x.tocoo() if sp.issparse(x) else np.asarray(x)
         vals = data.data if sp.issparse(x) else data
         if not np.all(np.isfinite(vals)):
             bad = np.flatnonzero(~np.isfinite(vals))[0]
             where = f"[{data.row[bad]}, {data.col[bad]}]" if sp.issparse(x) else f"[{bad}]"
-            raise ValueError(f"{name}: {what} has non-finite entries (first: {what}{where} = {vals[bad]})")
+            raise _checks.FileError(f"{path}: {what} has non-finite entries (first: {what}{where} = {vals[bad]})")
     M = sp.csc_matrix(M)
     try:
         lu = splu(M)
     except RuntimeError as exc:
-        raise ValueError(f"{name}: the global mass matrix M is singular: {exc}") from None
+        raise _checks.FileError(f"{path}: the global mass matrix M is singular: {exc}") from None
+    n = dim * mu.size
     Hd = sp.csc_matrix(H)
     # M^-1 H column block by column block keeps the dense intermediate small
     X = lu.solve(Hd.toarray()) if n <= 4096 else None
@@ -438,6 +543,9 @@ def _from_global(M, H, f, w, mu, name, storage, dim=2):
         MinvH = sp.csr_matrix(X)
     W = (Hd.T @ MinvH).tocsr()
     q = Hd.T @ lu.solve(np.asarray(f, dtype=float)) + w
+    if check:
+        _checks.check_values(path, W, q, mu, f"{labels[0]}, {labels[1]}", f"{labels[2]}, {labels[3]}", labels[4],
+                             reduced=True)
     return ContactFile(W, q, mu, "global", M=sp.csr_matrix(M), H=sp.csr_matrix(H), f=f, w=w, name=name,
                        storage=storage, dim=dim)
 
@@ -474,7 +582,9 @@ def write_dat(path, cf: ContactFile, storage: str = "csparse", form: str = "loca
         _write_dat_matrix(lines, cf.M, storage, rows, rows)
         _write_dat_matrix(lines, cf.H, storage, rows, d)
         vectors = (np.asarray(cf.f, float), np.asarray(cf.w, float), cf.mu)
-    lines.extend(" ".join(f"{x:.17g}" for x in v) + "\n" for v in vectors)
+    # repr: the shortest text that reads back to the same double, and never a bare integer ("0.0",
+    # "3.0", "1e+16"), so that no q is mistaken for the header of a global form's second matrix
+    lines.extend(" ".join(repr(float(x)) for x in v) + "\n" for v in vectors)
     with open(path, "w") as fh:
         fh.writelines(lines)
 
@@ -538,44 +648,6 @@ def _sbm_text(A, rows, cols) -> str:
 
 
 # --------------------------------------------------------------------------- FCLib (HDF5)
-def _h5_read(grp, key, path, what, dtype=float):
-    """One dataset of an FCLib group; a missing or unreadable one names the file and the dataset."""
-    where = f"{grp.name.rstrip('/')}/{key}"
-    try:
-        return np.asarray(grp[key][()], dtype=dtype).ravel()
-    except KeyError:
-        raise ValueError(f"{path}: {what}: missing dataset {where}") from None
-    except (OSError, TypeError, ValueError) as exc:  # a truncated or corrupt file fails here
-        raise ValueError(f"{path}: {what}: cannot read dataset {where}: {exc}") from None
-
-
-def _h5_int(grp, key, path, what):
-    x = _h5_read(grp, key, path, what, dtype=np.int64)
-    if x.size != 1:
-        raise ValueError(f"{path}: {what}: {grp.name.rstrip('/')}/{key} must hold one integer, got {x.size}")
-    return int(x[0])
-
-
-def _h5_matrix(grp, what, path):
-    m, n, nz = (_h5_int(grp, key, path, what) for key in ("m", "n", "nz"))
-    p, i = _h5_read(grp, "p", path, what, np.int64), _h5_read(grp, "i", path, what, np.int64)
-    x = _h5_read(grp, "x", path, what)
-    try:
-        if nz >= 0:  # triplet, CSparse convention: i rows, p columns
-            mat = sp.coo_matrix((x[:nz], (i[:nz], p[:nz])), shape=(m, n))
-        elif nz == -1:
-            mat = sp.csc_matrix((x[:p[-1]], i[:p[-1]], p), shape=(m, n))
-        elif nz == -2:
-            mat = sp.csr_matrix((x[:p[-1]], i[:p[-1]], p), shape=(m, n))
-        else:
-            raise ValueError(f"unknown storage nz = {nz}")
-        mat = sp.csr_matrix(mat)
-        mat.check_format(full_check=True)
-    except (ValueError, IndexError) as exc:
-        raise ValueError(f"{path}: {what}: inconsistent sparse data: {exc}") from None
-    return mat
-
-
 def _h5py():
     try:
         import h5py
@@ -584,58 +656,84 @@ def _h5py():
     return h5py
 
 
-def read_hdf5(path) -> ContactFile:
-    """Read an FCLib HDF5 problem (``/fclib_local`` or ``/fclib_global``, ``spacedim`` 2 or 3)."""
+def read_hdf5(path, check: bool = True) -> ContactFile:
+    """Read an FCLib HDF5 problem (``/fclib_local`` or ``/fclib_global``, ``spacedim`` 2 or 3).
+
+    Every dataset is checked before it is read (numeric, integer for sizes and indices, its declared
+    size against the file's, :func:`lcp.io.fclib_checks.h5_array`), the vectors' sizes against each
+    other, then each matrix's declared size against the vectors' and its pointers and indices
+    before the matrix is built. ``check``: also the value checks (finite data, mu >= 0, W symmetric
+    and positive semi-definite; :mod:`lcp.io.fclib_checks`).
+    """
     h5py = _h5py()
 
     path = os.fspath(path)
     name = os.path.basename(path)
     try:
-        fh = h5py.File(path, "r")
+        size = os.path.getsize(path)
     except OSError as exc:
-        raise ValueError(f"{path}: not a readable HDF5 file: {exc}") from None
+        raise _checks.FileError(f"{path}: cannot read: {exc}") from None
+    if size == 0:
+        raise _checks.FileError(f"{path}: empty file")
+    try:
+        fh = h5py.File(path, "r")
+    except (OSError, RuntimeError, ValueError, KeyError) as exc:
+        raise _checks.FileError(f"{path}: not a readable HDF5 file: {exc}") from None
     with fh:
         try:
-            form = "local" if "fclib_local" in fh else ("global" if "fclib_global" in fh else None)
-        except (OSError, RuntimeError) as exc:
-            raise ValueError(f"{path}: cannot read the root group: {exc}") from None
-        if form is None:
-            raise ValueError(f"{path}: neither /fclib_local nor /fclib_global found")
-        try:
-            g = fh[f"fclib_{form}"]
-            dim = _h5_int(g, "spacedim", path, "dimension")
-            if dim not in DIMENSIONS:
-                raise ValueError(f"{path}: /fclib_{form}/spacedim: only planar and spatial problems "
-                                 f"(spacedim 2 or 3) are supported, got {dim}")
-            if form == "local":
-                if "R" in g or "V" in g:
-                    raise ValueError(f"{path}: mixed problems (V, R) are not supported")
-                W = _h5_matrix(_h5_group(g, "W", path), "/fclib_local/W", path)
-                q = _h5_read(g, "vectors/q", path, "q")
-                mu = _h5_read(g, "vectors/mu", path, "mu")
-                if q.size != W.shape[0] or W.shape[0] != W.shape[1] or dim * mu.size != q.size:
-                    raise ValueError(f"{path}: sizes disagree: W {W.shape}, q {q.shape}, mu {mu.shape} "
-                                     f"(spacedim {dim})")
-                return ContactFile(W, q, mu, "local", name=name, storage="fclib", dim=dim)
-            if "G" in g:
-                raise ValueError(f"{path}: global problems with bilateral constraints (G) are not supported")
-            M = _h5_matrix(_h5_group(g, "M", path), "/fclib_global/M", path)
-            H = _h5_matrix(_h5_group(g, "H", path), "/fclib_global/H", path)
-            f, w = _h5_read(g, "vectors/f", path, "f"), _h5_read(g, "vectors/w", path, "w")
-            mu = _h5_read(g, "vectors/mu", path, "mu")
-            if M.shape != (f.size, f.size) or H.shape != (f.size, w.size) or w.size != dim * mu.size:
-                raise ValueError(f"{path}: global sizes disagree: M {M.shape}, H {H.shape}, f {f.shape}, "
-                                 f"w {w.shape}, mu {mu.shape} (spacedim {dim})")
-            return _from_global(M, H, f, w, mu, name, "fclib", dim)
-        except (OSError, RuntimeError) as exc:  # HDF5 trouble below the datasets' level
-            raise ValueError(f"{path}: /fclib_{form}: cannot read: {exc}") from None
+            return _read_h5_groups(fh, path, name, size, check)
+        except _checks.FileError:
+            raise
+        except (OSError, RuntimeError, KeyError, TypeError, ValueError, IndexError) as exc:
+            # HDF5 trouble below the datasets' level (a corrupt B-tree, a truncated file)
+            raise _checks.FileError(f"{path}: cannot read the FCLib groups: {type(exc).__name__}: {exc}") from None
+
+
+def _read_h5_groups(fh, path, name, size, check):
+    form = "local" if "fclib_local" in fh else ("global" if "fclib_global" in fh else None)
+    if form is None:
+        raise _checks.FileError(f"{path}: neither /fclib_local nor /fclib_global found")
+    g = _h5_group(fh, f"fclib_{form}", path)
+    dim = _checks.h5_int(g, "spacedim", path, "dimension", size)
+    if dim not in DIMENSIONS:
+        raise _checks.FileError(f"{path}: /fclib_{form}/spacedim: only planar and spatial problems "
+                                f"(spacedim 2 or 3) are supported, got {dim}")
+    vec = _h5_group(g, "vectors", path)
+    mu = _checks.h5_array(vec, "mu", path, "mu", False, size)
+    if form == "local":
+        if "R" in g or "V" in g:
+            raise _checks.FileError(f"{path}: mixed problems (V, R) are not supported")
+        q = _checks.h5_array(vec, "q", path, "q", False, size)
+        n = dim * mu.size
+        if q.size != n:
+            raise _checks.FileError(f"{path}: sizes disagree: q {q.shape}, mu {mu.shape} (spacedim {dim}: q "
+                                    f"needs {n} entries)")
+        W = _checks.h5_matrix(_h5_group(g, "W", path), path, size, (n, n), check)
+        if check:
+            _checks.check_values(path, W, q, mu, "/fclib_local/W", "/fclib_local/vectors/q",
+                                 "/fclib_local/vectors/mu")
+        return ContactFile(W, q, mu, "local", name=name, storage="fclib", dim=dim)
+    if "G" in g:
+        raise _checks.FileError(f"{path}: global problems with bilateral constraints (G) are not supported")
+    f = _checks.h5_array(vec, "f", path, "f", False, size)
+    w = _checks.h5_array(vec, "w", path, "w", False, size)
+    if w.size != dim * mu.size:
+        raise _checks.FileError(f"{path}: global sizes disagree: f {f.shape}, w {w.shape}, mu {mu.shape} "
+                                f"(spacedim {dim})")
+    M = _checks.h5_matrix(_h5_group(g, "M", path), path, size, (f.size, f.size), check)
+    H = _checks.h5_matrix(_h5_group(g, "H", path), path, size, (f.size, w.size), check)
+    return _from_global(M, H, f, w, mu, name, "fclib", dim, path=path, check=check,
+                        labels=tuple(f"/fclib_global/{x}" for x in ("M", "H", "vectors/f", "vectors/w", "vectors/mu")))
 
 
 def _h5_group(g, key, path):
     try:
-        return g[key]
+        sub = g[key]
     except KeyError:
-        raise ValueError(f"{path}: missing FCLib item {g.name}/{key}") from None
+        raise _checks.FileError(f"{path}: missing FCLib item {g.name.rstrip('/')}/{key}") from None
+    if not hasattr(sub, "keys"):
+        raise _checks.FileError(f"{path}: {g.name.rstrip('/')}/{key}: expected a group, found a dataset")
+    return sub
 
 
 def _h5_write_matrix(g, A):
@@ -674,13 +772,19 @@ def write_hdf5(path, cf: ContactFile, form: str | None = None) -> None:
         info["description"] = np.bytes_(f"{cf.n_contacts} {kind} contacts, written by lcp.io.fclib")
 
 
-def read_problem(path) -> ContactFile:
-    """Read a problem file by its content: HDF5 (FCLib) or Siconos ``.dat`` text."""
+def read_problem(path, check: bool = True) -> ContactFile:
+    """Read a problem file by its content: HDF5 (FCLib) or Siconos ``.dat`` text.
+
+    ``check`` (default): the value checks too (:mod:`lcp.io.fclib_checks`: finite data, finite
+    mu >= 0, W symmetric and positive semi-definite to stated tolerances), each failure a
+    ``ValueError`` naming the file and the dataset; ``check=False`` keeps the structural checks only
+    (what :meth:`ContactFile.check` then reports is the caller's).
+    """
     path = os.fspath(path)
     if not os.path.isfile(path):
-        raise ValueError(f"{path}: no such file")
+        raise _checks.FileError(f"{path}: no such file")
     with open(path, "rb") as fh:
         magic = fh.read(8)
     if magic == b"\x89HDF\r\n\x1a\n":
-        return read_hdf5(path)
-    return read_dat(path)
+        return read_hdf5(path, check=check)
+    return read_dat(path, check=check)
