@@ -34,7 +34,7 @@ from lcp.numerics.jit import HAVE_NUMBA, njit
 from lcp.timestepping.activation import CLOSE_ULPS, EPS, OPEN_ULPS
 from lcp.timestepping.compiled_kernels import (BRANCH_MAX_SWEEPS, BUFFER_FULL, DONE, NONFINITE,
                                                run_steps)
-from lcp.timestepping.contact_step import solve_with_fallback
+from lcp.timestepping.contact_step import count_solve, retry_with_fallback
 from lcp.timestepping.outcome import ambiguity_note
 from lcp.timestepping.projection import violation_function
 from lcp.result import STATUS_MESSAGES, Impact, SimulationResult, SolverStats
@@ -249,7 +249,11 @@ class _PythonStep:
             local = self.cache[key] = (idx, H[idx], SHt[:, idx], template)
         idx, Ha, SHta, template = local
         pb = template.with_q(qa)
-        sol, used, _ = solve_with_fallback(solver, pb, active.size, self.fallback, self.fallbacks, stats)
+        sol = solver.solve(pb)
+        count_solve(stats, sol)
+        used = None
+        if not sol.success:
+            sol, used, _ = retry_with_fallback(solver, pb, sol, active.size, self.fallback, self.fallbacks)
         if not sol.success:
             return None, None, sol, None
         if sol.message.startswith("fallback"):

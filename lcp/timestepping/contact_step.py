@@ -3,7 +3,7 @@
 Holds :class:`ContactStep` (the local problem from the active set's cached slices of the step's
 operators, the restitution shift, the solve with its fallback, the branch refinement, planar or
 spatial) and the fallback rule shared with the compiled loop (:func:`fallback_for`,
-:func:`solve_with_fallback`). Imports :mod:`lcp.contact` only (it fills in the run's
+:func:`retry_with_fallback`, :func:`count_solve`). Imports :mod:`lcp.contact` only (it fills in the run's
 :class:`~lcp.timestepping.outcome.RunNotes`, handed to it); never the loops, the path choice or
 anything above :mod:`lcp.timestepping`.
 """
@@ -16,7 +16,7 @@ import numpy as np
 from lcp.contact.problem import STICK, ContactProblem
 from lcp.contact.solvers import make_solver
 
-__all__ = ["ContactStep", "fallback_for", "solve_with_fallback"]
+__all__ = ["ContactStep", "count_solve", "fallback_for", "retry_with_fallback"]
 
 
 def fallback_for(solver, k: int):
@@ -30,18 +30,22 @@ def fallback_for(solver, k: int):
     return make_solver(name)
 
 
-def solve_with_fallback(solver, pb, k: int, fallback: bool, fallbacks: dict, stats):
-    """Solve the one-step problem ``pb`` (k active contacts) by ``solver`` and, where it fails and
-    ``fallback`` is set, by :func:`fallback_for`'s solver (cached in ``fallbacks`` by k).
-
-    Returns (solution, name of the fallback solver that succeeded or None, the failed solver's
-    message or None). The iteration counters of ``stats`` count the first solve only.
-    """
-    sol = solver.solve(pb)
+def count_solve(stats, sol):
+    """Add one solve's iterations and OSQP solves to the run's counters ``stats``."""
     stats.iterations += sol.iterations
     stats.max_iterations = max(stats.max_iterations, sol.iterations)
     stats.qp_solves += sol.qp_solves
-    if not sol.success and fallback and sol.status != -3:  # -3: forced solver does not apply
+
+
+def retry_with_fallback(solver, pb, sol, k: int, fallback: bool, fallbacks: dict):
+    """The retry of a one-step problem ``pb`` (k active contacts) on which ``solver`` failed with the
+    solution ``sol``: where ``fallback`` is set, by :func:`fallback_for`'s solver (cached in
+    ``fallbacks`` by k).
+
+    Returns (solution, name of the fallback solver that succeeded or None, the failed solver's
+    message or None); the solution is ``sol`` itself where no retry succeeded.
+    """
+    if fallback and sol.status != -3:  # -3: forced solver does not apply
         fb = fallbacks.setdefault(k, fallback_for(solver, k))
         if fb is not None:
             sol2 = fb.solve(pb)
@@ -112,7 +116,10 @@ class ContactStep:
         impulses, the active contacts' impulses (normals, then tangents) and modes. ``dv`` is None
         when every solver failed (``solution.message`` says why).
         """
-        idx, Ha, SHta, ea, template, cols = self.local(active, SHt, W, H)
+        local = self.cache.get(active.tobytes()) if self.keyed else None
+        if local is None:
+            local = self.local(active, SHt, W, H)
+        idx, Ha, SHta, ea, template, cols = local
         qa = Ha @ vfree
         if ea is not None:
             # Newton restitution u_N+ >= -e u_N- acts only on approaching contacts: with a
@@ -122,14 +129,17 @@ class ContactStep:
         pb = template.with_q(qa)
         notes = self.notes
         stats = notes.stats
-        sol, fb_name, why = solve_with_fallback(self.solver, pb, active.size, self.fallback, self.fallbacks, stats)
+        sol = self.solver.solve(pb)
         stats.solver_calls += 1
-        if fb_name is not None:
-            stats.fallbacks += 1
-            if notes.first_fallback is None:
-                notes.first_fallback = (k, tk, why, fb_name)
+        count_solve(stats, sol)
         if not sol.success:
-            return None, None, None, None, sol
+            sol, fb_name, why = retry_with_fallback(self.solver, pb, sol, active.size, self.fallback, self.fallbacks)
+            if fb_name is not None:
+                stats.fallbacks += 1
+                if notes.first_fallback is None:
+                    notes.first_fallback = (k, tk, why, fb_name)
+            if not sol.success:
+                return None, None, None, None, sol
         if sol.message.startswith("fallback"):
             stats.fallbacks += 1
         if sol.ambiguous and notes.first_ambiguous is None:
