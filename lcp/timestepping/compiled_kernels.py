@@ -337,7 +337,7 @@ def run_steps(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_to
             _free_dv(mode, fv, h, th, q, v, dvf, rhs, t1, t2)
         for a in range(n):
             vfree[a] = v[a] + dvf[a]
-        # activation (lcp.timestepping.moreau_jean._Activation): the same sums in the same order
+        # activation (lcp.timestepping.activation.Activation): the same sums in the same order
         any_open = False
         for j in range(m):
             uNm[j] = row_dot(Hp, Hi, Hx, v, j)
@@ -623,7 +623,7 @@ def run_steps(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_to
                 istate[4] = max(istate[4], its)
                 fstate[0] = max(fstate[0], res)
             istate[2] += 1
-            # impacts (lcp.timestepping.moreau_jean._record_impacts), before the loads are updated
+            # impacts (lcp.timestepping.outcome.record_impacts), before the loads are updated
             if istate[0] == 0:
                 for t in range(na):
                     j = act[t]
