@@ -9,7 +9,7 @@ from lcp.events import event_driven
 from lcp.result import SimulationResult
 from lcp.scenes.scene import Scene
 from lcp.model.system import System
-from lcp.timestepping.moreau_jean import MoreauJeanOptions, moreau_jean
+from lcp.timestepping.moreau_jean import MoreauJeanOptions, moreau_jean, moreau_jean_from_model
 
 __all__ = ["METHODS", "simulate"]
 
@@ -158,12 +158,7 @@ def _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, 
     if h > t_end and not allow_large_step:
         raise ValueError(f"h = {h!r} is larger than the horizon t_end = {t_end!r}; pass "
                          "allow_large_step=True if one step beyond t_end is what you want")
-    if not (fast and opts.solver in ("auto", "enum") and not solver_options and model.m == 1 and not model.nb
-            and opts.projection in ("auto", False)):
-        return None
-    from lcp.timestepping.moreau_jean import moreau_jean_from_model
-
-    return moreau_jean_from_model(model, q0, v0, float(t_end), opts)
+    return moreau_jean_from_model(model, q0, v0, float(t_end), opts)  # None where it does not apply
 
 
 def _plain_moreau_jean_options(h, theta, solver, solver_options, save_every, projection, projection_tol) -> bool:

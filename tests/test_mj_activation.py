@@ -8,7 +8,8 @@ import lcp
 from lcp.classical import box_on_corners, stacked_blocks
 from lcp.scenes import block_chain
 from lcp.model.system import Contact, System
-from lcp.timestepping.moreau_jean import CLOSE_ULPS, MoreauJeanOptions, _Activation, moreau_jean
+from lcp.timestepping.activation import CLOSE_ULPS, Activation
+from lcp.timestepping.moreau_jean import MoreauJeanOptions, moreau_jean
 
 EPS = np.finfo(float).eps
 HS = [1e-2, 1e-3, 1e-4, 1e-5, 1e-6]
@@ -77,7 +78,7 @@ def test_chain_on_a_raised_floor_keeps_every_contact(h):
 def test_activation_rule_tolerates_rounding_only():
     sc = block_chain(1)
     asm = lcp.timestepping.assembly.StepAssembly(sc.system, 1e-3, 0.5)
-    act = _Activation(asm, 1)
+    act = Activation(asm, 1)
     q = np.array([0.0, 0.0])
     H = asm.H
     zero = np.zeros(1)
