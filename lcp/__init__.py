@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import importlib
 
+from ._version import __version__ as __version__  # re-exported
+
 #: public name -> (module, attribute); None as attribute: the module itself
 _EXPORTS = {
     "simulate": ("lcp.simulation", "simulate"),

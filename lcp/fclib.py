@@ -350,7 +350,7 @@ def _read_csparse(tk, what, n0, n1):
     return sp.csr_matrix(mat), kind
 
 
-def read_dat(path) -> ContactFile:
+def read_dat(path: str | os.PathLike) -> ContactFile:
     """Read a Siconos ``.dat`` friction-contact problem (local or global form, dimension 2 or 3);
     see the module doc.
 
@@ -442,7 +442,7 @@ def _from_global(M, H, f, w, mu, name, storage, dim=2):
                        storage=storage, dim=dim)
 
 
-def write_dat(path, cf: ContactFile, storage: str = "csparse", form: str = "local",
+def write_dat(path: str | os.PathLike, cf: ContactFile, storage: str = "csparse", form: str = "local",
               mass_blocks: int | None = None) -> None:
     """Write a problem in Siconos's ``.dat`` layout (the layout its ``newFromFile`` readers take).
 
@@ -584,7 +584,7 @@ def _h5py():
     return h5py
 
 
-def read_hdf5(path) -> ContactFile:
+def read_hdf5(path: str | os.PathLike) -> ContactFile:
     """Read an FCLib HDF5 problem (``/fclib_local`` or ``/fclib_global``, ``spacedim`` 2 or 3)."""
     h5py = _h5py()
 
@@ -646,7 +646,7 @@ def _h5_write_matrix(g, A):
     g["p"], g["i"], g["x"] = A.indptr.astype(np.int32), A.indices.astype(np.int32), A.data.astype(float)
 
 
-def write_hdf5(path, cf: ContactFile, form: str | None = None) -> None:
+def write_hdf5(path: str | os.PathLike, cf: ContactFile, form: str | None = None) -> None:
     """Write a problem in FCLib's HDF5 layout (CSC matrices); ``form`` defaults to the file's own."""
     h5py = _h5py()
 
@@ -674,7 +674,7 @@ def write_hdf5(path, cf: ContactFile, form: str | None = None) -> None:
         info["description"] = np.bytes_(f"{cf.n_contacts} {kind} contacts, written by lcp.fclib")
 
 
-def read_problem(path) -> ContactFile:
+def read_problem(path: str | os.PathLike) -> ContactFile:
     """Read a problem file by its content: HDF5 (FCLib) or Siconos ``.dat`` text."""
     path = os.fspath(path)
     if not os.path.isfile(path):
