@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import importlib
 
+from lem._version import __version__ as __version__  # re-exported (one version for both packages)
+
 #: public name -> (module, attribute); None as attribute: the module itself
 _EXPORTS = {
     "simulate": ("lcp.simulation", "simulate"),

@@ -3,13 +3,20 @@ from __future__ import annotations
 
 import math
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from lcp.events import event_driven
 from lcp.result import SimulationResult
 from lcp.scenes.scene import Scene
 from lcp.model.system import System
 from lcp.timestepping.moreau_jean import MoreauJeanOptions, moreau_jean, moreau_jean_from_model
+
+if TYPE_CHECKING:  # annotations only: importing these here would load them with every simulate
+    from lcp.events import EventResult
+    from lcp.model.control import ControlSchedule
 
 __all__ = ["METHODS", "simulate"]
 
@@ -18,11 +25,12 @@ __all__ = ["METHODS", "simulate"]
 METHODS = {"moreau-jean": moreau_jean, "event": event_driven}
 
 
-def simulate(scene, t_end: float | None = None, h: float = 1e-3, theta: float = 0.5,
-             solver: str = "auto", method: str = "moreau-jean", q0=None, v0=None,
-             solver_options: dict | None = None, fallback: bool = True, save_every: int = 1,
-             fast: bool = True, allow_large_step: bool = False, control=None,
-             projection="auto", projection_tol: float = 1e-12, **method_options) -> SimulationResult:
+def simulate(scene: Scene | System, t_end: float | None = None, h: float = 1e-3, theta: float = 0.5,
+             solver: str = "auto", method: str = "moreau-jean", q0: ArrayLike | None = None,
+             v0: ArrayLike | None = None, solver_options: dict | None = None, fallback: bool = True,
+             save_every: int = 1, fast: bool = True, allow_large_step: bool = False,
+             control: ControlSchedule | None = None, projection: bool | str = "auto",
+             projection_tol: float = 1e-12, **method_options) -> SimulationResult | EventResult:
     """Simulate a scene (or a bare :class:`~lcp.model.system.System` with ``q0`` and ``v0``).
 
     Parameters

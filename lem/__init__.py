@@ -21,6 +21,9 @@ deprecated alias.
 """
 import importlib
 
+# one distribution (lcp-lem) ships both packages: one version, written in lem/_version.py
+from lem._version import __version__ as __version__  # re-exported
+
 # The engine (and numba behind it) loads on first use: ``lcp`` needs only lem.jean_pratt at import.
 _LAZY = {"AnalyticField": "fields", "PolynomialField": "fields", "solve": "propagation",
          "LEMResult": "result", "LEMWarning": "result", "solve_troesch": "troesch"}

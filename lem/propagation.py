@@ -2,13 +2,19 @@
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .fields import as_field
 from .result import STATUS_MESSAGES, LEMOptions, LEMResult, LEMStats, LEMWarning
 from .segment import EPS, Blowup, IVPFailure, Segment, propagate_segment
 from .validation import check_outputs, finite_vector
+
+if TYPE_CHECKING:
+    from .fields import AnalyticField, PolynomialField
 
 __all__ = ["solve"]
 
@@ -20,7 +26,9 @@ def _degrees(opts: LEMOptions) -> tuple:
     return tuple(d for d in (N - 2 * k, N - k, N, N + k) if d >= 1)
 
 
-def solve(fun, x_span, y0, *, t_eval=None, outputs=None, **options) -> LEMResult:
+def solve(fun: Callable | Sequence[Mapping] | PolynomialField | AnalyticField, x_span: tuple[float, float],
+          y0: ArrayLike, *, t_eval: ArrayLike | None = None, outputs: Sequence[int] | None = None,
+          **options) -> LEMResult:
     """Solve ``y' = f(t, y)``, ``y(x0) = y0`` by the truncated Linear Equivalence Method.
 
     Parameters

@@ -18,6 +18,7 @@ from __future__ import annotations
 import functools
 import importlib
 import sys
+import time
 
 from lcp.sweeps.parameter_sweep import cluster, map_sets
 
@@ -46,9 +47,35 @@ def _importable(fn):
     return fn
 
 
+#: a serial sweep whose first piece says it will take longer than this (seconds) prints its estimate
+ESTIMATE_FROM = 10.0
+
+
 def pieces(fn, items, client, desc: str = "pieces") -> list:
     """``[fn(x) for x in items]`` in this process (``client`` None) or on ``client``'s cluster,
-    one item per task (a study's pieces are few and unequal), with a progress bar."""
-    where = {} if client is None else {"client": client, "chunk_size": 1}
-    return map_sets(_importable(fn) if client is not None else fn, list(items), progress=True, desc=desc,
-                    **where)[0]
+    one item per task (a study's pieces are few and unequal), with a progress bar.
+
+    In this process, a long sweep first prints an estimate of its duration (on standard error):
+    the first piece's time multiplied by the number of pieces. Pieces differ in cost, so it is an
+    order of magnitude, which the progress bar then refines."""
+    items = list(items)
+    if client is not None:
+        return map_sets(_importable(fn), items, progress=True, desc=desc, client=client, chunk_size=1)[0]
+    if not items:
+        return []
+    t0 = time.perf_counter()
+    first = fn(items[0])
+    seconds = (time.perf_counter() - t0) * len(items)
+    if seconds >= ESTIMATE_FROM:
+        print(f"{desc}: {len(items)} pieces, about {_duration(seconds)} in all (from the first piece's "
+              f"time; pieces differ in cost)", file=sys.stderr, flush=True)
+    return [first, *(map_sets(fn, items[1:], progress=True, desc=desc)[0] if len(items) > 1 else [])]
+
+
+def _duration(seconds: float) -> str:
+    """A duration in the unit a reader expects: seconds, minutes or hours."""
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"

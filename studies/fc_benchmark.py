@@ -1,9 +1,12 @@
 """Friction-contact problem files solved by every applicable solver, with performance profiles.
 
-``python -m studies.fc_benchmark DIR [--out OUT] [--quick]`` reads every problem file in DIR
+``python -m studies.fc_benchmark [DIR] [--out OUT] [--quick]`` reads every problem file in DIR
 (FCLib HDF5 or Siconos ``.dat``, local or global form, planar or spatial; :mod:`lcp.fclib`), checks
 it, solves it with each applicable one-step solver and writes into OUT (default
-``figures/fc_benchmark/``):
+``figures/fc_benchmark/``). Without DIR it runs on its built-in problems (:func:`builtin_problems`:
+random planar and spatial problems of known structure, local and global forms, in each ``.dat``
+storage), written into ``OUT/problems/`` first so that the file readers are part of the run.
+It writes:
 
 - ``results.csv``: file, dimension, contacts, nnz(W), solver, status, time (s), iterations, the
   independent natural-map error (:func:`lcp.contact.law.natural_map_error`, normalised as
@@ -48,7 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from lcp.contact.spatial_solvers import make_cone_solver
-from lcp.fclib import read_problem, write_dat
+from lcp.fclib import ContactFile, read_problem, write_dat
 from lcp.contact.law import natural_map_error
 from lcp.contact.solvers import make_solver
 from studies._common import out_dir, parse_args, save, write_csv
@@ -136,6 +139,56 @@ def run_siconos_script(script: str, args, timeout: float = 3600):
     if res.returncode != 0:
         raise RuntimeError(f"Siconos peer failed: {res.stderr[-2000:]}")
     return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def builtin_problems(folder, seed: int = 0) -> list[Path]:
+    """Write the study's built-in problems into ``folder`` (created if needed) and return their paths.
+
+    Each is one step of random bodies of positive masses (W = H M^-1 H', positive definite, so every
+    problem has a solution), pressed into their contacts: planar local problems of 5, 40 and 120
+    contacts in dense, sparse-block and CSparse storage, a planar global one of 20 contacts, and
+    spatial (Coulomb disk) local and global ones of 10 and 20 contacts. Seeded: the same files on
+    every run.
+    """
+    rng = np.random.default_rng(seed)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+
+    def bodies(k, dim):
+        """Masses and a contact Jacobian H (velocities x contact rows, contact-by-contact order):
+        each contact row on its own body coordinate plus random couplings to others."""
+        n = dim * k + 3
+        H = np.zeros((n, dim * k))
+        H[np.arange(dim * k), np.arange(dim * k)] = 1.0
+        mask = rng.random((n, dim * k)) < min(1.0, 3.0 / n)
+        H[mask] += rng.normal(size=mask.sum())
+        return rng.uniform(0.5, 2.0, n), H
+
+    def pressing(k, dim):
+        """Free velocities per contact: approaching normals, random tangents."""
+        u = rng.normal(size=(k, dim))
+        u[:, 0] = -rng.uniform(0.1, 1.0, k)
+        return u.ravel()
+
+    paths = []
+    for k, storage in ((5, "dense"), (40, "sparse-block"), (120, "csparse")):
+        m, H = bodies(k, 2)
+        W = H.T @ (H / m[:, None])
+        path = folder / f"planar_local_{k}.dat"
+        write_dat(path, ContactFile(W, pressing(k, 2), rng.uniform(0.1, 0.9, k), name=path.stem), storage=storage)
+        paths.append(path)
+    for k, dim, form in ((20, 2, "global"), (10, 3, "local"), (20, 3, "global")):
+        m, H = bodies(k, dim)
+        mu = rng.uniform(0.1, 0.9, k)
+        # global form M v = H r + f, u = H' v + w: the free velocity H' M^-1 f + w presses
+        cf = ContactFile.from_global(np.diag(m), H, m * rng.normal(scale=0.1, size=m.size), pressing(k, dim), mu,
+                                     dim=dim)
+        if form == "local":
+            cf = ContactFile(cf.W, cf.q, mu, dim=dim)
+        path = folder / f"{'planar' if dim == 2 else 'spatial'}_{form}_{k}.dat"
+        write_dat(path, cf, storage="sparse-block", form=form)
+        paths.append(path)
+    return paths
 
 
 def problem_files(folder) -> list[Path]:
@@ -283,9 +336,18 @@ def performance_profile(table: dict, taus: np.ndarray) -> dict:
     return out
 
 
-def run(folder, out=None, quick: bool = False, siconos: bool = True) -> dict:
-    """Solve every problem of ``folder``; write the CSV and profiles into ``out`` (None: no files)."""
+def run(folder=None, out=None, quick: bool = False, siconos: bool = True) -> dict:
+    """Solve every problem of ``folder``; write the CSV and profiles into ``out`` (None: no files).
+
+    ``folder`` None: the built-in problems (:func:`builtin_problems`), written into ``out``'s
+    ``problems/`` (a temporary folder when ``out`` is None).
+    """
     t_start = time.perf_counter()
+    if folder is None:
+        if out is None:
+            with tempfile.TemporaryDirectory() as tmp:
+                return run(builtin_problems(Path(tmp) / "problems")[0].parent, None, quick, siconos)
+        folder = builtin_problems(out_dir(out, NAME) / "problems")[0].parent
     files = problem_files(folder)
     rows = []
     for path in files:
@@ -400,10 +462,14 @@ def print_rows(rows):
 
 def main(argv=None):
     def extra(p):
-        p.add_argument("folder", type=Path, help="folder of problem files (.dat, .hdf5)")
+        p.add_argument("folder", type=Path, nargs="?", default=None,
+                       help="folder of problem files (.dat, .hdf5); default: the built-in problems, "
+                            "written into OUT/problems/")
         p.add_argument("--no-siconos", action="store_true", help="do not run the Siconos peer")
 
     args = parse_args(NAME, __doc__.splitlines()[0], argv, extra)
+    if args.folder is None:
+        print(f"no folder given: solving the built-in problems, written into {args.out / 'problems'}")
     res = run(args.folder, args.out, args.quick, siconos=not args.no_siconos)
     print_rows(res["rows"])
     if res["note"]:

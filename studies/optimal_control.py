@@ -669,6 +669,8 @@ def main(argv=None):
     if not out["nosnoc"]:
         print("nosnoc (optional peer, pip install 'lcp-lem[ocp-peers]') is not installed: its rows and series are skipped")
     print(f"hold problem, multi-start: {out['multistart'].message}")
+    print("note: IPOPT may try points where a constraint is NaN and backs off from them; CasADi's warning for "
+          "each such trial is switched off (lcp.ocp), and a solve that cannot recover is reported above")
     for r in out["sweep"]:
         print(f"kappa = {r['kappa']:.2f}: uncontrolled peak {r['peak_uncontrolled']:.1f} N (N0 = {r['N0']:.1f}), "
               f"optimal peak {r['peak_opt']:.4f} N (replay {r['peak_replay']:.4f}, bound {r['bound']:.4f})")

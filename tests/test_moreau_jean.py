@@ -14,8 +14,13 @@ from .helpers import jean_pratt_errors
 SOLVERS = ["enum", "lemke", "osqp"]
 
 
-@pytest.mark.parametrize("solver", SOLVERS)
-@pytest.mark.parametrize("h", [1e-2, 1e-3, 1e-4, 1e-5])
+# h = 1e-5 by Lemke or OSQP takes seconds per case (a Python loop of ~1e4 steps): slow tests; the
+# closed-form enumeration keeps the finest step in the default suite
+EVERY_SOLVER_CASES = [pytest.param(solver, h, marks=pytest.mark.slow) if h == 1e-5 and solver != "enum"
+                      else (solver, h) for h in (1e-2, 1e-3, 1e-4, 1e-5) for solver in SOLVERS]
+
+
+@pytest.mark.parametrize("solver, h", EVERY_SOLVER_CASES)
 @pytest.mark.parametrize("v0", [1.0, -1.0])
 def test_default_scene_every_solver(solver, h, v0):
     sc = jean_pratt(v0=v0)

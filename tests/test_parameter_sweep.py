@@ -57,8 +57,12 @@ def test_bad_options_fail_before_running(kw, word):
         lcp.sweep(lcp.scenes.jean_pratt, [{"R": 0.5}], t_end=0.3, **kw)
 
 
-def test_unreachable_scheduler_fails_fast():
+def test_unreachable_scheduler_fails_fast(monkeypatch):
     pytest.importorskip("dask.distributed")
+    import lcp.sweeps.parameter_sweep
+
+    # the failure is what is checked, not the length of the wait (CONNECT_TIMEOUT, 5 s by default)
+    monkeypatch.setattr(lcp.sweeps.parameter_sweep, "CONNECT_TIMEOUT", 0.5)
     with pytest.raises(ConnectionError, match="cannot reach the Dask scheduler"):
         lcp.sweep(lcp.scenes.jean_pratt, [{"R": 0.5}], client="tcp://127.0.0.1:9", t_end=0.3)
 

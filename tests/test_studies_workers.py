@@ -60,7 +60,11 @@ def test_options_are_parsed(tmp_path):
         lem_convergence.run(out=tmp_path, quick=True, workers=0)
 
 
-def test_unreachable_scheduler_fails_fast(tmp_path):
+def test_unreachable_scheduler_fails_fast(tmp_path, monkeypatch):
+    import lcp.sweeps.parameter_sweep
+
+    # the failure is what is checked, not the length of the wait (CONNECT_TIMEOUT, 5 s by default)
+    monkeypatch.setattr(lcp.sweeps.parameter_sweep, "CONNECT_TIMEOUT", 0.5)
     with pytest.raises(ConnectionError, match="scheduler"):
         lem_convergence.main(["--quick", "--out", str(tmp_path), "--scheduler", "tcp://127.0.0.1:9"])
 

@@ -1,7 +1,11 @@
 """The spatial sliding study in quick mode: its numbers against the issue's outcomes."""
 import numpy as np
+import pytest
 
 from studies import spatial_sliding
+
+# the whole quick run takes 15-50 s; tests/test_studies_pieces.py runs a few of its pieces by default
+pytestmark = pytest.mark.slow
 
 
 def test_spatial_sliding_quick(tmp_path):

@@ -5,6 +5,9 @@ import pytest
 
 from studies import stability
 
+# the whole quick run takes 15-50 s; tests/test_studies_pieces.py runs a few of its pieces by default
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def result(tmp_path_factory):

@@ -7,6 +7,9 @@ import pytest
 
 from studies import work_precision as wp
 
+# the whole quick run takes 15-50 s; tests/test_studies_pieces.py runs a few of its pieces by default
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):

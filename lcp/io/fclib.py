@@ -416,7 +416,7 @@ def _read_csparse(tk, what, n0, n1, check=True):
     return mat, kind
 
 
-def read_dat(path, check: bool = True) -> ContactFile:
+def read_dat(path: str | os.PathLike, check: bool = True) -> ContactFile:
     """Read a Siconos ``.dat`` friction-contact problem (local or global form, dimension 2 or 3);
     see the module doc.
 
@@ -550,7 +550,7 @@ def _from_global(M, H, f, w, mu, name, storage, dim=2, path=None, check=True,
                        storage=storage, dim=dim)
 
 
-def write_dat(path, cf: ContactFile, storage: str = "csparse", form: str = "local",
+def write_dat(path: str | os.PathLike, cf: ContactFile, storage: str = "csparse", form: str = "local",
               mass_blocks: int | None = None) -> None:
     """Write a problem in Siconos's ``.dat`` layout (the layout its ``newFromFile`` readers take).
 
@@ -656,7 +656,7 @@ def _h5py():
     return h5py
 
 
-def read_hdf5(path, check: bool = True) -> ContactFile:
+def read_hdf5(path: str | os.PathLike, check: bool = True) -> ContactFile:
     """Read an FCLib HDF5 problem (``/fclib_local`` or ``/fclib_global``, ``spacedim`` 2 or 3).
 
     Every dataset is checked before it is read (numeric, integer for sizes and indices, its declared
@@ -744,7 +744,7 @@ def _h5_write_matrix(g, A):
     g["p"], g["i"], g["x"] = A.indptr.astype(np.int32), A.indices.astype(np.int32), A.data.astype(float)
 
 
-def write_hdf5(path, cf: ContactFile, form: str | None = None) -> None:
+def write_hdf5(path: str | os.PathLike, cf: ContactFile, form: str | None = None) -> None:
     """Write a problem in FCLib's HDF5 layout (CSC matrices); ``form`` defaults to the file's own."""
     h5py = _h5py()
 
@@ -772,7 +772,7 @@ def write_hdf5(path, cf: ContactFile, form: str | None = None) -> None:
         info["description"] = np.bytes_(f"{cf.n_contacts} {kind} contacts, written by lcp.io.fclib")
 
 
-def read_problem(path, check: bool = True) -> ContactFile:
+def read_problem(path: str | os.PathLike, check: bool = True) -> ContactFile:
     """Read a problem file by its content: HDF5 (FCLib) or Siconos ``.dat`` text.
 
     ``check`` (default): the value checks too (:mod:`lcp.io.fclib_checks`: finite data, finite

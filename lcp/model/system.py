@@ -23,6 +23,7 @@ from typing import Sequence
 
 import casadi as ca
 import numpy as np
+from numpy.typing import ArrayLike
 
 from lcp.model import state_checks
 from lcp.model.control import check_schedule, split_control
@@ -163,9 +164,10 @@ class System:
     (2, 1, True)
     """
 
-    def __init__(self, q, v, mass, force, contacts: Sequence[Contact] = (), constraints=None,
-                 t=None, names: Sequence[str] | None = None, breakpoints=None, control=None,
-                 control_bounds=None):
+    def __init__(self, q: ca.SX, v: ca.SX, mass: ca.SX | ArrayLike, force: ca.SX | ArrayLike,
+                 contacts: Sequence[Contact] = (), constraints: ca.SX | None = None,
+                 t: ca.SX | None = None, names: Sequence[str] | None = None, breakpoints: ArrayLike | None = None,
+                 control: ca.SX | None = None, control_bounds: ArrayLike | None = None) -> None:
         self.breakpoints = _breakpoints(breakpoints)
         self.control_schedule = None  # set by with_control
         if not isinstance(q, ca.SX) or not q.is_symbolic() or q.shape[1] != 1:

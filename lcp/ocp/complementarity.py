@@ -46,7 +46,13 @@ def ipopt_solver(tr, options: HomotopyOptions, warm: bool, cache: dict) -> ca.Fu
             ip.update({"warm_start_init_point": "yes", "mu_init": 1e-6,
                        "warm_start_bound_push": 1e-9, "warm_start_mult_bound_push": 1e-9})
         ip.update(options.ipopt_options or {})
-        cache[key] = ca.nlpsol("ocp_warm" if warm else "ocp", "ipopt", tr.nlp, {"print_time": False, "ipopt": ip})
+        # IPOPT may try points (in multi-starts and failing stages, from finite starting points)
+        # where a constraint or the cost evaluates to NaN; it backs off from them by itself (a
+        # solve that cannot recover ends with a failed status, reported in the result). CasADi
+        # would print a warning for every such trial (25 in a quick optimal_control study), which
+        # says nothing about the result.
+        cache[key] = ca.nlpsol("ocp_warm" if warm else "ocp", "ipopt", tr.nlp,
+                               {"print_time": False, "show_eval_warnings": False, "ipopt": ip})
     return cache[key]
 
 

@@ -11,6 +11,7 @@ stop time of a slide-then-stick motion), and the largest |gap| seen (lift-off or
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 import math
 import time
@@ -138,7 +139,8 @@ def _numpy_step(Z, c, n):
     Z[4 * n + 1] = np.maximum(Z[4 * n + 1], np.abs(gap))
 
 
-def simulate_batch(scenes, t_end: float, h: float, theta: float = 0.5, path: str = "auto") -> BatchResult:
+def simulate_batch(scenes: Sequence[Scene] | tuple[dict, np.ndarray], t_end: float, h: float, theta: float = 0.5,
+                   path: str = "auto") -> BatchResult:
     """Step many single-contact scenes together with Moreau-Jean (exact Coulomb per step).
 
     Parameters

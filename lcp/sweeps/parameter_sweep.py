@@ -32,9 +32,15 @@ import numbers
 import os
 import sys
 import time
+import warnings
 from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:  # optional dependencies (the parallel extra), for annotations only
+    import pandas as pd
+    from dask.distributed import Client
 
 __all__ = ["BUILD_FAILED", "cluster", "default_summary", "map_sets", "parameter_sets", "sweep"]
 
@@ -239,7 +245,9 @@ def _progress_bar(total, enabled, desc="sweep"):
         return None
     try:
         from tqdm.auto import tqdm
-    except ImportError:
+    except ImportError:  # a dependency of the package: say that the promised bar is missing, once
+        warnings.warn("tqdm is not installed, so no progress bar is shown (pip install tqdm)", RuntimeWarning,
+                      stacklevel=3)
         return None
     return tqdm(total=total, unit="set", desc=desc, file=sys.stderr)
 
@@ -312,9 +320,10 @@ def map_sets(fn: Callable, sets: Sequence, *, workers: int | None = None, client
     return out, {"workers": n_workers, "chunk_size": size}
 
 
-def sweep(build: Callable, params, *, summary: Callable | None = None, workers: int | None = None,
-          client=None, chunk_size: int | None = None, progress: bool | None = None,
-          **simulate_options):
+def sweep(build: Callable, params: Sequence[Mapping] | Mapping[str, Sequence], *,
+          summary: Callable | None = None, workers: int | None = None,
+          client: Client | str | None = None, chunk_size: int | None = None, progress: bool | None = None,
+          **simulate_options) -> pd.DataFrame:
     """Simulate one scene per parameter set and tabulate the results.
 
     Parameters

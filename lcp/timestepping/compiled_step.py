@@ -216,7 +216,9 @@ def build_library(name: str, code: bytes, openmp: bool = False) -> Path | None:
         lib = Path(tempfile.gettempdir()) / f"lcp-lem-{os.getuid() if hasattr(os, 'getuid') else 0}" / lib.name
         lib.parent.mkdir(parents=True, exist_ok=True)
     if not lib.exists():
-        with tempfile.TemporaryDirectory() as tmp:
+        # built beside the cache entry and renamed into place: os.replace is atomic within one file
+        # system, so parallel processes (Dask workers, pytest-xdist) never load a half-written library
+        with tempfile.TemporaryDirectory(dir=lib.parent) as tmp:
             src = Path(tmp) / f"{name}.c"
             src.write_bytes(code)
             part = Path(tmp) / lib.name
@@ -225,7 +227,7 @@ def build_library(name: str, code: bytes, openmp: bool = False) -> Path | None:
                                check=True, capture_output=True, timeout=300)
             except (subprocess.SubprocessError, OSError):
                 return None
-            shutil.move(str(part), lib)  # atomic within a file system: safe for parallel workers
+            os.replace(part, lib)
     return lib
 
 
