@@ -425,6 +425,17 @@ class ConeOperator:
         self.blocks[owner[C.row[same]], local[C.row[same]], local[C.col[same]]] = C.data[same]
         self.rhoN, self.rhoT = problem.rhoN, problem.rhoT
 
+    def fits(self, problem) -> bool:
+        """Whether this operator can be the one of ``problem`` (a warm start kept on its key)."""
+        return self.n == problem.n and np.array_equal(self.dims, problem.dims)
+
+    def sweeps(self, q, mu, r0, tol, max_sweeps, compiled=True, rel_scale=0.0):
+        """:func:`cone_nsgs` on this operator (its stopping measure is the residual: ``rel_scale``
+        must be 0)."""
+        if rel_scale != 0.0:
+            raise ValueError("the disk-law sweeps stop on the natural-map residual only (rel_scale = 0)")
+        return cone_nsgs(self, q, mu, r0, tol, max_sweeps, compiled)
+
 
 def cone_nsgs(op: ConeOperator, q, mu, r0=None, tol: float = 1e-12, max_sweeps: int = 10000,
               compiled: bool = True):
