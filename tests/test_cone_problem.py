@@ -372,7 +372,7 @@ def test_compiled_refinement_large_sparse():
 
 @given(seed=st.integers(0, 2**32 - 1))
 def test_solve3_matches_lapack(seed):
-    from lcp.contact.spatial_nsgs import _solve3
+    from lcp.contact.kernels import _solve3
 
     rng = np.random.default_rng(seed)
     W = spd(rng, 3, cond=100.0) + rng.normal(size=(3, 3)) * 0.1

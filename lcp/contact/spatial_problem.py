@@ -268,7 +268,7 @@ def local_disk(W, q, mu: float, guess=None, compiled: bool = True):
     Cases tried in the order open (q_N >= 0), stick (u = 0 with p in the disk), slide (p_T =
     -mu p_N d, u_N = 0, u_T = lambda d with lambda > 0 and W_NN - mu W_NT.d > 0); the sliding
     direction is found by Newton in its angle, and by all roots of the quartic in exp(i t) when
-    that fails (:mod:`lcp.contact.spatial_nsgs`).
+    that fails (:func:`lcp.contact.kernels.local_disk3`).
 
     Parameters
     ----------
@@ -295,8 +295,7 @@ def local_disk(W, q, mu: float, guess=None, compiled: bool = True):
     >>> p, mode = local_disk(np.eye(3), np.array([-1.0, 0.0, 2.0]), 0.5); p, int(mode)
     (array([ 1. ,  0. , -0.5]), 4)
     """
-    from lcp.contact import spatial_nsgs as cone_nsgs
-    from lcp.contact.nsgs import local_planar
+    from lcp.contact.kernels import local_disk3, local_planar
 
     W = np.asarray(W, dtype=float)
     q = np.asarray(q, dtype=float)
@@ -314,6 +313,6 @@ def local_disk(W, q, mu: float, guess=None, compiled: bool = True):
         pN, pT, mode = fn(W[0, 0], W[0, 1], W[1, 0], W[1, 1], q[0], q[1], mu)
         return np.array([pN, pT]), int(mode)
     g = (0.0, 0.0) if guess is None else tuple(float(x) for x in guess)
-    fn = cone_nsgs.local_disk3 if compiled else getattr(cone_nsgs.local_disk3, "py_func", cone_nsgs.local_disk3)
+    fn = local_disk3 if compiled else getattr(local_disk3, "py_func", local_disk3)
     pN, pT0, pT1, mode, _ = fn(np.ascontiguousarray(W), q[0], q[1], q[2], mu, g[0], g[1])
     return np.array([pN, pT0, pT1]), int(mode)

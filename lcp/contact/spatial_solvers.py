@@ -38,9 +38,8 @@ import numpy as np
 
 from lcp.numerics.lazy import issparse
 from lcp.numerics.lazy import sparse as sp
-from lcp.contact.spatial_nsgs import local_disk3
 from lcp.contact.spatial_problem import ConeContactProblem
-from lcp.contact.nsgs import local_planar
+from lcp.contact.kernels import local_disk3, local_planar
 from lcp.contact.solver_base import IterativeSolver, OneStepSolver, StepSolution, build_solver, register, sweep_blocked
 
 __all__ = [
