@@ -1,8 +1,12 @@
 """One-step contact solvers, by name: ``"enum"``, ``"lemke"``, ``"osqp"`` (and ``"auto"``).
 
 Each solver takes a :class:`~lcp.contact.problem.ContactProblem` and returns a :class:`StepSolution`.
-The base class owns the bookkeeping (the independent Coulomb residual check, the status); each
-solver implements one method, ``_solve``.
+The interface shared with the disk law's solvers is :mod:`lcp.contact.solver_base` (the base class
+owns the bookkeeping: the independent Coulomb residual check, the status; each solver implements
+one method, ``_solve``); this module registers the planar solvers in its one registry and gives
+:func:`make_solver` for both laws. Imports the planar problem and the methods' modules of
+``lcp.contact`` (the disk law's solvers only when asked for); it must not import anything above
+``lcp.contact``.
 
 - ``"enum"``: closed-form case analysis of a single planar contact (open, stick, slide+, slide-).
 - ``"lemke"``: the exact LCP form (:meth:`ContactProblem.to_lcp`) by Lemke's pivoting method.

@@ -1,8 +1,11 @@
 """One-step solvers of the spatial (Coulomb disk) contact problem, by name.
 
 Each solver takes a :class:`~lcp.contact.spatial_problem.ConeContactProblem` and returns a
-:class:`lcp.contact.solvers.StepSolution` (impulses in the blocked order). The base class
-:class:`ConeSolver` owns the bookkeeping of :class:`lcp.contact.solvers.OneStepSolver`: the Coulomb residual
+:class:`lcp.contact.solver_base.StepSolution` (impulses in the blocked order); the solvers are
+registered, law ``"disk"``, in :data:`lcp.contact.solver_base.REGISTRY` (``make_solver(name,
+law="disk")``; :data:`CONE_SOLVERS` and :func:`make_cone_solver` are this law's view). Imports
+``lcp.contact`` modules below it (never :mod:`lcp.contact.solvers`) and :mod:`lcp.numerics`. The
+base class :class:`ConeSolver` owns the bookkeeping of :class:`lcp.contact.solver_base.OneStepSolver`: the Coulomb residual
 (:meth:`ConeContactProblem.residual`) is recomputed independently of the solver and an exact
 solver's answer above ``residual_tol`` (relative to the problem's impulse scale and the largest
 impulse) is rejected with status -2.
