@@ -15,6 +15,8 @@ problem, kernels or solvers.
 """
 from __future__ import annotations
 
+from operator import mul
+
 import numpy as np
 
 from lcp.numerics.lazy import issparse
@@ -61,17 +63,21 @@ class FrictionContactProblem:
     def _set_scale(self):
         # impulse scale: the impulse that cancels the free velocity contact by contact
         if 0 < self.n <= 8:  # floats: cheaper than three NumPy calls on a few numbers (the same products)
-            self.scale = max(max([abs(a) * b for a, b in zip(self.q.tolist(), self._rho_list)]), 1e-300)
+            self.scale = max(max(map(mul, map(abs, self.q.tolist()), self._rho_list)), 1e-300)
         else:
             self.scale = max(float(np.max(np.abs(self.q) * self.rho)) if self.k else 0.0, 1e-300)
 
     def with_q(self, q):
         """The same operator with another free velocity (cheap: W's derived data is shared)."""
-        q = np.asarray(q, dtype=float)
+        if type(q) is not np.ndarray or q.dtype.kind != "f":  # (a float array as it is: once per time step)
+            q = np.asarray(q, dtype=float)
         if q.shape != (self.n,):
             raise ValueError(f"q must have shape ({self.n},), got {q.shape}")
         new = object.__new__(type(self))
-        new.__dict__.update(self.__dict__)
+        # attribute by attribute, in the constructor's order: the copy keeps CPython's compact
+        # instance layout (``new.__dict__.update`` would make every later attribute read slower)
+        for name, value in self.__dict__.items():
+            setattr(new, name, value)
         new.q = q
         new._set_scale()
         return new

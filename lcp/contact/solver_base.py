@@ -110,11 +110,15 @@ class OneStepSolver:
     def check_law(self, problem) -> None:
         """TypeError unless ``problem`` is posed in this solver's law."""
         if problem.law != self.law:
-            raise TypeError(f"problem must be a {LAWS[self.law]} (solver '{self.name}' solves the {self.law} law), "
-                            f"got {type(problem).__name__}")
+            self._wrong_law(problem)
+
+    def _wrong_law(self, problem):
+        raise TypeError(f"problem must be a {LAWS[self.law]} (solver '{self.name}' solves the {self.law} law), "
+                        f"got {type(problem).__name__}")
 
     def solve(self, problem) -> StepSolution:
-        self.check_law(problem)
+        if problem.law != self.law:  # (check_law, without a call: solve runs once per time step)
+            self._wrong_law(problem)
         if problem.k == 0:
             return StepSolution(np.zeros(0))
         if not self.applicable(problem):
