@@ -53,7 +53,6 @@ def test_every_subpackage_module_opens_with_a_docstring(mods):
     assert missing == []
 
 
-@pytest.mark.xfail(strict=True, reason="ContactProblem and ConeContactProblem are still being split")
 def test_rooms_fit_in_ones_head(mods):
     big_modules = []
     big_classes = []

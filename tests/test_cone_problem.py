@@ -5,7 +5,7 @@ import scipy.sparse as sp
 from hypothesis import given
 from hypothesis import strategies as st
 
-from lcp.contact import spatial_problem as cone_problem
+from lcp.contact import disk_branches
 from lcp.contact.spatial_problem import ConeContactProblem, cone_layout, local_disk
 from lcp.contact.problem import OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem
 from lcp.contact.law import check_problem, natural_map_error
@@ -240,12 +240,12 @@ def test_residual_paths_agree(dims, seed):
     sparse = ConeContactProblem(sp.csr_matrix(W), q, mu, dims)
     r = dense.residual(p)
     assert sparse.residual(p) == pytest.approx(r, rel=1e-12)
-    saved = cone_problem._RESIDUAL_KERNELS[:]
+    saved = disk_branches.COMPILED_KERNELS[:]
     try:
-        cone_problem._RESIDUAL_KERNELS[:] = [None]
+        disk_branches.COMPILED_KERNELS[:] = [None]
         assert dense.residual(p) == pytest.approx(r, rel=1e-12)
     finally:
-        cone_problem._RESIDUAL_KERNELS[:] = saved
+        disk_branches.COMPILED_KERNELS[:] = saved
 
 
 @given(k=st.integers(1, 10), seed=st.integers(0, 2**32 - 1))
@@ -372,7 +372,7 @@ def test_compiled_refinement_large_sparse():
 
 @given(seed=st.integers(0, 2**32 - 1))
 def test_solve3_matches_lapack(seed):
-    from lcp.contact.spatial_nsgs import _solve3
+    from lcp.contact.kernels import _solve3
 
     rng = np.random.default_rng(seed)
     W = spd(rng, 3, cond=100.0) + rng.normal(size=(3, 3)) * 0.1

@@ -143,6 +143,14 @@ class InterleavedOperator:
         self.rho = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 1.0)
         self.nnz = Wi.nnz
 
+    def fits(self, problem) -> bool:
+        """Whether this operator can be the one of ``problem`` (a warm start kept on its key)."""
+        return self.k == problem.k
+
+    def sweeps(self, q, mu, r0, tol, max_sweeps, compiled=True, rel_scale=0.0):
+        """:func:`nsgs` on this operator."""
+        return nsgs(self, q, mu, r0, tol, max_sweeps, compiled, rel_scale)
+
 
 def nsgs(op: InterleavedOperator, q, mu, r0=None, tol: float = 1e-12, max_sweeps: int = 10000,
          compiled: bool = True, rel_scale: float = 0.0):

@@ -16,195 +16,33 @@ convex QP, because the friction law is non-associated (docs/numerical_methods.md
 
 Each contact's solution is in one of four modes (:data:`OPEN`, :data:`STICK`, :data:`SLIDE_POS`,
 :data:`SLIDE_NEG`); once the modes are known the problem is linear (:meth:`solve_branch`).
+
+This module holds :class:`ContactProblem`: the planar law's residual, checks, contact scales and
+modes. What does not depend on the law is in :mod:`lcp.contact.friction_problem`, the branch
+solves in :mod:`lcp.contact.planar_branches`, the mode codes in :mod:`lcp.contact.modes` and the
+closed forms in :mod:`lcp.contact.planar_closed_form` (their names are re-exported here, where
+they have always been imported from). Imports ``lcp.contact`` modules below it (the compiled
+kernels of :mod:`lcp.contact.nsgs` when first needed) and :mod:`lcp.numerics`; it must not import
+the solvers.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-import enum
 import math
 
 import numpy as np
 from lcp.numerics.lazy import issparse
-from lcp.numerics.lazy import sparse as sp
+from lcp.contact.friction_problem import SPARSE_MIN_SIZE, FrictionContactProblem, stored_operator
 from lcp.contact.law import COUPLING_FLOOR, SCALE_FLOOR
+from lcp.contact.modes import MODE_NAMES, OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, STICK, ContactMode, ModeArray
+from lcp.contact.planar_branches import PlanarBranches
+from lcp.contact.planar_closed_form import CASADI_OPS, NUMPY_OPS, PY_OPS, planar_enum, planar_refine
 
 _EPS = float(np.finfo(float).eps)
 
 __all__ = ["ContactMode", "ModeArray", "OPEN", "STICK", "SLIDE_POS", "SLIDE_NEG", "SLIDE", "MODE_NAMES", "ContactProblem",
            "planar_enum",
            "planar_refine", "PY_OPS", "NUMPY_OPS", "CASADI_OPS", "SPARSE_MIN_SIZE"]
-
-class ContactMode(enum.IntEnum):
-    """Mode of a contact in a step; the values are the integers stored in ``SimulationResult.modes``
-    (so ``mode == 1`` and ``mode == ContactMode.STICK`` agree). INACTIVE (-1) marks a contact that
-    took no part in the step (its gap stayed open)."""
-
-    INACTIVE = -1
-    OPEN = 0
-    STICK = 1
-    SLIDE_POS = 2
-    SLIDE_NEG = 3
-    #: a spatial contact sliding in its tangent plane (direction given by the velocity)
-    SLIDE = 4
-
-
-OPEN, STICK, SLIDE_POS, SLIDE_NEG = ContactMode.OPEN, ContactMode.STICK, ContactMode.SLIDE_POS, ContactMode.SLIDE_NEG
-SLIDE = ContactMode.SLIDE
-#: a scipy.sparse W with at most this many rows is stored dense (2 x 2 blocks gain nothing from sparsity)
-SPARSE_MIN_SIZE = 8
-MODE_NAMES = {OPEN: "open", STICK: "stick", SLIDE_POS: "slide+", SLIDE_NEG: "slide-", SLIDE: "slide"}
-
-
-class ModeArray(np.ndarray):
-    """An int8 array of contact modes that prints the :class:`ContactMode` names.
-
-    It is an ordinary NumPy array otherwise (comparisons with integers or ``ContactMode`` members
-    work as before); ``names`` gives the names as a string array.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from lcp.contact.problem import ModeArray, STICK
-    >>> md = ModeArray.of(np.array([[1, -1], [2, 0]], dtype=np.int8)); md
-    ModeArray([[STICK, INACTIVE],
-               [SLIDE_POS, OPEN]])
-    >>> bool(md[0, 0] == STICK), md.names[1].tolist()
-    (True, ['SLIDE_POS', 'OPEN'])
-    """
-
-    @classmethod
-    def of(cls, modes) -> "ModeArray":
-        return np.asarray(modes, dtype=np.int8).view(cls)
-
-    @property
-    def names(self) -> np.ndarray:
-        """The mode names, same shape."""
-        lut = np.array([m.name for m in sorted(ContactMode)])  # index = value + 1
-        return lut[np.asarray(self, dtype=int) + 1]
-
-    def __array_wrap__(self, obj, context=None, return_scalar=False):
-        # results of arithmetic or comparisons are plain arrays (a bool mask is not a mode)
-        out = np.asarray(obj)
-        return out[()] if return_scalar else out
-
-    def _named(self) -> bool:
-        return self.dtype == np.int8 and bool(np.all((self >= -1) & (self <= 4)))
-
-    def __repr__(self):
-        if not self._named():
-            return np.ndarray.__repr__(np.asarray(self))
-        text = np.array2string(np.asarray(self), separator=", ", prefix="ModeArray(", formatter=_MODE_FORMAT)
-        return f"ModeArray({text})"
-
-    def __str__(self):
-        return np.array2string(np.asarray(self), formatter=_MODE_FORMAT) if self._named() else str(np.asarray(self))
-
-
-_MODE_FORMAT = {"int": lambda x: ContactMode(int(x)).name}
-
-
-class _Ops:
-    """The few operations :func:`planar_enum` needs, for one number type."""
-
-    def __init__(self, where, maximum, minimum):
-        self.where, self.maximum, self.minimum = where, maximum, minimum
-
-
-#: plain Python floats (the per-step solver), NumPy arrays (many scenes at once), CasADi SX (compiled steps)
-PY_OPS = _Ops(lambda c, a, b: a if c else b, max, min)
-NUMPY_OPS = _Ops(np.where, np.maximum, np.minimum)
-
-
-def _casadi_ops():
-    import casadi as ca
-
-    return _Ops(ca.if_else, ca.fmax, ca.fmin)
-
-
-class _LazyCasadiOps:
-    def __getattr__(self, name):
-        ops = _casadi_ops()
-        return getattr(ops, name)
-
-
-CASADI_OPS = _LazyCasadiOps()
-
-
-def planar_enum(W00, W01, W10, W11, qN, qT, mu, ops=PY_OPS, rtol: float = 1e-12):
-    """Closed-form solution of the discrete Coulomb problem of one planar contact.
-
-    u = W p + q with p = (p_N, p_T): the four cases are tried in the order open (p = 0, q_N >= 0),
-    stick (u = 0), slide+ (u_T > 0, p_T = -mu p_N), slide- (u_T < 0, p_T = mu p_N), and the first
-    admissible one is returned. A sliding case whose normal coefficient W_NN -+ mu W_NT is not
-    positive is the Painleve branch and is never admissible with p_N >= 0 pressing.
-
-    Written once for every number type: ``ops`` selects plain floats (:data:`PY_OPS`), NumPy
-    arrays elementwise (:data:`NUMPY_OPS`) or CasADi SX (:data:`CASADI_OPS`, for compiled steps).
-
-    Returns
-    -------
-    pN, pT : impulses (NaN where no case is admissible)
-    mode : OPEN, STICK, SLIDE_POS, SLIDE_NEG, or -1 where no case is admissible
-    n_distinct : number of admissible cases whose impulses differ from the returned one by more
-        than 1e-9 of the problem's scale, plus one (so > 1 flags several solutions)
-    """
-    where, fmax = ops.where, ops.maximum
-    scale = fmax(fmax(abs(qN) / W00, abs(qT) / W11), 1e-300)
-    tol = rtol * scale
-    open_ok = (qN / W00) >= -tol
-    det = W00 * W11 - W01 * W10
-    det_ok = det > 0
-    dets = where(det_ok, det, 1.0)
-    pN_st = (-qN * W11 + qT * W01) / dets
-    pT_st = (-qT * W00 + qN * W10) / dets
-    st_ok = det_ok * (pN_st >= -tol) * (abs(pT_st) <= mu * pN_st + tol)
-    a_p = W00 - mu * W01
-    ok_p = a_p > 0
-    pN_p = -qN / where(ok_p, a_p, 1.0)
-    uT_p = (W10 - mu * W11) * pN_p + qT
-    sp_ok = ok_p * (pN_p >= -tol) * ((uT_p / W11) > -tol)
-    a_m = W00 + mu * W01
-    ok_m = a_m > 0
-    pN_m = -qN / where(ok_m, a_m, 1.0)
-    uT_m = (W10 + mu * W11) * pN_m + qT
-    sm_ok = ok_m * (pN_m >= -tol) * ((uT_m / W11) < tol)
-    nan = float("nan")
-    pN = where(open_ok, 0.0, where(st_ok, pN_st, where(sp_ok, pN_p, where(sm_ok, pN_m, nan))))
-    pT = where(open_ok, 0.0, where(st_ok, pT_st, where(sp_ok, -mu * pN_p, where(sm_ok, mu * pN_m, nan))))
-    mode = where(open_ok, OPEN, where(st_ok, STICK, where(sp_ok, SLIDE_POS, where(sm_ok, SLIDE_NEG, -1))))
-    far = 1e-9 * scale
-
-    def differs(ok, a, b):
-        return ok * ((abs(a - pN) + abs(b - pT)) > far)
-
-    n_distinct = (1 + differs(open_ok, 0.0, 0.0) + differs(st_ok, pN_st, pT_st)
-                  + differs(sp_ok, pN_p, -mu * pN_p) + differs(sm_ok, pN_m, mu * pN_m))
-    return pN, pT, mode, n_distinct
-
-
-def planar_refine(W00, W01, W10, W11, rN, rT, mu, mode, ops=PY_OPS):
-    """One step of iterative refinement of a planar contact solution on its branch.
-
-    Given the local velocity residual (rN, rT) of the post-step velocity (what should be zero:
-    rN for a closed contact, rT for a sticking one), return the impulse correction (dpN, dpT) that
-    cancels it on the same branch (the sliding relation p_T = -+mu p_N is kept). With an
-    ill-conditioned mass matrix the first solve leaves rounding of order cond(W) eps in the
-    velocities, which would let a stuck block creep and a pressed one sink; one refinement
-    removes it. Same number-type genericity as :func:`planar_enum`.
-    """
-    where = ops.where
-    det = W00 * W11 - W01 * W10
-    dets = where(det != 0, det, 1.0)
-    st_N = (-rN * W11 + rT * W01) / dets
-    st_T = (-rT * W00 + rN * W10) / dets
-    a_p = W00 - mu * W01
-    a_m = W00 + mu * W01
-    sp_N = -rN / where(a_p != 0, a_p, 1.0)
-    sm_N = -rN / where(a_m != 0, a_m, 1.0)
-    dpN = where(mode == STICK, st_N, where(mode == SLIDE_POS, sp_N, where(mode == SLIDE_NEG, sm_N, 0.0)))
-    dpT = where(mode == STICK, st_T, where(mode == SLIDE_POS, -mu * sp_N, where(mode == SLIDE_NEG, mu * sm_N, 0.0)))
-    return dpN, dpT
-
 
 _RESIDUAL_KERNELS = []
 
@@ -225,7 +63,7 @@ def _compiled_residual():
 
 
 @dataclass
-class ContactProblem:
+class ContactProblem(FrictionContactProblem, PlanarBranches):
     """The discrete Coulomb problem  u = W p + q  for k planar contacts.
 
     Find p such that, for every contact j, 0 <= p_N,j perp u_N,j >= 0, |p_T,j| <= mu_j p_N,j and
@@ -259,18 +97,15 @@ class ContactProblem:
     mu: np.ndarray
     key: object = None
 
+    law = "planar"
+
     def __post_init__(self, rho=None):
-        if issparse(self.W):
-            # sparse operators stay sparse (memory grows with nnz); tiny ones are cheaper dense
-            self.W = (self.W.toarray().astype(float) if self.W.shape[0] <= SPARSE_MIN_SIZE
-                      else sp.csr_matrix(self.W, dtype=float))
-            if issparse(self.W):
-                self._branch_lus = {}  # modes -> SuperLU of the branch matrix (it depends on W only)
-        else:
-            self.W = np.asarray(self.W, dtype=float)
+        # sparse operators stay sparse (memory grows with nnz); tiny ones are cheaper dense
+        self.W = stored_operator(self.W)
         self.q = np.asarray(self.q, dtype=float)
         self.mu = np.atleast_1d(np.asarray(self.mu, dtype=float))
         self.k = k = self.mu.size
+        self.n = 2 * k
         if self.W.shape != (2 * k, 2 * k) or self.q.shape != (2 * k,):
             raise ValueError(f"W must be ({2 * k}, {2 * k}) and q ({2 * k},) for {k} contacts, "
                              f"got {self.W.shape} and {self.q.shape}")
@@ -279,31 +114,12 @@ class ContactProblem:
             # natural-map weights rho = 1/W_ii make the residual an impulse; guard zero diagonals
             rho = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 1.0)
         self.rho = rho
-        # impulse scale of this problem: the impulse that cancels the free velocity contact by contact
-        self.scale = max(float(np.max(np.abs(self.q) * self.rho)) if k else 0.0, 1e-300)
-
-    def with_q(self, q: np.ndarray) -> "ContactProblem":
-        """The same operator with another free velocity (cheap: W's derived data is reused)."""
-        new = object.__new__(ContactProblem)
-        new.W, new.mu, new.key, new.k, new.rho = self.W, self.mu, self.key, self.k, self.rho
-        new.q = q
-        if "_branch_lus" in self.__dict__:  # sparse W: branch factorizations are shared too
-            new._branch_lus = self._branch_lus
-        if "_absW" in self.__dict__:
-            new._absW = self._absW
-        if self.k == 1:  # floats: cheaper than three NumPy calls on a 2-vector
-            qN, qT = q.tolist()
-            rN, rT = self.rho.tolist()
-            new.scale = max(abs(qN) * rN, abs(qT) * rT, 1e-300)
-        else:
-            new.scale = max(float(np.max(np.abs(q) * self.rho)) if self.k else 0.0, 1e-300)
-        return new
+        self._rho_list = rho.tolist()
+        # W's derived data (branch factorizations, |W|, the sweeps' operator), shared by with_q copies
+        self._cache = {}
+        self._set_scale()
 
     # ----------------------------------------------------------------- the Coulomb law
-    def velocity(self, p: np.ndarray) -> np.ndarray:
-        """Local post-step velocity u = W p + q."""
-        return self.W @ p + self.q
-
     def residual(self, p: np.ndarray) -> float:
         """Coulomb-law residual of p (impulse units), independent of any solver's own flags.
 
@@ -378,9 +194,7 @@ class ContactProblem:
             err = math.hypot(rN - pN, rT - pT)
             scale = max(math.hypot(rN, rT), math.hypot(uN, uT), math.hypot(qN, qT))
             return err / scale if scale > _EPS else err
-        from lcp.contact.law import natural_map_error
-
-        return natural_map_error(self.W, self.q, self.mu, p)
+        return super().error(p)
 
     def contact_scales(self, p: np.ndarray) -> np.ndarray:
         """Impulse scale of each contact: the largest of its impulses in p and of the impulses that
@@ -403,11 +217,6 @@ class ContactProblem:
         ac = COUPLING_FLOOR * self.rho * (self._abs_W() @ ap)
         s = np.maximum(np.maximum(aq, ap), ac)
         return np.maximum(np.maximum(s[:k], s[k:]), SCALE_FLOOR * self.scale)
-
-    def _abs_W(self):
-        if "_absW" not in self.__dict__:
-            self._absW = abs(self.W) if issparse(self.W) else np.abs(self.W)
-        return self._absW
 
     def checks(self, p: np.ndarray) -> tuple[float, float, float]:
         """(:meth:`residual`, :meth:`relative_residual`, :meth:`error`) of p, in one pass over W
@@ -465,212 +274,7 @@ class ContactProblem:
         out[p[:k] <= tol_p] = OPEN
         return out
 
-    # ----------------------------------------------------------------- branches
-    def solve_branch(self, modes) -> np.ndarray | None:
-        """Solve the linear system of one branch (modes per contact); None if it is singular.
+    def _build_operator(self):
+        from lcp.contact.nsgs import InterleavedOperator
 
-        open: p_N = p_T = 0; closed: u_N = 0; stick: u_T = 0; slide+: p_T = -mu p_N;
-        slide-: p_T = +mu p_N. The result satisfies the Coulomb law iff :meth:`admissible`.
-        """
-        k = self.k
-        if k == 1:  # one contact: the closed form, without assembling a 2 x 2 system
-            return self._solve_branch_planar(int(modes[0]))
-        if issparse(self.W):
-            return self._solve_branch_sparse(np.asarray(modes))
-        E, r = self.branch_system(modes)
-        try:
-            p = np.linalg.solve(E, r)
-        except np.linalg.LinAlgError:
-            return None
-        if not np.all(np.isfinite(p)):
-            return None
-        return p
-
-    def branch_system(self, modes) -> tuple[np.ndarray, np.ndarray]:
-        """The linear system E p = r of one branch (see :meth:`solve_branch`); E is singular when
-        the branch's forces are not unique (redundant contacts)."""
-        k = self.k
-        E = np.zeros((2 * k, 2 * k))
-        r = np.zeros(2 * k)
-        for j, md in enumerate(modes):
-            if md == OPEN:
-                E[j, j] = 1.0
-                E[k + j, k + j] = 1.0
-                continue
-            E[j] = self.W[j]
-            r[j] = -self.q[j]
-            if md == STICK:
-                E[k + j] = self.W[k + j]
-                r[k + j] = -self.q[k + j]
-            else:
-                E[k + j, k + j] = 1.0
-                E[k + j, j] = self.mu[j] if md == SLIDE_POS else -self.mu[j]
-        return E, r
-
-    def _solve_branch_sparse(self, modes: np.ndarray) -> np.ndarray | None:
-        return _sparse_branch_solve(self, modes)
-
-    def _solve_branch_planar(self, mode: int) -> np.ndarray | None:
-        (W00, W01), (W10, W11) = self.W.tolist()
-        qN, qT = self.q.tolist()
-        mu = float(self.mu[0])
-        if mode == OPEN:
-            return np.zeros(2)
-        if mode == STICK:
-            det = W00 * W11 - W01 * W10
-            if det == 0.0:
-                return None
-            return np.array([(-qN * W11 + qT * W01) / det, (-qT * W00 + qN * W10) / det])
-        sgn = 1.0 if mode == SLIDE_POS else -1.0
-        a = W00 - sgn * mu * W01
-        if a == 0.0:
-            return None
-        pN = -qN / a
-        return np.array([pN, -sgn * mu * pN])
-
-    def admissible(self, p: np.ndarray, modes, rtol: float = 1e-11) -> bool:
-        """Whether a branch solution p satisfies the inequalities of its modes (within rtol * scale)."""
-        k = self.k
-        # plain floats: this runs once or more per step, on a handful of numbers
-        pl = p.tolist()
-        u = self.velocity(p).tolist()
-        rho, mu = self.rho.tolist(), self.mu.tolist()
-        # contact by contact (contact_scales): a light contact's inequalities are not waved
-        # through on a heavy contact's scale
-        tols = (rtol * self.contact_scales(p)).tolist()
-        for j, md in enumerate(modes):
-            pN, pT = pl[j], pl[k + j]
-            tol = tols[j]
-            if md == OPEN:
-                if u[j] * rho[j] < -tol:
-                    return False
-                continue
-            if pN < -tol:
-                return False
-            uT = u[k + j] * rho[k + j]
-            if md == STICK and abs(pT) > mu[j] * pN + tol:
-                return False
-            if md == SLIDE_POS and uT < -tol:
-                return False
-            if md == SLIDE_NEG and uT > tol:
-                return False
-        return True
-
-    def refine_branch(self, modes, max_changes: int | None = None):
-        """Starting from a guess of the modes, correct them until the branch solution is admissible.
-
-        A primal active-set iteration on the four modes: a closed contact pulling (p_N < 0)
-        opens; an open contact penetrating (u_N < 0) closes; a stick outside the cone slides
-        against its impulse; a slide whose velocity has the wrong sign sticks. Returns
-        (p, modes) or (None, modes) when no admissible branch is reached within ``max_changes``
-        corrections (default 2k + 2) or a cycle appears.
-        """
-        k = self.k
-        modes = np.array(modes, dtype=np.int8)
-        seen = set()
-        for _ in range((2 * k + 2) if max_changes is None else max_changes):
-            key = modes.tobytes()
-            if key in seen:
-                break
-            seen.add(key)
-            p = self.solve_branch(modes)
-            if p is None:
-                break
-            if self.admissible(p, modes):
-                return p, modes
-            u = self.velocity(p)
-            tols = 1e-11 * self.contact_scales(p)
-            new = modes.copy()
-            for j in range(k):
-                pN, pT, uT = p[j], p[k + j], u[k + j] * self.rho[k + j]
-                tol = tols[j]
-                if modes[j] == OPEN:
-                    if u[j] * self.rho[j] < -tol:
-                        new[j] = STICK
-                elif pN < -tol:
-                    new[j] = OPEN
-                elif modes[j] == STICK and abs(pT) > self.mu[j] * pN + tol:
-                    new[j] = SLIDE_POS if pT < 0 else SLIDE_NEG
-                elif (modes[j] == SLIDE_POS and uT < -tol) or (modes[j] == SLIDE_NEG and uT > tol):
-                    new[j] = STICK
-            modes = new
-        return None, modes
-
-    # ----------------------------------------------------------------- LCP form
-    def to_lcp(self) -> tuple[np.ndarray, np.ndarray]:
-        """The equivalent LCP(M, b): 0 <= z perp M z + b >= 0, z = (p_N, beta+, beta-, lambda).
-
-        p_T = beta+ - beta-; the rows are u_N, u_T + lambda, -u_T + lambda, mu p_N - beta+ - beta-
-        (Stewart-Trinkle / Anitescu-Potra form with the two tangent directions +-t).
-        """
-        return _lcp_form(self)
-
-    def from_lcp(self, z: np.ndarray) -> np.ndarray:
-        """Impulses p from an LCP solution z of :meth:`to_lcp`."""
-        k = self.k
-        return np.concatenate([z[:k], z[k:2 * k] - z[2 * k:3 * k]])
-
-
-def _sparse_branch_solve(self, modes: np.ndarray) -> np.ndarray | None:
-    """ContactProblem.solve_branch for a sparse W: the same rows, assembled and factorized sparsely.
-
-    The branch matrix depends on W, mu and the modes only, so its factorization is kept per
-    modes (shared by :meth:`with_q` copies): time stepping refines on the same branch step
-    after step.
-    """
-    from scipy.sparse.linalg import splu
-
-    k, W = self.k, self.W
-    closed = modes != OPEN
-    stick = modes == STICK
-    from_W = np.concatenate([closed, stick])
-    cache = self.__dict__.setdefault("_branch_lus", {})
-    key = modes.astype(np.int8).tobytes()
-    lu = cache.get(key)
-    if lu is None:
-        j = np.arange(k)
-        slide = closed & ~stick
-        # rows taken from W: u_N of closed contacts, u_T of sticking ones; identity rows otherwise
-        eye_rows = np.flatnonzero(~from_W)
-        sj = j[slide]  # p_T + -mu p_N = 0 on sliding contacts: the p_N column of their rows
-        sgn = np.where(modes[slide] == SLIDE_POS, 1.0, -1.0)
-        E = (sp.diags(from_W.astype(float)) @ W
-             + sp.csr_matrix((np.concatenate([np.ones(eye_rows.size), sgn * self.mu[sj]]),
-                              (np.concatenate([eye_rows, k + sj]), np.concatenate([eye_rows, sj]))),
-                             shape=(2 * k, 2 * k))).tocsc()
-        try:
-            lu = splu(E)
-        except RuntimeError:  # exactly singular: the branch's impulses are not unique
-            lu = False
-        if len(cache) > 64:
-            cache.clear()
-        cache[key] = lu
-    if lu is False:
-        return None
-    p = lu.solve(-np.where(from_W, self.q, 0.0))
-    if not np.all(np.isfinite(p)):
-        return None
-    return p
-
-
-def _lcp_form(self) -> tuple[np.ndarray, np.ndarray]:
-    """ContactProblem.to_lcp: the equivalent LCP(M, b): 0 <= z perp M z + b >= 0, z = (p_N, beta+, beta-, lambda).
-
-    p_T = beta+ - beta-; the rows are u_N, u_T + lambda, -u_T + lambda, mu p_N - beta+ - beta-
-    (Stewart-Trinkle / Anitescu-Potra form with the two tangent directions +-t).
-    """
-    k = self.k
-    W = self.W.toarray() if issparse(self.W) else self.W
-    WN, WT = W[:k], W[k:]  # rows of u_N and u_T in p = (p_N, p_T)
-    I = np.eye(k)
-    M = np.zeros((4 * k, 4 * k))
-    M[:k, :k], M[:k, k:2 * k], M[:k, 2 * k:3 * k] = WN[:, :k], WN[:, k:], -WN[:, k:]
-    M[k:2 * k, :k], M[k:2 * k, k:2 * k], M[k:2 * k, 2 * k:3 * k] = WT[:, :k], WT[:, k:], -WT[:, k:]
-    M[2 * k:3 * k, :3 * k] = -M[k:2 * k, :3 * k]
-    M[k:2 * k, 3 * k:] = I
-    M[2 * k:3 * k, 3 * k:] = I
-    M[3 * k:, :k] = np.diag(self.mu)
-    M[3 * k:, k:2 * k] = -I
-    M[3 * k:, 2 * k:3 * k] = -I
-    b = np.concatenate([self.q[:k], self.q[k:], -self.q[k:], np.zeros(k)])
-    return M, b
+        return InterleavedOperator(self.W)

@@ -1,8 +1,12 @@
 """One-step contact solvers, by name: ``"enum"``, ``"lemke"``, ``"osqp"`` (and ``"auto"``).
 
 Each solver takes a :class:`~lcp.contact.problem.ContactProblem` and returns a :class:`StepSolution`.
-The base class owns the bookkeeping (the independent Coulomb residual check, the status); each
-solver implements one method, ``_solve``.
+The interface shared with the disk law's solvers is :mod:`lcp.contact.solver_base` (the base class
+owns the bookkeeping: the independent Coulomb residual check, the status; each solver implements
+one method, ``_solve``); this module registers the planar solvers in its one registry and gives
+:func:`make_solver` for both laws. Imports the planar problem and the methods' modules of
+``lcp.contact`` (the disk law's solvers only when asked for); it must not import anything above
+``lcp.contact``.
 
 - ``"enum"``: closed-form case analysis of a single planar contact (open, stick, slide+, slide-).
 - ``"lemke"``: the exact LCP form (:meth:`ContactProblem.to_lcp`) by Lemke's pivoting method.
@@ -16,7 +20,6 @@ solver implements one method, ``_solve``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 import functools
 
 import numpy as np
@@ -25,117 +28,11 @@ from lcp.numerics.lazy import sparse as sp
 
 from lcp.contact.problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem, planar_enum
 from lcp.contact.lemke import lemke
+from lcp.contact.solver_base import (REGISTRY, IterativeSolver, OneStepSolver, StepSolution, build_solver, register,
+                                     sweep_blocked)
 
 __all__ = ["StepSolution", "OneStepSolver", "EnumSolver", "LemkeSolver", "OsqpSolver", "NsgsSolver",
-           "NewtonSolver", "SOLVERS", "make_solver"]
-
-
-@dataclass
-class StepSolution:
-    """What a one-step solver returns.
-
-    Attributes
-    ----------
-    p : ndarray, shape (2k,)
-        Impulses (p_N, p_T).
-    status : int
-        0 success, < 0 failure (see ``message``).
-    message : str
-    iterations : int
-        Solver iterations (pivots for Lemke, fixed-point iterations for OSQP, cases tried for enum).
-    qp_solves : int
-        OSQP solves (0 for the other solvers).
-    residual : float
-        Coulomb residual :meth:`ContactProblem.residual`, recomputed independently of the solver.
-    ambiguous : bool
-        More than one solution was found (enumeration only): the first admissible case is used.
-    error : float
-        Normalised natural-map error of ``p`` (Siconos's measure,
-        :func:`lcp.contact.law.natural_map_error`), recomputed from (W, q, mu, p) apart from
-        the solver; NaN when ``p`` is not finite.
-    """
-
-    p: np.ndarray
-    status: int = 0
-    message: str = "solved"
-    iterations: int = 0
-    qp_solves: int = 0
-    residual: float = 0.0
-    ambiguous: bool = False
-    error: float = float("nan")
-    #: ContactProblem.checks of ``p`` where the solver computed them already (its stopping test):
-    #: OneStepSolver.solve reuses them instead of a second pass over W
-    _checks: tuple | None = field(default=None, repr=False, compare=False)
-
-    @property
-    def success(self) -> bool:
-        return self.status >= 0
-
-
-class OneStepSolver:
-    """Base class: solve a ContactProblem, then check the Coulomb law independently.
-
-    Parameters
-    ----------
-    residual_tol : float
-        Largest accepted Coulomb residual, relative to the larger of the problem's impulse scale
-        and the largest impulse of the solution.
-
-    Every solution also carries its normalised natural-map error (``StepSolution.error``,
-    Siconos's measure). An exact solver's answer above :attr:`error_target` (``error_tol`` where
-    the solver takes one, else ``residual_tol``) has stopped short by that measure: status -1,
-    with the error in the message. The two measures differ where the problem's impulse scale
-    (``ContactProblem.scale``, the impulse that would cancel each contact's free velocity alone)
-    is far above the impulses of the solution, as with redundant contacts.
-    """
-
-    name = "base"
-    exact = True
-    error_tol: float | None = None
-
-    def __init__(self, residual_tol: float = 1e-10):
-        if not (np.isfinite(residual_tol) and residual_tol > 0):
-            raise ValueError(f"residual_tol must be finite and > 0, got {residual_tol!r}")
-        self.residual_tol = residual_tol
-
-    @property
-    def error_target(self) -> float:
-        """Largest accepted natural-map error: ``error_tol`` when given, else ``residual_tol``."""
-        return self.residual_tol if self.error_tol is None else self.error_tol
-
-    def applicable(self, problem: ContactProblem) -> bool:
-        return True
-
-    def solve(self, problem: ContactProblem) -> StepSolution:
-        if problem.k == 0:
-            return StepSolution(np.zeros(0))
-        if not self.applicable(problem):
-            return StepSolution(np.full(2 * problem.k, np.nan), -3,
-                                f"solver '{self.name}' does not apply to {problem.k} contacts")
-        sol = self._solve(problem)
-        # (the contact-by-contact residual is the iterative solvers' stopping test: an exact
-        # solver's pivoting rounds a contact whose free velocity is 1e-17 of the problem's to zero,
-        # which that test, on the contact's own scale, would call a violation)
-        if sol._checks is None:  # the same p and problem give the same checks: computed once
-            sol._checks = problem.checks(sol.p)
-        res, _, sol.error = sol._checks
-        if sol.success:
-            sol.residual = res
-            # relative to the impulses at hand: an absolute floor would pass any answer to a problem
-            # whose impulses are tiny (a file with |q| ~ 1e-15 once passed with a 38 % error)
-            scale = max(problem.scale, float(np.max(np.abs(sol.p))) if sol.p.size else 0.0, 1e-300)
-            if not np.isfinite(sol.residual) or sol.residual > self.residual_tol * scale:
-                sol.status = -2
-                sol.message = (f"solver '{self.name}' returned an impulse violating the Coulomb law "
-                               f"(residual {sol.residual:.3g})")
-            elif not sol.error <= self.error_target:
-                sol.status = -1
-                sol.message = (f"solver '{self.name}' stopped short: natural-map error {sol.error:.3g} > "
-                               f"{self.error_target:.3g} (Coulomb residual {sol.residual:.3g})")
-        return sol
-
-    def _solve(self, problem: ContactProblem) -> StepSolution:  # pragma: no cover - abstract
-        raise NotImplementedError
+           "NewtonSolver", "AutoSolver", "REGISTRY", "SOLVERS", "make_solver"]
 
 
 class EnumSolver(OneStepSolver):
@@ -372,31 +269,8 @@ class OsqpSolver(OneStepSolver):
         return modes
 
 
-class _Warm:
-    """Per-operator data of the iterative solvers: the contact-by-contact operator and the last
-    impulses (the warm start of the next step with the same W)."""
-
-    def __init__(self, solver, pb):
-        from lcp.contact.nsgs import InterleavedOperator
-
-        key = pb.key if pb.key is not None else None
-        hit = solver._cache.get(key) if key is not None else None
-        if hit is not None and hit[0].k == pb.k:
-            self.op, self.p = hit
-        else:
-            self.op, self.p = InterleavedOperator(pb.W), None
-        self.key = key
-        self.cache = solver._cache
-
-    def store(self, p):
-        if self.key is not None:
-            if len(self.cache) > 64:  # active sets come and go: keep the cache bounded
-                self.cache.clear()
-            self.cache[self.key] = (self.op, p)
-
-
-class _IterativeSolver(OneStepSolver):
-    """Bookkeeping shared by the iterative solvers: warm start, tolerance, the optional error check.
+class PlanarIterativeSolver(IterativeSolver):
+    """The planar iterative solvers' stopping rule: tolerance and the optional error check.
 
     ``residual_tol`` bounds :meth:`ContactProblem.residual` relative to the problem's impulse
     scale (the iterations stop at a tenth of it). The normalised natural-map error
@@ -406,14 +280,13 @@ class _IterativeSolver(OneStepSolver):
     """
 
     def __init__(self, residual_tol: float = 1e-10, error_tol: float | None = None, compiled: bool = True):
-        super().__init__(residual_tol)
+        super().__init__(residual_tol, compiled)
         if error_tol is not None and not (np.isfinite(error_tol) and error_tol > 0):
             raise ValueError(f"error_tol must be finite and > 0, got {error_tol!r}")
-        self.error_tol, self.compiled = error_tol, bool(compiled)
-        self._cache: dict = {}
+        self.error_tol = error_tol
 
     def _solve(self, pb):
-        warm = _Warm(self, pb)
+        warm = self.warm_start(pb)
         # relative to the problem's own impulse scale, so that small-impulse problems (granular
         # files) reach the same normalised error as large ones
         tol = 0.1 * self.residual_tol * pb.scale
@@ -452,7 +325,7 @@ class _IterativeSolver(OneStepSolver):
         raise NotImplementedError
 
 
-class NsgsSolver(_IterativeSolver):
+class NsgsSolver(PlanarIterativeSolver):
     """Nonsmooth Gauss-Seidel with exact closed-form local solves (:mod:`lcp.contact.nsgs`).
 
     Warm-started from the previous step's impulses when the problem's ``key`` recurs.
@@ -462,7 +335,7 @@ class NsgsSolver(_IterativeSolver):
     max_sweeps : int
         Largest number of sweeps; a solve that stops short reports status -1 naming its residual.
     residual_tol, error_tol : float
-        See :class:`_IterativeSolver`.
+        See :class:`PlanarIterativeSolver`.
     compiled : bool
         Use the numba sweeps when installed (False: the plain-Python ones, for tests).
     """
@@ -477,16 +350,11 @@ class NsgsSolver(_IterativeSolver):
         self.max_sweeps = int(max_sweeps)
 
     def _run(self, pb, op, p, tol, rel_scale):
-        from lcp.contact.nsgs import nsgs
-
-        r0 = None if p is None else p[op.perm]
-        r, sweeps, res, _ = nsgs(op, pb.q[op.perm], pb.mu, r0, tol, self.max_sweeps, self.compiled, rel_scale)
-        p = np.empty_like(r)
-        p[op.perm] = r
+        p, sweeps, res = sweep_blocked(op, pb.q[op.perm], pb.mu, p, tol, self.max_sweeps, self.compiled, rel_scale)
         return p, sweeps, res, f"NSGS stopped after {sweeps} sweeps"
 
 
-class NewtonSolver(_IterativeSolver):
+class NewtonSolver(PlanarIterativeSolver):
     """NSGS sweeps, then semismooth Newton (:mod:`lcp.contact.newton`) to rounding level.
 
     Rounds of NSGS sweeps (``sweeps``, doubling each round) and up to ``newton_iter`` Newton
@@ -501,7 +369,7 @@ class NewtonSolver(_IterativeSolver):
         NSGS sweeps before the first Newton phase (0: Newton alone).
     newton_iter, max_rounds : int
     residual_tol, error_tol : float
-        See :class:`_IterativeSolver`.
+        See :class:`PlanarIterativeSolver`.
     """
 
     name = "newton"
@@ -515,7 +383,6 @@ class NewtonSolver(_IterativeSolver):
 
     def _run(self, pb, op, p, tol, rel_scale):
         from lcp.contact.newton import newton_solve
-        from lcp.contact.nsgs import nsgs
 
         # rel_scale > 0: ContactProblem.stop_measure, each contact also on its own scale
         measure = pb.residual if rel_scale == 0 else pb.stop_measure
@@ -543,10 +410,8 @@ class NewtonSolver(_IterativeSolver):
             if self.sweeps:
                 # where Newton stalls (degenerate contacts) NSGS does the work: its share doubles
                 n_sw = self.sweeps * 2 ** min(rnd, 10)
-                r, sw, res_s, _ = nsgs(op, qi, pb.mu, p[op.perm], tol, n_sw, self.compiled, rel_scale)
+                p_s, sw, res_s = sweep_blocked(op, qi, pb.mu, p, tol, n_sw, self.compiled, rel_scale)
                 its += sw
-                p_s = np.empty_like(r)
-                p_s[op.perm] = r
                 if res_s <= res:  # the sweeps' measure is the same
                     p, res = p_s, res_s
                 if res <= tol:
@@ -617,36 +482,34 @@ class AutoSolver(OneStepSolver):
         if error_tol is not None and not natural_map_error(pb.W, pb.q, pb.mu, fin.p) <= error_tol:
             return None
         # the warm start of the next step with this W is the finished impulses, not the stalled ones
-        key = pb.key
-        if key is not None and key in self.iterative._cache:
-            self.iterative._cache[key] = (self.iterative._cache[key][0], fin.p.copy())
+        self.iterative.replace_warm_start(pb.key, fin.p.copy())
         self.core_pivots += 1
         return StepSolution(fin.p, 0, f"core pivot ({fin.core.size} contacts, {fin.pivots} pivots) after: {sol.message}",
                             sol.iterations + fin.pivots)
 
 
-SOLVERS = {"auto": AutoSolver, "enum": EnumSolver, "lemke": LemkeSolver, "osqp": OsqpSolver,
-           "nsgs": NsgsSolver, "newton": NewtonSolver}
+#: the planar law's solvers by name (its view of :data:`lcp.contact.solver_base.REGISTRY`)
+SOLVERS = register(AutoSolver, EnumSolver, LemkeSolver, OsqpSolver, NsgsSolver, NewtonSolver)
 
 
-def make_solver(name: str | OneStepSolver, **options) -> OneStepSolver:
-    """A one-step solver by name (``"auto"``, ``"enum"``, ``"lemke"``, ``"osqp"``, ``"nsgs"``,
-    ``"newton"``) or instance.
+def make_solver(name: str | OneStepSolver, law: str = "planar", **options) -> OneStepSolver:
+    """A one-step solver by name and law, or an instance (returned as it is).
+
+    Planar names: ``"auto"``, ``"enum"``, ``"lemke"``, ``"osqp"``, ``"nsgs"``, ``"newton"``;
+    ``law="disk"`` (the spatial problem, :mod:`lcp.contact.spatial_solvers`): ``"auto"``,
+    ``"local"``, ``"nsgs"``, ``"newton"``, ``"tresca"``, ``"faceted"``. :data:`REGISTRY` says which
+    laws each name handles.
 
     Examples
     --------
     >>> from lcp.contact.solvers import make_solver
     >>> make_solver("lemke").name
     'lemke'
+    >>> make_solver("nsgs", law="disk").law
+    'disk'
     """
-    if isinstance(name, OneStepSolver):
-        if options:
-            raise ValueError("solver_options cannot be given with a solver instance")
-        return name
-    if not isinstance(name, str) or name not in SOLVERS:
-        raise ValueError(f"unknown solver {name!r}; known solvers: {sorted(SOLVERS)}")
-    try:
-        return SOLVERS[name](**options)
-    except TypeError as exc:
-        raise ValueError(f"invalid solver_options for '{name}': {exc}") from exc
+    if law == "disk":
+        # the disk law's solvers register when their module loads (numba with it): only when asked
+        from lcp.contact import spatial_solvers  # noqa: F401
 
+    return build_solver(name, law, **options)

@@ -17,6 +17,12 @@ p_T,1 (d_1 entries), p_T,2, ...); the same for u and q. The contact-by-contact (
 order of FCLib and Siconos, (r_N,1, r_T,1.., r_N,2, ...), is reached by :attr:`perm`.
 
 Solvers are in :mod:`lcp.contact.spatial_solvers`; the exact local solve of one contact is :func:`local_disk`.
+
+This module holds :class:`ConeContactProblem`: the layout, the disk law's residual and modes,
+and :func:`local_disk`. What does not depend on the law is in :mod:`lcp.contact.friction_problem`,
+the linearisations and branch refinement in :mod:`lcp.contact.disk_branches`. Imports
+``lcp.contact`` modules below it (the compiled kernels when first needed) and :mod:`lcp.numerics`;
+it must not import the solvers.
 """
 from __future__ import annotations
 
@@ -26,15 +32,14 @@ import numpy as np
 
 from lcp.numerics.lazy import issparse
 from lcp.numerics.lazy import sparse as sp
-from lcp.contact.problem import OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, SPARSE_MIN_SIZE, STICK
+from lcp.contact.disk_branches import DENSE_JACOBIAN_MAX, DiskBranches, compiled_kernels
+from lcp.contact.friction_problem import FrictionContactProblem, stored_operator
+from lcp.contact.modes import OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, STICK, ModeArray
 
 # the mode codes as plain ints: IntEnum members in NumPy comparisons cost an enum lookup each
 _OPEN, _STICK, _SLIDE_POS, _SLIDE_NEG, _SLIDE = int(OPEN), int(STICK), int(SLIDE_POS), int(SLIDE_NEG), int(SLIDE)
 
-__all__ = ["ConeContactProblem", "cone_layout", "local_disk"]
-
-#: a sparse operator with at most this many rows gets dense Newton/refinement matrices (LAPACK beats SuperLU there)
-DENSE_JACOBIAN_MAX = 96
+__all__ = ["ConeContactProblem", "DENSE_JACOBIAN_MAX", "cone_layout", "local_disk"]
 
 
 def cone_layout(dims) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -63,22 +68,7 @@ def cone_layout(dims) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return toff, start, perm
 
 
-_RESIDUAL_KERNELS: list = []
-
-
-def _kernels():
-    """:mod:`lcp.contact.spatial_nsgs` when numba is installed (compiled residuals), else None."""
-    if not _RESIDUAL_KERNELS:
-        try:
-            from lcp.contact import spatial_nsgs as cone_nsgs
-
-            _RESIDUAL_KERNELS.append(cone_nsgs if cone_nsgs.HAVE_NUMBA else None)
-        except ImportError:  # pragma: no cover
-            _RESIDUAL_KERNELS.append(None)
-    return _RESIDUAL_KERNELS[0]
-
-
-class ConeContactProblem:
+class ConeContactProblem(FrictionContactProblem, DiskBranches):
     """The discrete Coulomb problem u = W p + q for k contacts of tangent dimension 1 or 2.
 
     Parameters
@@ -108,6 +98,8 @@ class ConeContactProblem:
     (0.0, ['SLIDE'])
     """
 
+    law = "disk"
+
     def __init__(self, W, q, mu, dims, key=None):
         mu = np.atleast_1d(np.asarray(mu, dtype=float))
         if mu.ndim != 1:
@@ -124,16 +116,11 @@ class ConeContactProblem:
         self.dims = dims_a.astype(np.int64)
         n = k + int(self.dims.sum())
         self.n = n
+        W = stored_operator(W)
+        if W.shape != (n, n):
+            raise ValueError(f"W must be ({n}, {n}) for dims {self.dims.tolist()}, got {W.shape}")
         if issparse(W):
-            if W.shape != (n, n):
-                raise ValueError(f"W must be ({n}, {n}) for dims {self.dims.tolist()}, got {W.shape}")
-            W = W.toarray().astype(float) if n <= SPARSE_MIN_SIZE else sp.csr_matrix(W, dtype=float)
-            if issparse(W):
-                W.sort_indices()
-        else:
-            W = np.asarray(W, dtype=float)
-            if W.shape != (n, n):
-                raise ValueError(f"W must be ({n}, {n}) for dims {self.dims.tolist()}, got {W.shape}")
+            W.sort_indices()
         data = W.data if issparse(W) else W
         if not np.all(np.isfinite(data)):
             raise ValueError("W must be finite")
@@ -167,24 +154,6 @@ class ConeContactProblem:
         self._rho_list = rho.tolist()
         self._cache: dict = {}
         self._set_scale()
-
-    def _set_scale(self):
-        # impulse scale: the impulse that cancels the free velocity contact by contact
-        if 0 < self.n <= 8:  # floats: cheaper than three NumPy calls on a few numbers (the same products)
-            self.scale = max(max([abs(a) * b for a, b in zip(self.q.tolist(), self._rho_list)]), 1e-300)
-        else:
-            self.scale = max(float(np.max(np.abs(self.q) * self.rho)) if self.k else 0.0, 1e-300)
-
-    def with_q(self, q) -> ConeContactProblem:
-        """The same operator with another free velocity (cheap: W's derived data is shared)."""
-        q = np.asarray(q, dtype=float)
-        if q.shape != (self.n,):
-            raise ValueError(f"q must have shape ({self.n},), got {q.shape}")
-        new = object.__new__(ConeContactProblem)
-        new.__dict__.update(self.__dict__)
-        new.q = q
-        new._set_scale()
-        return new
 
     # ----------------------------------------------------------------- layout
     @property
@@ -237,10 +206,6 @@ class ConeContactProblem:
         return x
 
     # ----------------------------------------------------------------- the Coulomb law
-    def velocity(self, p) -> np.ndarray:
-        """Local post-step velocity u = W p + q."""
-        return self.W @ p + self.q
-
     def residual(self, p) -> float:
         """Coulomb-law residual of p (impulse units), independent of any solver.
 
@@ -252,7 +217,7 @@ class ConeContactProblem:
         if self.k == 0:
             return 0.0
         p = np.asarray(p, dtype=float)
-        ker = _kernels()
+        ker = compiled_kernels()
         if ker is not None and math.isfinite(p.sum()):  # one reduction: NaN/inf propagate into the sum
             if self._sparse:
                 W = self.W
@@ -270,21 +235,13 @@ class ConeContactProblem:
         res = np.maximum(np.abs(rN), np.hypot(rT[:, 0], rT[:, 1]))
         return float(np.max(res)) if np.all(np.isfinite(res)) else float("nan")
 
-    def error(self, p) -> float:
-        """Siconos-normalised natural-map error (:func:`lcp.contact.law.natural_map_error`)."""
-        from lcp.contact.law import natural_map_error
-
-        return natural_map_error(self.W, self.q, self.mu, p, dims=self.dims)
-
     def modes(self, p, rtol: float = 1e-9) -> np.ndarray:
         """Mode of each contact: OPEN, STICK, SLIDE (d = 2) or SLIDE_POS / SLIDE_NEG (d = 1)."""
-        from lcp.contact.problem import ModeArray
-
         return ModeArray.of(self._modes(np.asarray(p, dtype=float), rtol))
 
     def _modes(self, p, rtol: float = 1e-9) -> np.ndarray:
         """:meth:`modes` as a plain int8 array (the codes of :class:`lcp.contact.problem.ContactMode`)."""
-        ker = _kernels()
+        ker = compiled_kernels()
         if ker is not None:
             u = self.W @ p + self.q
             return ker.modes_blocked(p, u, self.dims, self.toff, self.rhoT, self.scale, rtol)
@@ -299,224 +256,11 @@ class ConeContactProblem:
         out[P[:, 0] <= tol] = _OPEN
         return out
 
-    # ----------------------------------------------------------------- linearisations
-    def alart_curnier(self, p):
-        """The Alart-Curnier function Phi(p) (blocked) and its piece's blocks (A, B), J = A + B W.
+    def _build_operator(self):
+        from lcp.contact.spatial_nsgs import ConeOperator
 
-        Phi_N = p_N - max(0, z_N), Phi_T = p_T - proj_D(z_T), z = p - rho u, D the disk of radius
-        mu max(z_N, 0). A and B are (k, 3, 3) per-contact blocks in (N, T0, T1) order.
-        """
-        k = self.k
-        P, U = self._gather(p), self._gather(self.velocity(p))
-        zN = P[:, 0] - self.rhoN * U[:, 0]
-        closed = zN > 0
-        s = self.mu * np.maximum(zN, 0.0)
-        zT = P[:, 1:] - self.rhoT[:, None] * U[:, 1:]
-        nz = np.hypot(zT[:, 0], zT[:, 1])
-        interior = closed & (nz < s)
-        proj_on = ~interior & (nz > 0)
-        nzs = np.where(nz > 0, nz, 1.0)
-        nrm = zT / nzs[:, None]
-        f = np.where(interior, 1.0, np.where(nz > 0, np.minimum(s / nzs, 1.0), 0.0))
-        Phi = np.zeros((k, 3))
-        Phi[:, 0] = P[:, 0] - np.maximum(zN, 0.0)
-        Phi[:, 1:] = P[:, 1:] - zT * f[:, None]
-        eye = np.eye(2)
-        G = np.where(interior[:, None, None], eye,
-                     np.where(proj_on[:, None, None], (s / nzs)[:, None, None]
-                              * (eye - nrm[:, :, None] * nrm[:, None, :]), 0.0))
-        g = nrm * (self.mu * closed * proj_on)[:, None]
-        A = np.zeros((k, 3, 3))
-        B = np.zeros((k, 3, 3))
-        A[:, 0, 0] = np.where(closed, 0.0, 1.0)
-        B[:, 0, 0] = np.where(closed, self.rhoN, 0.0)
-        A[:, 1:, 1:] = eye - G
-        A[:, 1:, 0] = -g
-        B[:, 1:, 1:] = self.rhoT[:, None, None] * G
-        B[:, 1:, 0] = self.rhoN[:, None] * g
-        return self._scatter(Phi), A, B
+        return ConeOperator(self)
 
-    def branch_equations(self, p, modes):
-        """The equations of the branch ``modes`` at p and their Jacobian blocks (F, A, B).
-
-        open: p = 0; closed: u_N = 0; stick: u_T = 0; slide (d = 2): p_T + mu p_N u_T/|u_T| = 0;
-        slide+/- (d = 1): p_T +- mu p_N = 0. Newton on F (J = A + B W) keeps the branch.
-        """
-        k = self.k
-        modes = np.asarray(modes, dtype=np.int64)
-        P, U = self._gather(p), self._gather(self.velocity(p))
-        F = np.zeros((k, 3))
-        A = np.zeros((k, 3, 3))
-        B = np.zeros((k, 3, 3))
-        eye = np.eye(2)
-        op = modes == _OPEN
-        F[op] = P[op]
-        A[op] = np.eye(3)
-        cl = ~op
-        F[cl, 0] = U[cl, 0]
-        B[cl, 0, 0] = 1.0
-        st = modes == _STICK
-        F[st, 1:] = U[st, 1:]
-        B[st, 1:, 1:] = eye
-        sl1 = (modes == _SLIDE_POS) | (modes == _SLIDE_NEG)
-        sgn = np.where(modes == _SLIDE_POS, 1.0, -1.0)
-        F[sl1, 1] = P[sl1, 1] + self.mu[sl1] * P[sl1, 0] * sgn[sl1]
-        A[sl1, 1:, 1:] = eye
-        A[sl1, 1, 0] = self.mu[sl1] * sgn[sl1]
-        sl = modes == _SLIDE
-        if np.any(sl):
-            uT = U[sl, 1:]
-            nu = np.hypot(uT[:, 0], uT[:, 1])
-            nu = np.where(nu > 0, nu, 1.0)
-            nrm = uT / nu[:, None]
-            mu, pN = self.mu[sl], P[sl, 0]
-            F[sl, 1:] = P[sl, 1:] + (mu * pN)[:, None] * nrm
-            A[sl, 1:, 1:] = eye
-            A[sl, 1:, 0] = mu[:, None] * nrm
-            B[sl, 1:, 1:] = (mu * pN / nu)[:, None, None] * (eye - nrm[:, :, None] * nrm[:, None, :])
-        return self._scatter(F), A, B
-
-    def jacobian(self, A, B):
-        """J = A + B W from per-contact blocks: dense ndarray for a dense W, CSC for a sparse one."""
-        R, V = self.R, self._valid
-        if issparse(self.W) and self.n > DENSE_JACOBIAN_MAX:
-            rows, cols, av, bv = [], [], [], []
-            for a in range(3):
-                for b in range(3):
-                    ok = V[:, a] & V[:, b]
-                    rows.append(R[ok, a])
-                    cols.append(R[ok, b])
-                    av.append(A[ok, a, b])
-                    bv.append(B[ok, a, b])
-            rows, cols = np.concatenate(rows), np.concatenate(cols)
-            Am = sp.csr_matrix((np.concatenate(av), (rows, cols)), shape=(self.n, self.n))
-            Bm = sp.csr_matrix((np.concatenate(bv), (rows, cols)), shape=(self.n, self.n))
-            return (Am + Bm @ self.W).tocsc()
-        J = np.zeros((self.n, self.n))
-        W = self._dense_W()
-        for a in range(3):
-            ra = V[:, a]
-            for b in range(3):
-                ok = ra & V[:, b]
-                J[R[ok, a], R[ok, b]] += A[ok, a, b]
-                J[R[ok, a]] += B[ok, a, b][:, None] * W[R[ok, b]]
-        return J
-
-    def newton_system(self, p, jacobian: bool = True):
-        """(Phi, J) of the Alart-Curnier function at p (:meth:`alart_curnier`, :meth:`jacobian`),
-        compiled when numba is installed; J is None with ``jacobian=False`` (a line search needs
-        Phi only)."""
-        ker = _kernels()
-        p = np.asarray(p, dtype=float)
-        if ker is None or not math.isfinite(p.sum()):
-            phi, A, B = self.alart_curnier(p)
-            return phi, (self.jacobian(A, B) if jacobian else None)
-        sparse = self._sparse
-        if sparse:
-            W = self.W
-            u = ker.velocity_csr(W.indptr, W.indices, W.data, self.q, p)
-        else:
-            u = ker.velocity_dense(self.W, self.q, p)
-        if not jacobian:
-            return ker.alart_curnier_phi(u, self.mu, self.dims, self.toff, self.rhoN, self.rhoT, p), None
-        if not sparse or self.n <= DENSE_JACOBIAN_MAX:
-            return ker.alart_curnier_dense(self._dense_W(), u, self.mu, self.dims, self.toff, self.rhoN,
-                                           self.rhoT, p)
-        W = self.W
-        phi, r, c, v = ker.alart_curnier_csr(W.indptr, W.indices, W.data, u, self.mu, self.dims, self.toff,
-                                             self.rhoN, self.rhoT, p)
-        return phi, sp.csc_matrix((v, (r, c)), shape=(self.n, self.n))
-
-    def _dense_W(self) -> np.ndarray:
-        """W as a dense array (kept: small sparse operators factorize faster dense)."""
-        if not self._sparse:
-            return self.W
-        Wd = self._cache.get("dense_W")
-        if Wd is None:
-            Wd = self._cache["dense_W"] = self.W.toarray()
-        return Wd
-
-    def operator(self):
-        """The contact-by-contact operator of the sweeps (:class:`lcp.contact.spatial_nsgs.ConeOperator`),
-        built once and shared by :meth:`with_q` copies."""
-        op = self._cache.get("operator")
-        if op is None:
-            from lcp.contact.spatial_nsgs import ConeOperator
-
-            op = self._cache["operator"] = ConeOperator(self)
-        return op
-
-    def solve_linear(self, J, rhs):
-        """J x = rhs (dense or sparse; a singular dense J gets its least-squares solution); None if
-        no finite solution is found."""
-        try:
-            if issparse(J):
-                from scipy.sparse.linalg import splu
-
-                x = splu(J).solve(rhs)
-            else:
-                x = np.linalg.solve(J, rhs)
-        except (np.linalg.LinAlgError, RuntimeError):
-            x = None
-        if (x is None or not np.all(np.isfinite(x))) and not issparse(J):
-            # redundant contacts make J singular: the least-squares (minimum-norm) step
-            try:
-                x = np.linalg.lstsq(J, rhs, rcond=None)[0]
-            except np.linalg.LinAlgError:
-                return None
-        return x if x is not None and np.all(np.isfinite(x)) else None
-
-    def refine(self, p, iterations: int = 3) -> np.ndarray:
-        """Branch-wise exact correction of a solution p: Newton on the equations of its modes.
-
-        Open contacts get p = 0; sticking ones the linear rows u_N = u_T = 0; sliding ones the
-        sliding equations (:meth:`branch_equations`). Each step is kept only while it lowers the
-        branch equations without raising the Coulomb residual, so a stuck contact's tangential
-        velocity ends at rounding level of W p + q (it does not creep step after step). Returns
-        the corrected impulse (p itself when nothing improves).
-        """
-        return self.refine_modes(p, iterations)[0]
-
-    def refine_modes(self, p, iterations: int = 3) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`refine` and the modes of its result (int8 codes, as :meth:`modes`) in one pass.
-
-        With numba installed and W dense or small (at most :data:`DENSE_JACOBIAN_MAX` rows) the
-        whole refinement is one compiled call; ``iterations = 0`` gives (p, modes of p).
-        """
-        p = np.asarray(p, dtype=float)
-        if self.k == 0:
-            return p, np.zeros(0, dtype=np.int8)
-        if not math.isfinite(p.sum()):
-            return p, self._modes(p)
-        ker = _kernels()
-        if ker is not None and (not self._sparse or self.n <= DENSE_JACOBIAN_MAX):
-            return ker.refine_dense(self._dense_W(), self.q, self.mu, self.dims, self.toff, self.rhoN, self.rhoT,
-                                    self.scale, p, int(iterations), 1e-9)
-        best = self._refine_numpy(p, iterations)
-        return best, self._modes(best)
-
-    def _refine_numpy(self, p, iterations):
-        modes = self._modes(p)
-        r0 = self.residual(p)
-        r_ok = max(r0, 1e-15 * max(self.scale, float(np.max(np.abs(p)))))
-        best = p
-        F, A, B = self.branch_equations(p, modes)
-        f_best = float(np.max(np.abs(F)))
-        x = p
-        for _ in range(iterations):
-            if f_best == 0.0:
-                break
-            dx = self.solve_linear(self.jacobian(A, B), -F)
-            if dx is None:
-                break
-            x = x + dx
-            F, A, B = self.branch_equations(x, modes)
-            fx = float(np.max(np.abs(F)))
-            if not fx < f_best:
-                break
-            if self.residual(x) <= r_ok:
-                best, f_best = x, fx
-        return best
 
 def local_disk(W, q, mu: float, guess=None, compiled: bool = True):
     """Exact solution of one contact's Coulomb problem u = W p + q (W 3 x 3 for a disk, 2 x 2 planar).
@@ -524,7 +268,7 @@ def local_disk(W, q, mu: float, guess=None, compiled: bool = True):
     Cases tried in the order open (q_N >= 0), stick (u = 0 with p in the disk), slide (p_T =
     -mu p_N d, u_N = 0, u_T = lambda d with lambda > 0 and W_NN - mu W_NT.d > 0); the sliding
     direction is found by Newton in its angle, and by all roots of the quartic in exp(i t) when
-    that fails (:mod:`lcp.contact.spatial_nsgs`).
+    that fails (:func:`lcp.contact.kernels.local_disk3`).
 
     Parameters
     ----------
@@ -551,8 +295,7 @@ def local_disk(W, q, mu: float, guess=None, compiled: bool = True):
     >>> p, mode = local_disk(np.eye(3), np.array([-1.0, 0.0, 2.0]), 0.5); p, int(mode)
     (array([ 1. ,  0. , -0.5]), 4)
     """
-    from lcp.contact import spatial_nsgs as cone_nsgs
-    from lcp.contact.nsgs import local_planar
+    from lcp.contact.kernels import local_disk3, local_planar
 
     W = np.asarray(W, dtype=float)
     q = np.asarray(q, dtype=float)
@@ -570,6 +313,6 @@ def local_disk(W, q, mu: float, guess=None, compiled: bool = True):
         pN, pT, mode = fn(W[0, 0], W[0, 1], W[1, 0], W[1, 1], q[0], q[1], mu)
         return np.array([pN, pT]), int(mode)
     g = (0.0, 0.0) if guess is None else tuple(float(x) for x in guess)
-    fn = cone_nsgs.local_disk3 if compiled else getattr(cone_nsgs.local_disk3, "py_func", cone_nsgs.local_disk3)
+    fn = local_disk3 if compiled else getattr(local_disk3, "py_func", local_disk3)
     pN, pT0, pT1, mode, _ = fn(np.ascontiguousarray(W), q[0], q[1], q[2], mu, g[0], g[1])
     return np.array([pN, pT0, pT1]), int(mode)

@@ -1,8 +1,11 @@
 """One-step solvers of the spatial (Coulomb disk) contact problem, by name.
 
 Each solver takes a :class:`~lcp.contact.spatial_problem.ConeContactProblem` and returns a
-:class:`lcp.contact.solvers.StepSolution` (impulses in the blocked order). The base class
-:class:`ConeSolver` owns the bookkeeping of :class:`lcp.contact.solvers.OneStepSolver`: the Coulomb residual
+:class:`lcp.contact.solver_base.StepSolution` (impulses in the blocked order); the solvers are
+registered, law ``"disk"``, in :data:`lcp.contact.solver_base.REGISTRY` (``make_solver(name,
+law="disk")``; :data:`CONE_SOLVERS` and :func:`make_cone_solver` are this law's view). Imports
+``lcp.contact`` modules below it (never :mod:`lcp.contact.solvers`) and :mod:`lcp.numerics`. The
+base class :class:`ConeSolver` owns the bookkeeping of :class:`lcp.contact.solver_base.OneStepSolver`: the Coulomb residual
 (:meth:`ConeContactProblem.residual`) is recomputed independently of the solver and an exact
 solver's answer above ``residual_tol`` (relative to the problem's impulse scale and the largest
 impulse) is rejected with status -2.
@@ -38,10 +41,9 @@ import numpy as np
 
 from lcp.numerics.lazy import issparse
 from lcp.numerics.lazy import sparse as sp
-from lcp.contact.spatial_nsgs import local_disk3
 from lcp.contact.spatial_problem import ConeContactProblem
-from lcp.contact.nsgs import local_planar
-from lcp.contact.solvers import OneStepSolver, StepSolution
+from lcp.contact.kernels import local_disk3, local_planar
+from lcp.contact.solver_base import IterativeSolver, OneStepSolver, StepSolution, build_solver, register, sweep_blocked
 
 __all__ = [
     "CONE_SOLVERS",
@@ -71,43 +73,26 @@ class ConeStepSolution(StepSolution):
 
 
 class ConeSolver(OneStepSolver):
-    """Base class: solve a ConeContactProblem, then check the disk law independently.
+    """Base class of the disk-law solvers: :class:`lcp.contact.solver_base.OneStepSolver` for a
+    :class:`ConeContactProblem` (p in the blocked order).
 
-    The contract of :class:`lcp.contact.solvers.OneStepSolver`: ``solve(problem) -> StepSolution`` with p in
-    the blocked order, status >= 0 success, the residual recomputed from (W, q, mu, p). An inexact
-    solver (``exact = False``, the faceted approximation) reports its residual without rejection.
+    The Coulomb residual (:meth:`ConeContactProblem.residual`) and the natural-map error are
+    recomputed from (W, q, mu, p) for every answer, failures included (NaN for a p that is not
+    finite or not of the problem's size).
     """
 
     name = "cone-base"
+    law = "disk"
     #: solves the disk law (the time stepper picks the fallback among the spatial solvers by this)
     spatial = True
 
-    def solve(self, problem: ConeContactProblem) -> StepSolution:
-        if not isinstance(problem, ConeContactProblem):
-            raise TypeError(f"problem must be a ConeContactProblem, got {type(problem).__name__}")
-        if problem.k == 0:
-            return StepSolution(np.zeros(0))
-        if not self.applicable(problem):
-            return StepSolution(np.full(problem.n, np.nan), -3,
-                                f"solver '{self.name}' does not apply to {problem.k} contacts")
-        sol = self._solve(problem)
+    def _record_checks(self, problem, sol):
         p = sol.p
         if p.shape == (problem.n,) and math.isfinite(p.sum()):  # NaN/inf propagate into the sum
             sol.residual = problem.residual(p)
             sol.error = problem.error(p)
         else:
             sol.residual = sol.error = float("nan")
-        if sol.success and self.exact:
-            scale = max(problem.scale, float(np.abs(p).max()) if p.size else 0.0, 1e-300)
-            if not np.isfinite(sol.residual) or sol.residual > self.residual_tol * scale:
-                sol.status = -2
-                sol.message = (f"solver '{self.name}' returned an impulse violating the Coulomb law "
-                               f"(residual {sol.residual:.3g})")
-            elif not sol.error <= self.error_target:
-                sol.status = -1
-                sol.message = (f"solver '{self.name}' stopped short: natural-map error {sol.error:.3g} > "
-                               f"{self.error_target:.3g} (Coulomb residual {sol.residual:.3g})")
-        return sol
 
 
 # ----------------------------------------------------------------- local
@@ -148,55 +133,25 @@ class LocalSolver(ConeSolver):
 
 
 # ----------------------------------------------------------------- NSGS
-class _Warm:
-    """The contact-by-contact operator and the last impulses of an operator (keyed problems)."""
-
-    def __init__(self, solver, pb):
-        hit = solver._cache.get(pb.key) if pb.key is not None else None
-        if hit is not None and hit[0].n == pb.n and np.array_equal(hit[0].dims, pb.dims):
-            self.op, self.p = hit
-        else:
-            self.op, self.p = pb.operator(), None
-        self.key, self.cache = pb.key, solver._cache
-
-    def store(self, p):
-        if self.key is not None and np.all(np.isfinite(p)):
-            if len(self.cache) > 64:  # active sets come and go: keep the cache bounded
-                self.cache.clear()
-            self.cache[self.key] = (self.op, p)
-
-
-def _nsgs_run(pb, op, p, tol, sweeps, compiled):
-    """``sweeps`` NSGS sweeps from p (blocked): (p, sweeps done, residual)."""
-    from lcp.contact.spatial_nsgs import cone_nsgs
-
-    r0 = None if p is None else p[op.perm]
-    r, n, res, _ = cone_nsgs(op, pb.q[op.perm], pb.mu, r0, tol, sweeps, compiled)
-    out = np.empty_like(r)
-    out[op.perm] = r
-    return out, n, res
-
-
-class _Iterative(ConeSolver):
-    """Shared options of the iterative solvers: tolerance, warm start, final branch refinement."""
+class ConeIterativeSolver(IterativeSolver, ConeSolver):
+    """The disk law's iterative solvers: warm start, tolerance, final branch refinement."""
 
     def __init__(self, residual_tol: float = 1e-10, compiled: bool = True, polish: bool = True):
-        super().__init__(residual_tol)
-        self.compiled, self.polish = bool(compiled), bool(polish)
-        self._cache: dict = {}
+        super().__init__(residual_tol, compiled)
+        self.polish = bool(polish)
 
     def _finish(self, pb, p, its, res, tol, msg, warm=None):
         md = None
         if self.polish and res <= tol:
             p, md = pb.refine_modes(p)
-        if warm is not None:
+        if warm is not None and np.all(np.isfinite(p)):
             warm.store(p)
         if not res <= tol:
             return ConeStepSolution(p, -1, f"{self.name}: {msg}; residual {res:.3g} > tolerance {tol:.3g}", its)
         return ConeStepSolution(p, 0, "solved", its, modes=md)
 
 
-class ConeNsgsSolver(_Iterative):
+class ConeNsgsSolver(ConeIterativeSolver):
     """Nonsmooth Gauss-Seidel with exact local disk/planar solves (:mod:`lcp.contact.spatial_nsgs`).
 
     Parameters
@@ -220,9 +175,9 @@ class ConeNsgsSolver(_Iterative):
         self.max_sweeps = int(max_sweeps)
 
     def _solve(self, pb):
-        warm = _Warm(self, pb)
+        warm = self.warm_start(pb)
         tol = 0.1 * self.residual_tol * pb.scale
-        p, n, res = _nsgs_run(pb, warm.op, warm.p, tol, self.max_sweeps, self.compiled)
+        p, n, res = sweep_blocked(warm.op, pb.q[warm.op.perm], pb.mu, warm.p, tol, self.max_sweeps, self.compiled)
         return self._finish(pb, p, n, res, tol, f"NSGS stopped after {n} sweeps", warm)
 
 
@@ -278,7 +233,7 @@ def cone_newton(pb: ConeContactProblem, p0, tol: float, max_iter: int = 50, max_
     return p, max_iter, res, f"no convergence in {max_iter} Newton iterations (residual {res:.3g})"
 
 
-class ConeNewtonSolver(_Iterative):
+class ConeNewtonSolver(ConeIterativeSolver):
     """NSGS sweeps, then semismooth Newton (:func:`cone_newton`) to rounding level.
 
     Rounds of ``sweeps`` NSGS sweeps (doubling each round) and up to ``newton_iter`` Newton
@@ -305,7 +260,7 @@ class ConeNewtonSolver(_Iterative):
         self.sweeps, self.newton_iter, self.max_rounds = int(sweeps), int(newton_iter), int(max_rounds)
 
     def _solve(self, pb):
-        warm = _Warm(self, pb)
+        warm = self.warm_start(pb)
         # Newton converges to rounding once on the right piece: aim at the round-off floor
         tol = 0.1 * self.residual_tol * pb.scale
         p = np.zeros(pb.n) if warm.p is None else warm.p.copy()
@@ -315,7 +270,8 @@ class ConeNewtonSolver(_Iterative):
             if res <= tol:
                 break
             if self.sweeps:
-                p_s, n, res_s = _nsgs_run(pb, warm.op, p, tol, self.sweeps * 2 ** min(rnd, 10), self.compiled)
+                p_s, n, res_s = sweep_blocked(warm.op, pb.q[warm.op.perm], pb.mu, p, tol,
+                                              self.sweeps * 2 ** min(rnd, 10), self.compiled)
                 its += n
                 if res_s <= res:
                     p, res = p_s, res_s
@@ -594,8 +550,7 @@ class ConeAutoSolver(ConeSolver):
 
     def solve(self, problem: ConeContactProblem) -> StepSolution:
         # the chosen solver (and every fallback) checks its own answer with the same tolerance
-        if not isinstance(problem, ConeContactProblem):
-            raise TypeError(f"problem must be a ConeContactProblem, got {type(problem).__name__}")
+        self.check_law(problem)
         if problem.k == 0:
             return StepSolution(np.zeros(0))
         return self._solve(problem)
@@ -622,13 +577,14 @@ class ConeAutoSolver(ConeSolver):
         return sol
 
 
-CONE_SOLVERS = {"auto": ConeAutoSolver, "local": LocalSolver, "nsgs": ConeNsgsSolver, "newton": ConeNewtonSolver,
-                "tresca": TrescaSolver, "faceted": FacetedSolver}
+#: the disk law's solvers by name (its view of :data:`lcp.contact.solver_base.REGISTRY`)
+CONE_SOLVERS = register(ConeAutoSolver, LocalSolver, ConeNsgsSolver, ConeNewtonSolver, TrescaSolver, FacetedSolver)
 
 
 def make_cone_solver(name: str | ConeSolver, **options) -> ConeSolver:
     """A spatial one-step solver by name (``"auto"``, ``"local"``, ``"nsgs"``, ``"newton"``,
-    ``"tresca"``, ``"faceted"``) or instance.
+    ``"tresca"``, ``"faceted"``) or instance: :func:`lcp.contact.solvers.make_solver` with
+    ``law="disk"``.
 
     Examples
     --------
@@ -639,14 +595,4 @@ def make_cone_solver(name: str | ConeSolver, **options) -> ConeSolver:
     >>> sol = make_cone_solver("auto").solve(pb); sol.p, sol.status
     (array([ 1. ,  0. , -0.5]), 0)
     """
-    if isinstance(name, ConeSolver):
-        if options:
-            raise ValueError("solver options cannot be given with a solver instance")
-        return name
-    if not isinstance(name, str) or name not in CONE_SOLVERS:
-        raise ValueError(f"unknown cone solver {name!r}; known: {sorted(CONE_SOLVERS)}")
-    try:
-        return CONE_SOLVERS[name](**options)
-    except TypeError as exc:
-        raise ValueError(f"invalid options for cone solver '{name}': {exc}") from exc
-
+    return build_solver(name, "disk", **options)
