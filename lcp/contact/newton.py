@@ -19,7 +19,7 @@ import numpy as np
 from lcp.numerics.lazy import issparse
 from lcp.numerics.lazy import sparse as sp
 
-__all__ = ["alart_curnier", "newton_solve"]
+__all__ = ["armijo", "alart_curnier", "newton_solve"]
 
 
 def alart_curnier(W, q, mu, rho, p):
@@ -100,18 +100,10 @@ def newton_solve(W, q, mu, rho, p0, tol: float, max_iter: int = 50, residual=Non
                 return p, it, res, f"singular Newton matrix at iteration {it}: {exc}"
         if not np.all(np.isfinite(d)):
             return p, it, res, f"non-finite Newton direction at iteration {it}"
-        t = 1.0
-        for _ in range(40):
-            p_new = p + t * d
-            phi_new, _, closed_n, stick_n, sgn_n = alart_curnier(W, q, mu, rho, p_new)
-            m_new = float(phi_new @ phi_new)
-            if m_new <= (1 - 1e-4 * t) * merit or m_new == 0.0:
-                break
-            t *= 0.5
-        else:
+        step = armijo(lambda x: alart_curnier(W, q, mu, rho, x), p, d, merit)
+        if step is None:
             return p, it, res, f"line search failed at iteration {it} (merit {merit:.3g})"
-        p, phi, merit = p_new, phi_new, m_new
-        closed, stick, sgn = closed_n, stick_n, sgn_n
+        t, p, merit, (phi, _, closed, stick, sgn) = step
         res = resid(p)
         if res <= tol:
             return p, it, res, "converged"
@@ -121,3 +113,23 @@ def newton_solve(W, q, mu, rho, p0, tol: float, max_iter: int = 50, residual=Non
         if damped >= max_damped:
             return p, it, res, f"{damped} damped steps in a row at iteration {it} (residual {res:.3g})"
     return p, max_iter, res, f"no convergence in {max_iter} Newton iterations (residual {res:.3g})"
+
+
+def armijo(evaluate, p, d, merit):
+    """Backtracking (Armijo) line search on the merit |Phi|^2 along the Newton direction d.
+
+    ``evaluate(x)`` returns a tuple whose first member is Phi(x). Steps 1, 1/2, 1/4, ... (40 at
+    most) until the merit falls by the Armijo fraction 1e-4 t, or reaches zero. Returns
+    (t, p + t d, its merit, evaluate's tuple there), or None when no step is accepted. Shared by
+    the planar and the disk law's Newton iterations.
+    """
+    t = 1.0
+    for _ in range(40):
+        p_new = p + t * d
+        out = evaluate(p_new)
+        phi_new = out[0]
+        m_new = float(phi_new @ phi_new)
+        if m_new <= (1 - 1e-4 * t) * merit or m_new == 0.0:
+            return t, p_new, m_new, out
+        t *= 0.5
+    return None

@@ -43,6 +43,7 @@ from lcp.numerics.lazy import issparse
 from lcp.numerics.lazy import sparse as sp
 from lcp.contact.spatial_problem import ConeContactProblem
 from lcp.contact.kernels import local_disk3, local_planar
+from lcp.contact.newton import armijo
 from lcp.contact.solver_base import IterativeSolver, OneStepSolver, StepSolution, build_solver, register, sweep_blocked
 
 __all__ = [
@@ -213,17 +214,12 @@ def cone_newton(pb: ConeContactProblem, p0, tol: float, max_iter: int = 50, max_
             d = pb.solve_linear(J, -phi)
             if d is None:
                 return p, it, res, f"singular Newton matrix at iteration {it}"
-        t = 1.0
-        for _ in range(40):
-            p_new = p + t * d
-            phi_new = pb.newton_system(p_new, jacobian=False)[0]  # the line search needs Phi only
-            m_new = float(phi_new @ phi_new)
-            if m_new <= (1 - 1e-4 * t) * merit or m_new == 0.0:
-                break
-            t *= 0.5
-        else:
+        # the line search needs Phi only
+        step = armijo(lambda x: pb.newton_system(x, jacobian=False), p, d, merit)
+        if step is None:
             return p, it, res, f"line search failed at iteration {it} (merit {merit:.3g})"
-        p, phi, merit, J = p_new, phi_new, m_new, None
+        t, p, merit, (phi, *_) = step
+        J = None
         res = pb.residual(p)
         if res <= tol:
             return p, it, res, "converged"
