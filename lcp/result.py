@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["STATUS_MESSAGES", "SolverStats", "StepImpulses", "Impact", "SimulationResult"]
+__all__ = ["flag_unresolvable", "STATUS_MESSAGES", "SolverStats", "StepImpulses", "Impact", "SimulationResult"]
 
 #: status code -> meaning; success is ``status >= 0``.
 STATUS_MESSAGES = {
@@ -15,6 +15,7 @@ STATUS_MESSAGES = {
     -3: "No consistent contact mode exists (Painleve inconsistency).",
     -4: "Too many events (Zeno behaviour or chattering between contact modes).",
     -5: "The position projection did not converge.",
+    -6: "The motion cannot be resolved in double precision (ill-conditioned mass matrix).",
 }
 
 
@@ -168,3 +169,12 @@ class SimulationResult(StepImpulses):
     def __repr__(self) -> str:
         return (f"SimulationResult(method={self.method!r}, solver={self.solver!r}, h={self.h:g}, "
                 f"steps={self.stats.steps}, status={self.status}, message={self.message!r})")
+
+
+def flag_unresolvable(res: SimulationResult, reason: str) -> SimulationResult:
+    """A run whose mass matrix is beyond double precision's reach (``lcp.model.conditioning``)
+    ends with status -6 and the reason, the trajectory kept for inspection: never a silent success."""
+    if reason and res.status == 0:
+        res.status = -6
+        res.message = f"{STATUS_MESSAGES[-6]} {reason}"
+    return res

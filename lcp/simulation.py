@@ -9,10 +9,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from lcp.events import event_driven
-from lcp.result import SimulationResult
+from lcp.model.conditioning import EVENT_LIMIT, mass_condition, resolvable
+from lcp.result import SimulationResult, flag_unresolvable
 from lcp.scenes.scene import Scene
 from lcp.model.system import System
-from lcp.timestepping.moreau_jean import MoreauJeanOptions, moreau_jean, moreau_jean_from_model
+from lcp.timestepping.moreau_jean import MoreauJeanOptions, model_condition, moreau_jean, moreau_jean_from_model
 
 if TYPE_CHECKING:  # annotations only: importing these here would load them with every simulate
     from lcp.events import EventResult
@@ -135,8 +136,11 @@ def simulate(scene: Scene | System, t_end: float | None = None, h: float = 1e-3,
         if method_options:
             raise ValueError(f"unknown options for method 'moreau-jean': {sorted(method_options)}")
         return moreau_jean(system, q0, v0, float(t_end), opts)
-    return METHODS[method](system, q0, v0, float(t_end), scene=scene if isinstance(scene, Scene) else None,
-                           **method_options)
+    res = METHODS[method](system, q0, v0, float(t_end), scene=scene if isinstance(scene, Scene) else None,
+                          **method_options)
+    if method == "event":  # Moreau-Jean flags its own runs (lcp.timestepping.moreau_jean)
+        res = flag_unresolvable(res, resolvable(mass_condition(system, np.asarray(q0, dtype=float)), EVENT_LIMIT))
+    return res
 
 
 def _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, solver_options, fallback,
@@ -160,7 +164,8 @@ def _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, 
     if method == "event":
         from lcp.events.single_contact import run_with_options
 
-        return run_with_options(model, q0, v0, float(t_end), method_options)
+        res = run_with_options(model, q0, v0, float(t_end), method_options)
+        return flag_unresolvable(res, resolvable(model_condition(model), EVENT_LIMIT))
     if method_options:
         raise ValueError(f"unknown options for method 'moreau-jean': {sorted(method_options)}")
     if h > t_end and not allow_large_step:

@@ -27,17 +27,20 @@ run only where there is none.
 """
 from __future__ import annotations
 
+import weakref
+
 from dataclasses import dataclass
 
 import numpy as np
 
+from lcp.model.conditioning import MOREAU_JEAN_LIMIT, mass_condition, reduced_condition, resolvable
 from lcp.timestepping import compiled_step as compiled
 from lcp.timestepping.activation import CLOSE_ULPS, OPEN_ULPS
 from lcp.timestepping.assembly import StepAssembly
 from lcp.timestepping.outcome import compiled_step_result
 from lcp.timestepping.projection import PositionProjection, needs_projection
 from lcp.timestepping.python_loop import run_python_loop
-from lcp.result import SimulationResult
+from lcp.result import SimulationResult, flag_unresolvable
 from lcp.contact.solvers import SOLVERS, OneStepSolver, make_solver
 
 __all__ = ["CLOSE_ULPS", "OPEN_ULPS", "MoreauJeanOptions", "moreau_jean", "moreau_jean_from_model"]
@@ -152,6 +155,7 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     if not (isinstance(t_end, (int, float, np.floating)) and np.isfinite(t_end) and t_end > 0):
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
     q0, v0 = system.check_state(q0, v0)
+    unresolvable = resolvable(mass_condition(system, q0), MOREAU_JEAN_LIMIT)
     h, th = float(options.h), float(options.theta)
     spatial = system.is_spatial
     solver = _spatial_solver(options) if spatial else make_solver(options.solver, **(options.solver_options or {}))
@@ -164,14 +168,18 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     proj = _projector(system, options)
     # the path, chosen once: the compiled paths only where nothing needs Python per step
     if options.fast and proj is None and solver.name in ("auto", "enum") and compiled.applicable(system):
-        return run_compiled_step(asm, q0, v0, n_steps, every, solver.name)
+        return flag_unresolvable(run_compiled_step(asm, q0, v0, n_steps, every, solver.name), unresolvable)
     if options.fast and proj is None and not spatial and system.n_contacts >= 2 and system.is_constant:
         # imported here: numba loads only where the compiled loop may run
         from lcp.timestepping import compiled_loop
 
         if compiled_loop.applicable(asm, solver, options):
-            return compiled_loop.moreau_jean_loop(asm, q0, v0, n_steps, every, solver, options.fallback)
-    return run_python_loop(system, asm, q0, v0, h, th, n_steps, every, solver, options.fallback, proj)
+            res = compiled_loop.moreau_jean_loop(asm, q0, v0, n_steps, every, solver, options.fallback)
+            return flag_unresolvable(res, unresolvable)
+    res = run_python_loop(system, asm, q0, v0, h, th, n_steps, every, solver, options.fallback, proj)
+    return flag_unresolvable(res, unresolvable)
+
+
 
 
 def _n_steps(t_end, h) -> int:
@@ -204,8 +212,21 @@ def moreau_jean_from_model(model, q0, v0, t_end: float, options: MoreauJeanOptio
     h, th = float(options.h), float(options.theta)
     n_steps = _n_steps(t_end, h)
     solver = options.solver if isinstance(options.solver, str) else options.solver.name
-    return run_compiled_step(NumericAssembly(model, h, th), q0, v0, n_steps, int(options.save_every), solver,
-                             contact_name=model.contact_names[0], violation=lambda Q, t: model.violation(Q))
+    res = run_compiled_step(NumericAssembly(model, h, th), q0, v0, n_steps, int(options.save_every), solver,
+                            contact_name=model.contact_names[0], violation=lambda Q, t: model.violation(Q))
+    return flag_unresolvable(res, resolvable(model_condition(model), MOREAU_JEAN_LIMIT))
+
+
+#: constant model -> the condition number of its mass matrix (a sweep's parameter sets build new models)
+_MODEL_CONDITION = weakref.WeakKeyDictionary()
+
+
+def model_condition(model) -> float:
+    """:func:`lcp.model.conditioning.reduced_condition` of a constant model, kept per model."""
+    kappa = _MODEL_CONDITION.get(model)
+    if kappa is None:
+        kappa = _MODEL_CONDITION[model] = reduced_condition(model.A, model.G)
+    return kappa
 
 
 def run_compiled_step(asm, q0, v0, n_steps, every, solver_name, contact_name=None, violation=None) -> SimulationResult:
