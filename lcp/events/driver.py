@@ -95,9 +95,12 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
         return spatial_event_driven(system, q0, v0, t_end, opts, frozenset(options), scene)
     q0, v0 = check_state(system, q0, v0)
     t_out = opts.output_times(t_end)
-    integ = Integrator(system, q0, v0, t_end, opts)
-    integ.model.state_checked = integ.model.constant  # the mass matrix is the same at every state
-    integ.check_initial(q0, v0)
+    try:
+        integ = Integrator(system, q0, v0, t_end, opts)
+        integ.model.state_checked = integ.model.constant  # the mass matrix is the same at every state
+        integ.check_initial(q0, v0)
+    except FloatingPointError as exc:  # the start itself: bad input, named
+        raise ValueError(f"the initial state cannot be integrated: {exc}") from None
     phases, status, message, t_fail = integ.run(q0, v0)
     n, m = system.n, system.n_contacts
     for note in integ.notes:

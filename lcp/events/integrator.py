@@ -237,6 +237,9 @@ class Integrator:
             except Inconsistent as exc:
                 status, message = -3, f"{EVENT_STATUS_MESSAGES[-3]} {exc}"
                 break
+            except FloatingPointError as exc:  # a force that is not finite at this state, named
+                status, message = -2, f"{EVENT_STATUS_MESSAGES[-2]} At t = {t:.10g}: {exc}."
+                break
             if last is not None and last[1] == "impact":
                 jump = self.watch_bounces(t, q, v, P, closed, sol, last[0])
                 if jump is not None:

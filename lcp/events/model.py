@@ -190,6 +190,9 @@ class SystemModel(ContactKinematics):
             return d
         n, m, nb = self.n, self.m, self.sys.n_bilateral
         A, F, G, zeta, H, Hdv, gap = (np.array(x, dtype=float) for x in self.fn(t, q, v))
+        if not all_finite(F.ravel()):
+            bad = [self.sys.names[i] for i in np.flatnonzero(~np.isfinite(F.ravel()))]
+            raise FloatingPointError(f"the force F(t, q, v) is not finite at t = {t:.10g} (coordinates {bad})")
         return StateData(A.reshape(n, n), F.ravel(), G.reshape(nb, n), zeta.ravel(), H.reshape(2 * m, n),
                      Hdv.ravel(), gap.ravel())
 

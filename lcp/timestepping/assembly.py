@@ -233,10 +233,22 @@ class StepAssembly:
         out = one_step_fn(self.sys)(t, q, v, self.h, self.theta)
         vfree, S, T, SHt, W, gap, H = (np.array(x, dtype=float) for x in out)
         if not (np.all(np.isfinite(S)) and np.all(np.isfinite(vfree))):
-            raise FloatingPointError("singular iteration matrix: the mass matrix is singular on the "
-                                     "constraint manifold")
+            raise FloatingPointError(self._nonfinite_cause(t, q, v, S))
         return (vfree.ravel(), S.reshape(n, n), T.reshape(n, -1), SHt.reshape(n, r),
                 W.reshape(r, r), gap.ravel(), H.reshape(r, n))
+
+    def _nonfinite_cause(self, t, q, v, S) -> str:
+        """What made a step's data non-finite, named: the forces (at t or t + h), their Jacobians,
+        or the iteration matrix (a mass matrix singular on the constraint manifold)."""
+        sys_, h = self.sys, self.h
+        for tt in (t, t + h):
+            F = np.array(sys_.force_fn(tt, q, v), dtype=float).ravel()
+            if not np.all(np.isfinite(F)):
+                bad = [sys_.names[i] for i in np.flatnonzero(~np.isfinite(F))]
+                return f"the force F(t, q, v) is not finite at t = {tt:.10g} (coordinates {bad})"
+        if np.all(np.isfinite(S)):
+            return "the force's Jacobians dF/dq, dF/dv or the constraints' time derivative are not finite"
+        return "singular iteration matrix: the mass matrix is singular on the constraint manifold"
 
     def at(self, t, q, v):
         """(v_free - v, SHt, W, gap, H) at the start of a step from (t, q, v)."""
