@@ -34,7 +34,10 @@ __all__ = ["Contact", "System"]
 def _finite_nonneg(name: str, value) -> float:
     if isinstance(value, (str, bytes)) or np.ndim(value) != 0:  # float("0.3") would pass a typo'd string through
         raise ValueError(f"{name} must be a number, got {value!r}")
-    value = float(value)
+    try:
+        value = float(value)
+    except (TypeError, ValueError):  # None, objects
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
     if not np.isfinite(value):
         raise ValueError(f"{name} must be finite, got {value!r}")
     if value < 0:

@@ -106,6 +106,9 @@ class MoreauJeanOptions:
             raise ValueError(f"solver must be a solver name or a OneStepSolver, got {self.solver!r}")
         if self.solver_options is not None and not isinstance(self.solver_options, dict):
             raise ValueError(f"solver_options must be a dict, got {self.solver_options!r}")
+        for name in ("fallback", "fast"):  # "no" is truthy: only a real bool says what the user meant
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if not (self.projection is True or self.projection is False or self.projection == "auto"):
             raise ValueError(f"projection must be True, False or 'auto', got {self.projection!r}")
         tol = self.projection_tol
