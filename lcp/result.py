@@ -16,6 +16,7 @@ STATUS_MESSAGES = {
     -4: "Too many events (Zeno behaviour or chattering between contact modes).",
     -5: "The position projection did not converge.",
     -6: "The motion cannot be resolved in double precision (ill-conditioned mass matrix).",
+    -7: "A step was rejected: the forces vary faster than the step resolves.",
 }
 
 

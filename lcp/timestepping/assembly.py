@@ -8,11 +8,12 @@ import weakref
 
 import casadi as ca
 import numpy as np
+from lcp.timestepping.force_check import ForceStepCheck, nonfinite_cause
 from lcp.numerics.lazy import sparse as sp
 from lcp.numerics.block_diagonal import block_inverse
 from lcp.numerics.casadi_eval import evaluate_into
 
-__all__ = ["StepAssembly", "kahan_add", "SPARSE_MIN_CONTACT_ROWS", "SPARSE_DROP_TOL"]
+__all__ = ["StepAssembly", "kahan_add", "one_step_fn", "SPARSE_MIN_CONTACT_ROWS", "SPARSE_DROP_TOL"]
 
 #: constant systems with at least this many contact rows (2 per contact) are assembled sparsely
 SPARSE_MIN_CONTACT_ROWS = 200
@@ -69,6 +70,10 @@ class StepAssembly:
         # forces are evaluated per step and nothing else is rebuilt
         self.matrices_constant = (system.mass_is_constant and system.kinematics_is_constant
                                   and system.force_is_affine)
+        # forces not affine in (q, v): each step's linearisation is checked at the next
+        # (lcp.timestepping.force_check); a control schedule's forces are integrated exactly instead
+        self.force_check = (ForceStepCheck(system, h) if not system.force_is_affine and self.schedule is None
+                            else None)
         # many contacts, no bilateral constraints: assemble sparsely (memory grows with nnz(W))
         self.sparse = (self.matrices_constant and self.rows >= SPARSE_MIN_CONTACT_ROWS
                        and system.n_bilateral == 0)
@@ -233,22 +238,9 @@ class StepAssembly:
         out = one_step_fn(self.sys)(t, q, v, self.h, self.theta)
         vfree, S, T, SHt, W, gap, H = (np.array(x, dtype=float) for x in out)
         if not (np.all(np.isfinite(S)) and np.all(np.isfinite(vfree))):
-            raise FloatingPointError(self._nonfinite_cause(t, q, v, S))
+            raise FloatingPointError(nonfinite_cause(self.sys, self.h, t, q, v, S))
         return (vfree.ravel(), S.reshape(n, n), T.reshape(n, -1), SHt.reshape(n, r),
                 W.reshape(r, r), gap.ravel(), H.reshape(r, n))
-
-    def _nonfinite_cause(self, t, q, v, S) -> str:
-        """What made a step's data non-finite, named: the forces (at t or t + h), their Jacobians,
-        or the iteration matrix (a mass matrix singular on the constraint manifold)."""
-        sys_, h = self.sys, self.h
-        for tt in (t, t + h):
-            F = np.array(sys_.force_fn(tt, q, v), dtype=float).ravel()
-            if not np.all(np.isfinite(F)):
-                bad = [sys_.names[i] for i in np.flatnonzero(~np.isfinite(F))]
-                return f"the force F(t, q, v) is not finite at t = {tt:.10g} (coordinates {bad})"
-        if np.all(np.isfinite(S)):
-            return "the force's Jacobians dF/dq, dF/dv or the constraints' time derivative are not finite"
-        return "singular iteration matrix: the mass matrix is singular on the constraint manifold"
 
     def at(self, t, q, v):
         """(v_free - v, SHt, W, gap, H) at the start of a step from (t, q, v)."""
@@ -272,6 +264,8 @@ class StepAssembly:
                 dv = dv + self._control_correction(t, q, self.S)
             return dv, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
         vfree, S, _, SHt, W, gap, H = self._eval(t, q, v)
+        if self.force_check is not None:
+            self.force_check(t, q, v)
         dv = vfree - v
         if self.schedule is not None:
             dv = dv + self._control_correction(t, q, S)

@@ -19,6 +19,7 @@ from lcp.contact.problem import MODE_NAMES, ModeArray
 from lcp.result import STATUS_MESSAGES, SimulationResult
 from lcp.timestepping.activation import Activation
 from lcp.timestepping.assembly import kahan_add
+from lcp.timestepping.force_check import StepRejected
 from lcp.timestepping.contact_step import ContactStep
 from lcp.timestepping.outcome import RunNotes, lazy_violation, record_impacts
 from lcp.timestepping.projection import violation_function
@@ -77,8 +78,8 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
             dvf, SHt, W, gap, H = asm.at(tk, q, v)
             vfree = v + dvf
         except FloatingPointError as exc:
-            status = -2
-            message = f"{STATUS_MESSAGES[-2]} Step {k} (t = {tk:.10g}): {exc}."
+            status = -7 if isinstance(exc, StepRejected) else -2
+            message = f"{STATUS_MESSAGES[status]} Step {k} (t = {tk:.10g}): {exc}."
             break
         if m:
             uN_minus = H[:m] @ v
