@@ -90,6 +90,14 @@ class OptimalControlProblem:
     replay_tol : float or None
         ``success`` requires the replay miss (:attr:`OCPResult.replay`) within it; None skips the
         replay.
+    contact_law : {"auto", "gap", "velocity"}
+        ``"gap"``: complementarity on the gap, 0 <= g(q_{k+1}) perp N_k >= 0, the force only where
+        the gap is closed at both ends of the step, with impulses at the nodes (Newton's law and
+        Coulomb's, as the event method's impacts), so that within one horizon a contact can open,
+        fly and close. ``"velocity"``: Moreau-Jean's velocity-level law applied to every contact at
+        every step (every contact stays closed: exact for a block that never leaves the floor, wrong
+        for anything that flies). ``"auto"`` (default): the gap law when a contact starts open
+        (g(q0) > 0), else the velocity law. :mod:`lcp.ocp.transcription` says more.
 
     Examples
     --------
@@ -114,7 +122,7 @@ class OptimalControlProblem:
                  stage_cost: Callable | None = None, terminal_cost: Callable | None = None,
                  terminal_constraints: Callable | None = None, path_constraints: Callable | None = None,
                  path_equalities: Callable | None = None, max_cost: Callable | None = None, control_rate_weight: float = 0.0,
-                 replay_tol: float | None = 1e-6):
+                 replay_tol: float | None = 1e-6, contact_law: str = "auto"):
         from lcp.scenes.scene import Scene
 
         if isinstance(system, Scene):
@@ -146,6 +154,14 @@ class OptimalControlProblem:
         if not isinstance(theta, (int, float, np.floating)) or not 0.5 <= theta <= 1.0:
             raise ValueError(f"theta must lie in [1/2, 1], got {theta!r}")
         self.theta = float(theta)
+        if contact_law not in ("auto", "gap", "velocity"):
+            raise ValueError(f"contact_law must be 'auto', 'gap' or 'velocity', got {contact_law!r}")
+        if contact_law == "auto":
+            gaps = system.gaps(self.q0) if system.n_contacts else np.zeros(0)
+            contact_law = "gap" if np.any(gaps > 1e-12 * max(1.0, float(np.max(np.abs(self.q0), initial=0.0)))) \
+                else "velocity"
+        #: the contact law of the transcription, "gap" or "velocity" ("auto" resolved)
+        self.contact_law = contact_law
         self.T = positive("T", T)
         self.free_time = bool(free_time)
         self.T_bounds = _pair("T_bounds", T_bounds)
