@@ -26,10 +26,10 @@ from dataclasses import replace
 import casadi as ca
 import numpy as np
 
-from lcp.contact.problem import ContactProblem
+from lcp.contact.problem import OPEN, ContactProblem
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions
 from lcp.ocp.results import HomotopyStage
-from lcp.ocp.transcription import PAIRS
+from lcp.ocp.transcription import IMPULSE_PAIRS, PAIRS
 
 __all__ = ["diagnose", "fixed_mode_bounds", "ipopt_solver", "run_fixed_modes", "run_homotopy", "run_phases"]
 
@@ -108,7 +108,7 @@ def run_homotopy(tr, x0, P0, options: HomotopyOptions, cache: dict):
     return best[0], best[1], best[2], status, message, history
 
 
-def fixed_mode_bounds(tr, x):
+def _fixed_mode_bounds_velocity(tr, x):
     """Variable bounds with, pair by pair (cross and rate pairs included), the smaller member of
     each complementarity pair at ``x`` fixed at zero: the mode of every step frozen as at ``x``."""
     ix = tr.ix
@@ -121,6 +121,74 @@ def fixed_mode_bounds(tr, x):
         a_small = x[ia] <= x[iw]
         ubx[ia[a_small]] = 0.0
         ubx[iw[~a_small]] = 0.0
+    for ia, iw in _rate_pairs(tr):  # a >= 0 against a signed rate: the smaller (in magnitude) is zero
+        # a multiplier at rounding level counts as zero: a guess without rates (a staircase) would
+        # otherwise freeze every rate at zero, sliding steps included
+        tiny = 1e-9 * max(float(np.max(np.abs(x[ia]), initial=0.0)), 1.0)
+        a_small = x[ia] <= np.maximum(np.abs(x[iw]), tiny)
+        ubx[ia[a_small]] = 0.0
+        lbx[iw[~a_small]] = ubx[iw[~a_small]] = 0.0
+    return lbx, ubx
+
+
+def _normal_start_gap(tr):
+    """The scaled gap of every contact at node 0 (a number: q0 is given)."""
+    pb = tr.pb
+    return pb.system.gaps(pb.q0) / tr.gap_scale
+
+
+def fixed_mode_bounds(tr, x):
+    """Variable bounds with, pair by pair (start-gap, impulse, cross, signed and rate pairs included),
+    the smaller member of each complementarity pair at ``x`` fixed at zero: the mode of every step
+    frozen as at ``x``.
+
+    Only what the mode does not already imply is fixed (dependent equalities would leave IPOPT a
+    rank-deficient Jacobian): no friction pair of a contact whose normal force (impulse) is fixed
+    at zero (its friction then vanishes by mu N - beta+ - beta- >= 0), and no signed pair of a step
+    that continues a contact phase without an impulse (its start velocity follows from the gaps).
+    """
+    if not tr.gap_law:
+        return _fixed_mode_bounds_velocity(tr, x)
+    ix = tr.ix
+    lbx, ubx = tr.lbx.copy(), tr.ubx.copy()
+    pb = tr.pb
+    N, m = pb.N, pb.system.n_contacts
+    if m:
+        def fix(ia, iw, w=None):  # True where the multiplier is fixed at zero
+            ia = ia.reshape(-1)
+            wv = x[iw.reshape(-1)] if w is None else w
+            small = x[ia] <= wv
+            ubx[ia[small]] = 0.0
+            if w is None:
+                ubx[iw.reshape(-1)[~small]] = 0.0
+            return small.reshape(-1, m)
+
+        g0 = _normal_start_gap(tr)
+        off = fix(ix["pN"], ix["wN"])
+        off[:1] |= fix(ix["pN"][:1], None, g0)
+        off_i = fix(ix["PN"][:1], None, g0)
+        if N > 1:
+            off[1:] |= fix(ix["pN"][1:], ix["wN"][:-1])
+            off_i = np.vstack([off_i, fix(ix["PN"][1:], ix["wN"][:-1])])
+        on, on_i = ~off.reshape(-1), ~off_i.reshape(-1)
+        pairs = [(ix[a].reshape(-1)[on], ix[w].reshape(-1)[on]) for a, w in PAIRS[1:]]
+        pairs += [(ix[a].reshape(-1)[on_i], ix[w].reshape(-1)[on_i]) for a, w in IMPULSE_PAIRS[1:]]
+        if tr.cross and N > 1:  # step k's friction multipliers against step k-1's slacks (k >= 1)
+            both = (~off[1:] & ~off[:-1]).reshape(-1)
+            pairs += [(ix[a][1:].reshape(-1)[both], ix[w][:-1].reshape(-1)[both])
+                      for a, w in (("bp", "wp"), ("bm", "wm"), ("wl", "lam"))]
+        for ia, iw in pairs:
+            a_small = x[ia] <= x[iw]
+            ubx[ia[a_small]] = 0.0
+            ubx[iw[~a_small]] = 0.0
+        # signed pairs: a contact with a force starts its step at rest (unless the previous step
+        # already held it closed and no impulse acted in between); an impulse meets Newton's law
+        implied = np.zeros_like(off)
+        implied[1:] = ~off[:-1] & off_i[1:]
+        s_u = ix["sU"].reshape(N, m)[~off & ~implied]
+        lbx[s_u] = ubx[s_u] = 0.0
+        s_i = ix["sI"].reshape(N, m)[~off_i]
+        lbx[s_i] = ubx[s_i] = 0.0
     for ia, iw in _rate_pairs(tr):  # a >= 0 against a signed rate: the smaller (in magnitude) is zero
         # a multiplier at rounding level counts as zero: a guess without rates (a staircase) would
         # otherwise freeze every rate at zero, sliding steps included
@@ -207,6 +275,110 @@ def _rate_pairs(tr):
 
 
 def diagnose(tr, x) -> dict:
+    """Coulomb residual, dynamics residual and modes per step, recomputed in NumPy.
+
+    ``residual`` (impulse units) is the largest of: the Coulomb residual
+    (:meth:`~lcp.contact.problem.ContactProblem.residual`) of each step's velocity-level problem on
+    the contacts in contact over the step (a force, or the gap closed at both ends), the impulses of
+    the others, a force where the gap is open (min(p_N, g / (theta h W_jj))) or the normal
+    velocity is not zero at the start (min(p_N, |u_N+| / W_jj)), a penetration at a node
+    (g / (theta h W_jj) below zero), and the Coulomb residual of each node's impulse (Newton's law)
+    on the contacts closed there.
+    """
+    if not tr.gap_law:
+        return _diagnose_velocity(tr, x)
+    pb = tr.pb
+    _, hs, q, v, u, pN, pT = tr.unpack(x)
+    N, n, m, nb = pb.N, pb.system.n, pb.system.n_contacts, pb.system.n_bilateral
+    th, mu, e = pb.theta, pb.system.mu, pb.system.e
+    ua, ub = {"constant": (u, u), "linear": (u[:-1], u[1:]), "affine": (u[0::2], u[1::2])}[pb.hold]
+    ubar = 0.5 * (ua + ub)
+    tk = np.concatenate([[0.0], np.cumsum(hs)])[:-1]
+    vs = np.array(tr.aux(x, np.concatenate([[0.0], pb.q0, pb.v0])), dtype=float).T  # after the impulses
+    out = tr.step.map(N)(tk[None, :], hs[None, :], q[:-1].T, vs.T, ua.T, ubar.T, (ub - ua).T)
+
+    def blocks(a, r, c):  # (r, c N) -> (N, r, c)
+        return np.array(a, dtype=float).reshape(r, N, c).transpose(1, 0, 2)
+
+    def kkt(A, G):
+        K = np.zeros((N, n + nb, n + nb))
+        K[:, :n, :n] = A
+        K[:, :n, n:] = G.transpose(0, 2, 1)
+        K[:, n:, :n] = G
+        return K
+
+    Wh, r, H = blocks(out[0], n, n), blocks(out[1], n, 1)[..., 0], blocks(out[2], 2 * m, n)
+    G, phi_t1, gap = blocks(out[3], nb, n), blocks(out[4], nb, 1)[..., 0], blocks(out[5], m, 1)[..., 0]
+    KKT = kkt(Wh, G)
+    rhs = np.concatenate([r, -phi_t1 - np.einsum("kij,kj->ki", G, vs)], axis=1)
+    vfree = vs + np.linalg.solve(KKT, rhs[..., None])[:, :n, 0]
+    res, conflicts = 0.0, 0
+    modes = np.full((N, m), OPEN, dtype=np.int8)
+    max_product = lcp_res = cross = 0.0
+    if not m:
+        return {"residual": res, "dynamics": float(np.max(np.abs(vfree - v[1:]), initial=0.0)), "modes": modes,
+                "conflicts": conflicts, "max_product": max_product, "lcp": lcp_res, "cross": cross}
+    PN, PT = tr.impulses(x)
+    Ht = np.concatenate([H.transpose(0, 2, 1), np.zeros((N, nb, 2 * m))], axis=1)
+    SHt = np.linalg.solve(KKT, Ht)[:, :n]
+    W = H @ SHt
+    Mq = blocks(tr.kin.map(N)(tk[None, :], q[:-1].T)[0], n, n)
+    W0 = H @ np.linalg.solve(kkt(Mq, G), Ht)[:, :n]  # the impulses' Delassus operator
+    gaps = np.array([pb.system.gaps(qk) for qk in q])  # (N + 1, m)
+    gtol = 1e-9 * max(1.0, float(np.max(np.abs(q))))
+    uN_minus = np.einsum("kij,kj->ki", H[:, :m], vs)
+    qf = np.einsum("kij,kj->ki", H, vfree)
+    gap_pred = gap + hs[:, None] * ((1 - th) * uN_minus + th * qf[:, :m])
+    p = np.concatenate([pN, pT], axis=1)
+    P = np.concatenate([PN, PT], axis=1)
+    u_pre = np.einsum("kij,kj->ki", H, v[:-1])
+    for k in range(N):
+        wd = np.maximum(np.diag(W[k])[:m], 1e-300)
+        closed0, closed1 = gaps[k] <= gtol, gaps[k + 1] <= gtol
+        act = (pN[k] > 0) | (closed0 & closed1)
+        rows = np.concatenate([np.flatnonzero(act), m + np.flatnonzero(act)])
+        if act.any():
+            cp = ContactProblem(W[k][np.ix_(rows, rows)], qf[k][rows], mu[act])
+            res = max(res, cp.residual(p[k][rows]))
+            modes[k, act] = cp.modes(p[k][rows], rtol=1e-6)
+        if (~act).any():
+            res = max(res, float(np.max(np.abs(p[k][np.concatenate([~act, ~act])]))))
+        scaled = np.maximum(gaps[k], gaps[k + 1]) / (th * hs[k] * wd)
+        res = max(res, float(np.max(np.minimum(pN[k], scaled))), float(np.max(-gaps[k + 1] / (th * hs[k] * wd))),
+                  float(np.max(np.minimum(pN[k], np.abs(uN_minus[k]) / wd))))
+        # the impulse at node k: Newton's law on the contacts closed there, none elsewhere
+        qi = u_pre[k].copy()
+        qi[:m] += e * np.minimum(u_pre[k][:m], 0.0)
+        rows = np.concatenate([np.flatnonzero(closed0), m + np.flatnonzero(closed0)])
+        if closed0.any():
+            res = max(res, ContactProblem(W0[k][np.ix_(rows, rows)], qi[rows], mu[closed0]).residual(P[k][rows]))
+        if (~closed0).any():
+            res = max(res, float(np.max(np.abs(P[k][np.concatenate([~closed0, ~closed0])]))))
+        conflicts += int(np.any((gap_pred[k] > 0) & (pN[k] > 1e-9 * max(1.0, float(np.max(np.abs(p[k])))))))
+    vplus = vfree + np.einsum("kij,kj->ki", SHt, p)
+    ix = tr.ix
+    g0 = pb.system.gaps(pb.q0) / tr.gap_scale
+    a = np.concatenate([x[ix[nm]].ravel() for nm, _ in PAIRS] + [x[ix["PN"]].ravel()]
+                       + [x[ix[nm]].ravel() for nm, _ in IMPULSE_PAIRS[1:]])
+    w = np.concatenate([x[ix[nm]].ravel() for _, nm in PAIRS] + [np.concatenate([g0, x[ix["wN"][:-1]].ravel()])]
+                       + [x[ix[nm]].ravel() for _, nm in IMPULSE_PAIRS[1:]])
+    # the normal force against the start gap, the signed pairs and the cross pairs: "cross"
+    ca_ = [x[ix["pN"]].ravel(), x[ix["pN"]].ravel(), x[ix["PN"]].ravel()]
+    cw_ = [np.concatenate([g0, x[ix["wN"][:-1]].ravel()]), np.abs(x[ix["sU"]].ravel()), np.abs(x[ix["sI"]].ravel())]
+    if tr.cross:
+        ca_ += [x[ix[nm][1:]].ravel() for nm in ("bp", "bm", "wl")]
+        cw_ += [x[ix[nm][:-1]].ravel() for nm in ("wp", "wm", "lam")]
+    ca_, cw_ = np.concatenate(ca_), np.concatenate(cw_)
+    max_product = float(max(np.max(a * w), np.max(ca_ * cw_, initial=0.0)))
+    lcp_res = float(np.max(np.abs(np.minimum(a, w))))
+    cross = float(np.max(np.abs(np.minimum(ca_, cw_)), initial=0.0))
+    for ia, iw in _rate_pairs(tr):  # the affine hold's rate pairs count as cross pairs
+        cross = max(cross, float(np.max(np.minimum(x[ia], np.abs(x[iw])), initial=0.0)))
+    return {"residual": res, "dynamics": float(np.max(np.abs(vplus - v[1:]))), "modes": modes,
+            "conflicts": conflicts, "max_product": max_product, "lcp": lcp_res, "cross": cross}
+
+
+def _diagnose_velocity(tr, x) -> dict:
     """Coulomb residual (ContactProblem.residual), dynamics residual and modes per step, in NumPy."""
     pb = tr.pb
     _, hs, q, v, u, pN, pT = tr.unpack(x)

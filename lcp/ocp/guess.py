@@ -80,19 +80,25 @@ def x0_from_guess(pb, tr, gs: OCPGuess) -> np.ndarray:
         x0[ix["q"][k - 1]] = gs.q[k]
         x0[ix["v"][k - 1]] = gs.v[k]
     m = pb.system.n_contacts
-    if m:
+    if m:  # the guess's impulses as forces over the steps; no impulses at the nodes
         mu, e = pb.system.mu, pb.system.e
         for k in range(N):
             H = pb.system.contact_jacobian(gs.q[k])
             uN, uT = H[:m] @ gs.v[k + 1], H[m:] @ gs.v[k + 1]
+            uN0, uT0 = H[:m] @ gs.v[k], H[m:] @ gs.v[k]
             pN, pT = np.maximum(gs.p_N[k], 0.0) / steps[k], gs.p_T[k] / steps[k]  # forces
             bp, bm = np.maximum(pT, 0.0), np.maximum(-pT, 0.0)
             lam = np.abs(uT)
             vals = {"pN": pN, "bp": bp, "bm": bm, "lam": lam,
-                    "wN": np.maximum(uN + e * np.minimum(H[:m] @ gs.v[k], 0.0), 0.0),
+                    "wN": (np.maximum(pb.system.gaps(gs.q[k + 1]) / tr.gap_scale, 0.0) if tr.gap_law else
+                           np.maximum(uN + e * np.minimum(H[:m] @ gs.v[k], 0.0), 0.0)),
                     "wp": np.maximum(lam + uT, 0.0), "wm": np.maximum(lam - uT, 0.0),
-                    "wl": np.maximum(mu * pN - bp - bm, 0.0)}
+                    "wl": np.maximum(mu * pN - bp - bm, 0.0),
+                    "sU": uN0, "sI": uN0 + e * np.minimum(uN0, 0.0),
+                    "Plam": np.abs(uT0), "Pwp": np.abs(uT0) + uT0, "Pwm": np.abs(uT0) - uT0}
             for nm, val in vals.items():
+                if nm not in ix:  # the velocity law has no impulses at the nodes
+                    continue
                 x0[ix[nm][k]] = val
     if pb.max_cost is not None:
         x0[ix["z"]] = 0.0

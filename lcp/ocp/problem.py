@@ -90,6 +90,14 @@ class OptimalControlProblem:
     replay_tol : float or None
         ``success`` requires the replay miss (:attr:`OCPResult.replay`) within it; None skips the
         replay.
+    contact_law : {"auto", "gap", "velocity"}
+        ``"gap"``: complementarity on the gap, 0 <= g(q_{k+1}) perp N_k >= 0, the force only where
+        the gap is closed at both ends of the step, with impulses at the nodes (Newton's law and
+        Coulomb's, as the event method's impacts), so that within one horizon a contact can open,
+        fly and close. ``"velocity"``: Moreau-Jean's velocity-level law applied to every contact at
+        every step (every contact stays closed: exact for a block that never leaves the floor, wrong
+        for anything that flies). ``"auto"`` (default): the gap law when a contact starts open
+        (g(q0) > 0), else the velocity law. :mod:`lcp.ocp.transcription` says more.
 
     Examples
     --------
@@ -114,7 +122,7 @@ class OptimalControlProblem:
                  stage_cost: Callable | None = None, terminal_cost: Callable | None = None,
                  terminal_constraints: Callable | None = None, path_constraints: Callable | None = None,
                  path_equalities: Callable | None = None, max_cost: Callable | None = None, control_rate_weight: float = 0.0,
-                 replay_tol: float | None = 1e-6):
+                 replay_tol: float | None = 1e-6, contact_law: str = "auto"):
         from lcp.scenes.scene import Scene
 
         if isinstance(system, Scene):
@@ -146,25 +154,14 @@ class OptimalControlProblem:
         if not isinstance(theta, (int, float, np.floating)) or not 0.5 <= theta <= 1.0:
             raise ValueError(f"theta must lie in [1/2, 1], got {theta!r}")
         self.theta = float(theta)
+        #: the contact law of the transcription, "gap" or "velocity" ("auto" resolved)
+        self.contact_law = _contact_law(system, self.q0, contact_law)
         self.T = positive("T", T)
         self.free_time = bool(free_time)
         self.T_bounds = _pair("T_bounds", T_bounds)
         if self.free_time and not self.T_bounds[0] <= self.T <= self.T_bounds[1]:
             raise ValueError(f"T (the initial guess) must lie within T_bounds {T_bounds!r}, got {T!r}")
-        if hold not in OCP_HOLDS:
-            raise ValueError(f"hold must be one of {OCP_HOLDS}, got {hold!r}")
-        if hold == "affine" and self.theta != 0.5:
-            raise ValueError(f"theta must be 1/2 with hold='affine' (its position update is the corrected "
-                             f"trapezoid), got {theta!r}")
-        if hold == "affine" and system.n_bilateral:
-            raise ValueError("hold='affine' does not support bilateral constraints (their force rates are not "
-                             "modelled)")
-        if steps not in ("uniform", "free"):
-            raise ValueError(f"steps must be 'uniform' or 'free', got {steps!r}")
-        self.hold, self.steps = hold, steps
-        self.step_bounds = _pair("step_bounds", step_bounds)
-        if not self.step_bounds[0] <= 1.0 <= self.step_bounds[1]:
-            raise ValueError(f"step_bounds must contain 1 (the uniform step), got {step_bounds!r}")
+        self.hold, self.steps, self.step_bounds = _grid(system, self.theta, hold, steps, step_bounds)
         self.node_times = self._check_node_times(node_times)
         for name, fn in (("stage_cost", stage_cost), ("terminal_cost", terminal_cost),
                          ("terminal_constraints", terminal_constraints),
@@ -322,6 +319,34 @@ class OptimalControlProblem:
             the MPCC: different optima mean the answer is the best found, not a proven global one.
         """
         return multistart(self, guesses, options, rtol, **option_kw)
+
+def _contact_law(system, q0, contact_law: str) -> str:
+    """The transcription's contact law: "auto" is the gap law when a contact starts open."""
+    if contact_law not in ("auto", "gap", "velocity"):
+        raise ValueError(f"contact_law must be 'auto', 'gap' or 'velocity', got {contact_law!r}")
+    if contact_law == "auto":
+        gaps = system.gaps(q0) if system.n_contacts else np.zeros(0)
+        return "gap" if np.any(gaps > 1e-12 * max(1.0, float(np.max(np.abs(q0), initial=0.0)))) else "velocity"
+    return contact_law
+
+
+def _grid(system, theta: float, hold: str, steps: str, step_bounds) -> tuple[str, str, tuple[float, float]]:
+    """The checked control hold, step kind and step-length bounds of the transcription."""
+    if hold not in OCP_HOLDS:
+        raise ValueError(f"hold must be one of {OCP_HOLDS}, got {hold!r}")
+    if hold == "affine" and theta != 0.5:
+        raise ValueError(f"theta must be 1/2 with hold='affine' (its position update is the corrected "
+                         f"trapezoid), got {theta!r}")
+    if hold == "affine" and system.n_bilateral:
+        raise ValueError("hold='affine' does not support bilateral constraints (their force rates are not "
+                         "modelled)")
+    if steps not in ("uniform", "free"):
+        raise ValueError(f"steps must be 'uniform' or 'free', got {steps!r}")
+    bounds = _pair("step_bounds", step_bounds)
+    if not bounds[0] <= 1.0 <= bounds[1]:
+        raise ValueError(f"step_bounds must contain 1 (the uniform step), got {step_bounds!r}")
+    return hold, steps, bounds
+
 
 def _pair(name, value) -> tuple[float, float]:
     try:

@@ -253,4 +253,43 @@ def replay_check(result: OCPResult, tol: float, refine: int = 50) -> ReplayCheck
                 val = np.array(val, dtype=float).ravel()
                 if val.size:
                     viol = max(viol, float(np.max(np.abs(val) if absolute else val)))
-    return ReplayCheck(method=method, final_miss=final, node_miss=nodes, path_violation=viol, tol=tol)
+    return ReplayCheck(method=method, final_miss=final, node_miss=nodes, path_violation=viol, tol=tol,
+                       where=_where(result, rp, tol))
+
+
+def _replay_modes(rp, k):
+    """The replay's contact modes at the start of interval k (None when it does not record them)."""
+    try:
+        if rp.pieces:
+            return np.asarray(rp.pieces[k].modes[0])
+        sim = rp.sim
+        j = int(np.searchsorted(sim.t, rp.t[k] + 1e-12 * max(1.0, float(rp.t[-1])))) - 1
+        return np.asarray(sim.modes[max(j, 0)])
+    except (IndexError, AttributeError, TypeError):
+        return None
+
+
+def _where(result, rp, tol) -> str:
+    """Where the replay leaves the optimizer (see :attr:`ReplayCheck.where`). Positions only: at a
+    node with an impulse the optimizer's velocity is the one before it."""
+    from lcp.contact.problem import MODE_NAMES
+
+    miss = np.max(np.abs(rp.q - result.q), axis=1)
+    bad = np.flatnonzero(miss > tol)
+    if not bad.size:
+        return ""
+    first, worst = int(bad[0]), int(np.argmax(miss))
+    text = (f"the replay's position first misses by more than {tol:.1e} at node {first} (t = {result.t[first]:.6g}), "
+            f"by {miss[first]:.2e}; the largest miss {miss[worst]:.2e} is at node {worst} (t = {result.t[worst]:.6g})")
+    k = first - 1
+    names = [c.name for c in result.problem.system.contacts]
+    modes = _replay_modes(rp, k) if k >= 0 else None
+    if modes is not None and result.modes.shape[1]:
+        diff = [j for j in range(result.modes.shape[1]) if int(modes[j]) != int(result.modes[k, j])]
+        if diff:
+            parts = [f"contact {names[j] if names else j!r}: {MODE_NAMES.get(int(result.modes[k, j]), '?')} in "
+                     f"the optimizer, {MODE_NAMES.get(int(modes[j]), '?')} in the replay" for j in diff]
+            text += f"; in step {k} " + ", ".join(parts)
+        else:
+            text += f"; in step {k} every contact has the same mode in both"
+    return text

@@ -142,6 +142,10 @@ class ReplayCheck:
         states at the nodes (0 without either).
     tol : float
         The tolerance ``success`` requires of ``final_miss`` and ``path_violation``.
+    where : str
+        Where the replay leaves the optimizer's trajectory: the first node whose position misses by
+        more than ``tol``, the node of the largest miss, and the contacts whose mode differs in the
+        step before that first node ("" when every node is within ``tol``).
     """
 
     method: str
@@ -149,6 +153,7 @@ class ReplayCheck:
     node_miss: float
     path_violation: float
     tol: float
+    where: str = ""
 
     @property
     def ok(self) -> bool:

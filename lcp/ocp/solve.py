@@ -47,17 +47,26 @@ def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
     if method == "phases" and problem.steps == "free":
         res.message += bound_steps_note(problem, res)
     if problem.replay_tol is not None and np.all(np.isfinite(res.q)):
+        # the message is written after the replay: what the solve found, then what the replay found
         try:
             res.replay = replay_check(res, problem.replay_tol)
         except RuntimeError as exc:
+            solved = res.message
             res.status = -3
-            res.message = f"{OCP_STATUS_MESSAGES[-3]} The replay failed: {exc} (Solve: {res.message})"
+            res.message = f"{OCP_STATUS_MESSAGES[-3]} The replay failed: {exc} Before the replay: {solved}"
             return res
-        if res.status >= 0 and not res.replay.ok:
+        rc = res.replay
+        if res.status >= 0 and not rc.ok:
+            solved = res.message
             res.status = -3
-            res.message = (f"{OCP_STATUS_MESSAGES[-3]} Final-state miss {res.replay.final_miss:.2e}, path "
-                           f"violation {res.replay.path_violation:.2e} > {problem.replay_tol:.1e} "
-                           f"({res.replay.method} replay). (Solve: {res.message})")
+            hint = (" The velocity law keeps every contact closed: if a contact should open, give "
+                    "contact_law='gap'." if problem.contact_law == "velocity" else "")
+            res.message = (f"{OCP_STATUS_MESSAGES[-3]} Replayed by {rc.method}: final-state miss "
+                           f"{rc.final_miss:.2e}, path violation {rc.path_violation:.2e} > {problem.replay_tol:.1e}"
+                           f"{'; ' + rc.where if rc.where else ''}.{hint} Before the replay: {solved}")
+        elif res.status >= 0:
+            res.message += (f" Replayed by {rc.method}: final-state miss {rc.final_miss:.2e}, path violation "
+                            f"{rc.path_violation:.2e}, within replay_tol = {problem.replay_tol:.1e}.")
     return res
 
 

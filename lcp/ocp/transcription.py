@@ -27,6 +27,22 @@ The discrete Coulomb law of each contact is the LCP of
 
 with forces (N = p_N / h) as unknowns, so that a product a w is a power whatever the step.
 
+The gap law: contacts that open and close (``contact_law="gap"``)
+------------------------------------------------------------------
+The law above holds every contact closed at every step. Under the gap law the normal pair is on
+the gap at the step's end, 0 <= N_k perp g(q_{k+1}) / (theta T / N) >= 0, with two more conditions
+on a force: the gap closed at the step's start too (N_k perp g(q_k)) and the normal velocity zero
+there (|N_k u_N(v_k+)| <= sigma, a signed pair). A contact that closes with approach velocity gets
+an impulse at the node: v_k+ = v_k + M^-1 H' P_k, with P_N perp g(q_k), Newton's law
+P_N (u_N(v_k+) + e min(u_N(v_k), 0)) = 0 and Coulomb's law on P_T (the event method's impact
+law), and step k starts from v_k+. Friction vanishes with N (mu N - beta+ - beta- >= 0). Between
+nodes a contact is then either closed with a force or open, so the theta = 1/2 step is exact for
+constant forces in flight as in contact, and the event replay repeats it, provided the touchdowns,
+lift-offs and stick-slip switches fall on nodes (free steps, or a control that puts them there).
+The node velocities v_k stay those before the impulse. Not yet: the friction cross pairs of free
+steps after a flight compare with the flying step's slacks (a landing that sticks at once needs
+zero tangential velocity before it).
+
 Free steps: switches off the grid
 ---------------------------------
 With ``steps="free"`` the step lengths are unknowns and the *cross complementarity* of FESD
@@ -75,8 +91,15 @@ import numpy as np
 
 __all__ = ["PAIRS", "Transcription"]
 
-#: complementarity pairs (multiplier, slack) of one contact, in the order of the module docstring
+#: complementarity pairs (multiplier, slack) of one contact in one step, in the order of the module
+#: docstring; ``wN`` is the gap at the step's end (scaled to a velocity), not a velocity
 PAIRS = (("pN", "wN"), ("bp", "wp"), ("bm", "wm"), ("lam", "wl"))
+#: the pairs of the impulse at a step's start node: ``gS`` (the gap at that node: ``g0`` at node 0,
+#: the previous step's ``wN`` after it) gates the normal impulse, the rest is the Coulomb law at impact
+IMPULSE_PAIRS = (("PN", "gS"), ("Pbp", "Pwp"), ("Pbm", "Pwm"), ("Plam", "Pwl"))
+#: pairs of a multiplier >= 0 and a signed velocity (relaxed as |a s| <= sigma): a contact carrying a
+#: force over a step starts it at rest in the normal direction; an impulse gives Newton's restitution
+SIGNED_PAIRS = (("pN", "sU"), ("PN", "sI"))
 
 
 def _scalar(expr, name):
@@ -107,6 +130,16 @@ class Transcription:
         t_start = time.perf_counter()
         self.pb = pb
         self.step = self._step_function()
+        sys = pb.system
+        self.kin = ca.Function("kin", [sys.t_sym, sys.q_sym], [sys.mass_expr, sys.H_expr,
+                                                               ca.jacobian(sys.constraints_expr, sys.q_sym)])
+        #: gaps are scaled to velocities by the nominal step theta T / N (the products a w of the
+        #: normal pairs are then powers, and a resting contact's wN equals its normal velocity)
+        self.gap_scale = pb.theta * pb.T / pb.N
+        #: the gap law (impulses at the nodes, contacts that open and close) or the velocity law
+        #: (every contact closed at every step)
+        self.gap_law = pb.contact_law == "gap" and sys.n_contacts > 0
+        self.restitution = self.gap_law and bool(np.any(sys.e > 0))
         self.cross = pb.steps == "free" and pb.system.n_contacts > 0
         self._x, self._lbx, self._ubx, self._nx = [], [], [], 0
         self._g, self._lbg, self._ubg = [], [], []
@@ -189,12 +222,18 @@ class Transcription:
             uN0, uT0 = ca.mtimes(sub[0], v0p), ca.mtimes(sub[1], v0p)
             lam0 = ca.fabs(uT0)
             prev = {"wN": uN0, "wp": lam0 + uT0, "wm": lam0 - uT0, "lam": lam0}
+        self.vplus, gS = [], None
+        if self.gap_law:  # node 0's gap: a number (q0 is given), not a variable that the mode could fix
+            gS = sys.gap_fn(q0p) / self.gap_scale
         for k in range(N):
             h = hs[k]
-            blk = {nm: self._var(f"{nm}{k}", m, 0.0, np.inf, key=nm) for a_w in PAIRS for nm in a_w}
-            lamb = self._var(f"lb{k}", nb, -np.inf, np.inf, key="lb")
             ua, ub = self.control_pair(us, k)
             qa, qb, va, vb = qs[k], qs[k + 1], vs[k], vs[k + 1]
+            if self.gap_law:  # the impulse at the step's start node, then the step from the velocity after it
+                va, imp_pairs, signed = self._impulse(k, tk[k], qa, va, gS, sigma)
+            self.vplus.append(va)
+            blk = {nm: self._var(f"{nm}{k}", m, 0.0, np.inf, key=nm) for a_w in PAIRS for nm in a_w}
+            lamb = self._var(f"lb{k}", nb, -np.inf, np.inf, key="lb")
             Wh, r, H, G, phi_t1, _, Mq, dF = self.step(tk[k], h, qa, va, ua, 0.5 * (ua + ub), ub - ua)
             pN, pT = h * blk["pN"], h * (blk["bp"] - blk["bm"])
             dyn = ca.mtimes(Wh, vb - va) - r
@@ -210,20 +249,37 @@ class Transcription:
             else:
                 self._constrain(qb - qa - h * ((1 - th) * va + th * vb), 0.0, 0.0)
             if m:
-                HN, HT = H[:m, :], H[m:, :]
-                uN, uT = ca.mtimes(HN, vb), ca.mtimes(HT, vb)
+                uN, uT = ca.mtimes(H[:m, :], vb), ca.mtimes(H[m:, :], vb)
                 lam = blk["lam"]
-                self._constrain(blk["wN"] - (uN + e * ca.fmin(ca.mtimes(HN, va), 0)), 0.0, 0.0)
+                if self.gap_law:
+                    # the gap at the step's end (position level); the force only where the gap is
+                    # closed at both ends of the step (pN against gS: the start gap) and the normal
+                    # velocity at the start is zero (the signed pair pN sU)
+                    self._constrain(blk["wN"] - sys.gap_fn(qb) / self.gap_scale, 0.0, 0.0)
+                else:
+                    self._constrain(blk["wN"] - (uN + e * ca.fmin(ca.mtimes(H[:m, :], va), 0)), 0.0, 0.0)
                 self._constrain(blk["wp"] - (lam + uT), 0.0, 0.0)
                 self._constrain(blk["wm"] - (lam - uT), 0.0, 0.0)
                 self._constrain(blk["wl"] - (mu * blk["pN"] - blk["bp"] - blk["bm"]), 0.0, 0.0)
                 a = [blk[x] for x, _ in PAIRS]
                 w = [blk[y] for _, y in PAIRS]
-                if self.cross:  # step k's multipliers against step k - 1's slacks at node k
-                    a += [blk["pN"], blk["bp"], blk["bm"], blk["wl"]]
-                    w += [prev["wN"], prev["wp"], prev["wm"], prev["lam"]]
+                if self.gap_law:
+                    a += [blk["pN"]] + imp_pairs[0]
+                    w += [gS] + imp_pairs[1]
+                if self.cross:  # step k's multipliers against step k - 1's slacks at node k (the
+                    # normal one only under the velocity law: the gap law has pN against gS)
+                    names = (("bp", "wp"), ("bm", "wm"), ("wl", "lam"))
+                    if not self.gap_law:
+                        names = (("pN", "wN"),) + names
+                    a += [blk[x] for x, _ in names]
+                    w += [prev[y] for _, y in names]
                     prev = blk
                 self._constrain(ca.vertcat(*a) * ca.vertcat(*w) - sigma, -np.inf, 0.0)  # Scholtes
+                if self.gap_law:
+                    prod = ca.vertcat(blk["pN"] * signed[0], signed[1])
+                    self._constrain(prod - sigma, -np.inf, 0.0)
+                    self._constrain(prod + sigma, 0.0, np.inf)
+                    gS = blk["wN"]
             st = pb.make_step(k, tk[k], h, qa, qb, va, vb, ua, ub, pN, pT)
             if pb.stage_cost is not None:
                 J = J + h * _scalar(pb.stage_cost(st), "stage_cost")
@@ -245,7 +301,12 @@ class Transcription:
             J = J + z
         g = ca.vertcat(*self._g) if self._g else ca.SX.zeros(0, 1)
         self.nlp = {"x": ca.vertcat(*self._x), "f": J, "g": g, "p": ca.vertcat(sigma, q0p, v0p)}
+        #: (x, p) -> the velocity after each node's impulse (n, N): the start of each step
+        self.aux = ca.Function("aux", [self.nlp["x"], self.nlp["p"]], [ca.horzcat(*self.vplus)])
+        del self.vplus
         self.ix = {key: np.array(val) for key, val in self.ix.items()}
+        if self.gap_law and not self.restitution:
+            self.ix["sI"] = self.ix["sU"]
         self.lbx, self.ubx = np.concatenate(self._lbx), np.concatenate(self._ubx)
         self.lbg = np.concatenate(self._lbg) if self._lbg else np.zeros(0)
         self.ubg = np.concatenate(self._ubg) if self._ubg else np.zeros(0)
@@ -259,6 +320,43 @@ class Transcription:
         if hold == "linear":
             return us[k], us[k + 1]
         return us[2 * k], us[2 * k + 1]
+
+    def _impulse(self, k, t, q, v, gS, sigma):
+        """The impulse at node k (at the start of step k) and the velocity after it.
+
+        Newton's restitution and Coulomb's law at the velocity level, as the event method's impact
+        law (:mod:`lcp.events.impacts`): the normal impulse PN only where the gap gS is closed, and
+        then such that u_N+ + e min(u_N-, 0) = 0 (the signed pair PN sI); the friction impulse
+        within mu PN, opposing the tangential velocity after the impulse. Returns (v+, the
+        nonnegative pairs as two lists, (sU, PN sI)).
+        """
+        sys = self.pb.system
+        m, nb = sys.n_contacts, sys.n_bilateral
+        imp = {nm: self._var(f"{nm}{k}", m, 0.0, np.inf, key=nm) for a_w in IMPULSE_PAIRS[1:] for nm in a_w}
+        imp["PN"] = self._var(f"PN{k}", m, 0.0, np.inf, key="PN")
+        sU = self._var(f"sU{k}", m, -np.inf, np.inf, key="sU")
+        Mq, H, G = self.kin(t, q)
+        rhs = ca.mtimes(H.T, ca.vertcat(imp["PN"], imp["Pbp"] - imp["Pbm"]))
+        if nb:  # the impulse keeps the bilateral constraints' velocities
+            K = ca.vertcat(ca.horzcat(Mq, G.T), ca.horzcat(G, ca.SX.zeros(nb, nb)))
+            dv = ca.solve(K, ca.vertcat(rhs, ca.SX.zeros(nb, 1)))[: sys.n]
+        else:
+            dv = ca.solve(Mq, rhs)
+        vp = v + dv
+        HN, HT = H[:m, :], H[m:, :]
+        uN, uT = ca.mtimes(HN, vp), ca.mtimes(HT, vp)
+        self._constrain(sU - uN, 0.0, 0.0)
+        if self.restitution:
+            sI = self._var(f"sI{k}", m, -np.inf, np.inf, key="sI")
+            self._constrain(sI - (uN + ca.DM(sys.e) * ca.fmin(ca.mtimes(HN, v), 0)), 0.0, 0.0)
+        else:
+            sI = sU
+        self._constrain(imp["Pwp"] - (imp["Plam"] + uT), 0.0, 0.0)
+        self._constrain(imp["Pwm"] - (imp["Plam"] - uT), 0.0, 0.0)
+        self._constrain(imp["Pwl"] - (ca.DM(sys.mu) * imp["PN"] - imp["Pbp"] - imp["Pbm"]), 0.0, 0.0)
+        a = [imp["PN"], imp["Pbp"], imp["Pbm"], imp["Plam"]]
+        w = [gS, imp["Pwp"], imp["Pwm"], imp["Pwl"]]
+        return vp, (a, w), (sU, imp["PN"] * sI)
 
     def _rates(self, k, blk, H, Mq, dF, m, mu, sigma):
         """Acceleration change da over step k under the affine hold (module docstring), with its
@@ -293,3 +391,11 @@ class Transcription:
         else:
             pN = pT = np.zeros((N, 0))
         return T, steps, q, v, u, pN, pT
+
+    def impulses(self, x):
+        """The impulses (P_N, P_T) at the start node of each step, shape (N, m) each."""
+        N, m = self.pb.N, self.pb.system.n_contacts
+        if not self.gap_law:
+            return np.zeros((N, 0)), np.zeros((N, 0))
+        ix = self.ix
+        return x[ix["PN"]].reshape(N, m), (x[ix["Pbp"]] - x[ix["Pbm"]]).reshape(N, m)
