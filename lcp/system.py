@@ -249,12 +249,16 @@ class System:
                             and self.force_is_affine and not self.force_depends_on_t)
 
         args = [self.t_sym, q, v]
-        self.mass_fn = ca.Function("mass", [self.t_sym, q], [self.mass_expr])
-        self.force_fn = ca.Function("force", args, [self.force_expr])
-        self.force_jac_fn = ca.Function("force_jac", args, [K, C])
-        self.constraints_fn = ca.Function("constraints", [self.t_sym, q], [self.constraints_expr, G, phi_t])
-        self.gap_fn = ca.Function("gap", [q], [gap])
-        self.H_fn = ca.Function("H", [q], [H])
+        try:
+            self.mass_fn = ca.Function("mass", [self.t_sym, q], [self.mass_expr])
+            self.force_fn = ca.Function("force", args, [self.force_expr])
+            self.force_jac_fn = ca.Function("force_jac", args, [K, C])
+            self.constraints_fn = ca.Function("constraints", [self.t_sym, q], [self.constraints_expr, G, phi_t])
+            self.gap_fn = ca.Function("gap", [q], [gap])
+            self.H_fn = ca.Function("H", [q], [H])
+        except RuntimeError:
+            self._check_free_symbols(t is None, gap, H, phi_t)  # names a symbol the System lacks
+            raise
         if m and not ca.depends_on(ca.vec(H), q):
             self._check_contact_rows(np.zeros(n))  # constant kinematics: checked once, here
         # everything one Moreau-Jean step needs at (t, q, v), in one call
@@ -263,6 +267,36 @@ class System:
             [self.mass_expr, self.force_expr, K, C, G, phi_t, gap, H])
         # energy bookkeeping needs a potential only when the user gives one; kinetic energy is general
         self.kinetic_fn = ca.Function("kinetic", [self.t_sym, q, v], [0.5 * ca.mtimes([v.T, self.mass_expr, v])])
+
+    def _check_free_symbols(self, no_t_given, gap, H, phi_t) -> None:
+        """A ValueError naming a symbol that an expression uses but the System does not know (CasADi
+        would only say "variables [t] are free ... set option 'allow_free'"), typically a time
+        symbol not passed as ``t=``."""
+        known = [self.t_sym, self.q_sym, self.v_sym]
+        if self.control_sym is not None:
+            known.append(self.control_sym)
+        known = ca.vertcat(*known)
+        parts = [("mass", self.mass_expr), ("force", getattr(self, "controlled_force_expr", self.force_expr)),
+                 ("constraints", self.constraints_expr), ("constraints' time derivative", phi_t),
+                 ("contact gaps", gap), ("contact Jacobian", H)]
+        for label, expr in parts:
+            free = [str(x) for x in ca.symvar(expr) if not ca.depends_on(x, known)]
+            if not free:
+                continue
+            one = len(free) == 1
+            names = ", ".join(repr(f) for f in free)
+            cand = next((f for f in free if f.lower() in ("t", "time")), free[0])
+            if no_t_given:
+                time = (f"if {cand!r} is the time, pass it to System as t={cand} (no t= was given, so "
+                        f"the System's time is a symbol of its own); ")
+            else:
+                time = (f"the System's time is the symbol given as t= ({str(self.t_sym)!r}), and a symbol "
+                        "of the same name made by another SX.sym call is a different one; ")
+            raise ValueError(f"the {label} uses the symbol{'' if one else 's'} {names}, which "
+                             f"{'is' if one else 'are'} not the System's q, v, t"
+                             f"{' or control' if self.control_sym is not None else ''}: {time}otherwise "
+                             f"give {'it a number' if one else 'them numbers'} or make "
+                             f"{'it a coordinate' if one else 'them coordinates'}")
 
     def _init_control(self, control, control_bounds, q, v, t):
         """Split F = F0 + B u for a control u (:func:`lcp.control.split_control`)."""
@@ -375,19 +409,49 @@ class System:
             raise ValueError(f"{what} handles planar contacts only; contact {name!r} is spatial "
                              "(two tangent directions)")
 
-    def _check_contact_rows(self, q) -> None:
-        """The tangent rows of each contact must be independent of each other and of its normal."""
+    def _contact_rows_degenerate(self, q, j) -> tuple[np.ndarray, np.ndarray] | None:
+        """(rows [H_N; H_T] of contact j at q, their singular values) if they are dependent there."""
         H = self.contact_jacobian(q)
         m, off = self.n_contacts, self.tangent_offsets
+        rows = H[np.r_[j, m + off[j]:m + off[j + 1]]]
+        s = np.linalg.svd(rows, compute_uv=False)
+        if not np.all(np.isfinite(s)):
+            raise ValueError(f"contact {self.contacts[j].name!r}: its Jacobian rows are not finite at q0 = {q}")
+        return (rows, s) if s[-1] <= 1e-10 * max(s[0], 1e-300) else None
+
+    def _check_contact_rows(self, q) -> None:
+        """The tangent rows of each contact must be independent of each other and of its normal.
+
+        Checked once, at q0 (anywhere when the kinematics are constant). Where the rows depend on q,
+        a configuration can be singular for a contact (a double pendulum hanging straight down has
+        a zero normal row for a floor under its tip) while the contact is sound elsewhere; the
+        message then says that it is this configuration, by checking one nearby.
+        """
+        q = np.asarray(q, dtype=float)
         for j, c in enumerate(self.contacts):
-            rows = H[np.r_[j, m + off[j]:m + off[j + 1]]]
-            s = np.linalg.svd(rows, compute_uv=False)
-            if not np.all(np.isfinite(s)):
-                raise ValueError(f"contact {c.name!r}: its Jacobian rows are not finite at q = {q}")
-            if s[-1] <= 1e-10 * max(s[0], 1e-300):
-                which = "normal" if s[0] == 0 else ("tangent rows" if rows.shape[0] > 2 else "tangent row")
-                raise ValueError(f"contact {c.name!r}: its {which} must be independent of each other and of "
-                                 f"the normal (the rows [H_N; H_T] are rank deficient, singular values {s})")
+            bad = self._contact_rows_degenerate(q, j)
+            if bad is None:
+                continue
+            rows, s = bad
+            if s[0] == 0:
+                what = "its normal and tangent rows are all zero"
+            elif np.linalg.norm(rows[0]) <= 1e-10 * s[0]:
+                what = "its normal row H_N (the gradient of its gap) is zero"
+            else:
+                what = (f"its {'tangent rows are' if rows.shape[0] > 2 else 'tangent row is'} not independent "
+                        f"of {'each other and of ' if rows.shape[0] > 2 else ''}the normal")
+            detail = f"(rows [H_N; H_T] rank deficient, singular values {s})"
+            if self.kinematics_is_constant:
+                raise ValueError(f"contact {c.name!r}: {what} {detail}; the kinematics are constant, so "
+                                 "this holds in every configuration")
+            # a deterministic nearby configuration: is it q0, or the contact?
+            near = q + 1e-3 * (1.0 + np.abs(q)) * np.sin(1.0 + np.arange(q.size))
+            if self._contact_rows_degenerate(near, j) is None:
+                raise ValueError(f"contact {c.name!r}: at q0 = {q} (where the contact rows are checked) "
+                                 f"{what} {detail}. Only this configuration is singular for the contact: "
+                                 "at a nearby one the rows are independent. Start from a q0 off it")
+            raise ValueError(f"contact {c.name!r}: {what} {detail}, at q0 = {q} (where the contact rows are "
+                             "checked) and at a nearby configuration too")
         self._contact_rows_checked = True
 
     def constraint_residual(self, q, t: float = 0.0) -> np.ndarray:

@@ -121,6 +121,10 @@ class MoreauJeanOptions:
         th = self.theta
         if not isinstance(th, (int, float, np.floating)) or not np.isfinite(th) or not 0.5 <= th <= 1.0:
             raise ValueError(f"theta must lie in [1/2, 1], got {th!r}")
+        for name in ("fallback", "fast"):
+            # a bool, not anything with a truth value: fallback="no" would read as True
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if not isinstance(self.save_every, (int, np.integer)) or self.save_every < 1:
             raise ValueError(f"save_every must be an integer >= 1, got {self.save_every!r}")
         if isinstance(self.solver, str) and self.solver not in SOLVERS and self.solver not in _cone_solvers():

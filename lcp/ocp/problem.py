@@ -240,8 +240,11 @@ class OptimalControlProblem:
 
     def _guess_from(self, guess) -> OCPGuess:
         if guess is None:
-            mid = np.where(np.isfinite(self.u_min) & np.isfinite(self.u_max), 0.5 * (self.u_min + self.u_max),
-                           np.clip(0.0, self.u_min, self.u_max))
+            # the middle of finite bounds, else 0 clipped to the one finite bound (computed only where
+            # both are finite: inf + -inf would warn)
+            both = np.isfinite(self.u_min) & np.isfinite(self.u_max)
+            mid = np.array(np.clip(0.0, self.u_min, self.u_max), dtype=float)
+            mid[both] = 0.5 * (self.u_min[both] + self.u_max[both])
             return self.guess(u=mid)
         if isinstance(guess, (OCPResult, OCPGuess)):
             rows = self.control_rows
@@ -321,14 +324,25 @@ class OptimalControlProblem:
                 res.replay = replay_check(res, self.replay_tol)
             except RuntimeError as exc:
                 res.status = -3
-                res.message = f"{OCP_STATUS_MESSAGES[-3]} The replay failed: {exc} (Solve: {res.message})"
+                res.message = (f"{OCP_STATUS_MESSAGES[-3]} The replay failed: {exc}{self._unbounded_note()} "
+                               f"(Solve: {_solve_part(res.message)})")
                 return res
             if res.status >= 0 and not res.replay.ok:
                 res.status = -3
                 res.message = (f"{OCP_STATUS_MESSAGES[-3]} Final-state miss {res.replay.final_miss:.2e}, path "
                                f"violation {res.replay.path_violation:.2e} > {self.replay_tol:.1e} "
-                               f"({res.replay.method} replay). (Solve: {res.message})")
+                               f"({res.replay.method} replay).{self._unbounded_note()} "
+                               f"(Solve: {_solve_part(res.message)})")
         return res
+
+    def _unbounded_note(self) -> str:
+        """Said when the replay fails and a control component has no bound on one side or both."""
+        free = np.flatnonzero(~(np.isfinite(self.u_min) & np.isfinite(self.u_max)))
+        if not free.size:
+            return ""
+        return (f" The control {'component' if free.size == 1 else 'components'} {free.tolist()} "
+                f"{'has' if free.size == 1 else 'have'} no bound (u_min, u_max or the system's control_bounds): "
+                "the optimizer may use forces and steps that the replay cannot follow.")
 
     def _bound_steps_note(self, res) -> str:
         """A note naming the free steps that end at a length bound: with the phase sequence fixed,
@@ -407,3 +421,12 @@ def _pair(name, value) -> tuple[float, float]:
     if not (0 < lo <= hi) or np.isnan(hi):
         raise ValueError(f"{name} must satisfy 0 < lower <= upper, got {value!r}")
     return lo, hi
+
+
+def _solve_part(message: str) -> str:
+    """The optimizer's own message, inside a replay failure's message: the success text of status 0
+    claims the replay miss is within tolerance, which the replay has just disproved."""
+    solved = OCP_STATUS_MESSAGES[0]
+    if message.startswith(solved):
+        return "the optimizer converged: its complementarity residual is within tolerance." + message[len(solved):]
+    return message
