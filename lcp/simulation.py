@@ -154,7 +154,8 @@ def _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, 
     if not isinstance(t_end, (int, float, np.floating)) or not np.isfinite(t_end) or t_end <= 0:
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
     if method == "event" and _plain_moreau_jean_options(h, theta, solver, solver_options, save_every, projection,
-                                                        projection_tol):
+                                                        projection_tol) \
+            and isinstance(fallback, (bool, np.bool_)) and isinstance(fast, (bool, np.bool_)):
         opts = None  # valid, and unused by the event method: no need to build them
     else:
         opts = MoreauJeanOptions(h=h, theta=theta, solver=solver, solver_options=solver_options,

@@ -107,8 +107,16 @@ class ContactProblem(FrictionContactProblem, PlanarBranches):
         self.k = k = self.mu.size
         self.n = 2 * k
         if self.W.shape != (2 * k, 2 * k) or self.q.shape != (2 * k,):
+            n = self.q.shape[0] if self.q.ndim == 1 else -1
+            if n >= 0 and n % 2 == 0 and self.W.shape == (n, n):
+                # W and q agree on n // 2 contacts: it is mu that does not
+                raise ValueError(f"mu must hold one friction coefficient per contact: W {self.W.shape} and "
+                                 f"q {self.q.shape} are for {n // 2} contacts, got mu of shape "
+                                 f"{self.mu.shape}")
             raise ValueError(f"W must be ({2 * k}, {2 * k}) and q ({2 * k},) for {k} contacts, "
                              f"got {self.W.shape} and {self.q.shape}")
+        if self.mu.ndim != 1:
+            raise ValueError(f"mu must be a vector, one friction coefficient per contact, got shape {self.mu.shape}")
         if rho is None:
             d = self.W.diagonal() if issparse(self.W) else np.diag(self.W)
             # natural-map weights rho = 1/W_ii make the residual an impulse; guard zero diagonals

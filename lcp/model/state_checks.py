@@ -1,4 +1,5 @@
-"""The checks of a start: the mass matrix (symmetric positive definite) and the contact rows (independent).
+"""The checks of a system and its start: the mass matrix (symmetric positive definite), the contact rows
+(independent), and the symbols its expressions use (the System's own).
 
 :meth:`System.check_state <lcp.model.system.System.check_state>` runs these tests on a start;
 they work on the nonzeros CasADi gives (a sparse mass matrix of independent bodies is tested
@@ -6,11 +7,12 @@ block by block, never formed dense). Imports :mod:`lcp.numerics` only (the Syste
 """
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 
 from lcp.numerics.casadi_eval import evaluate_into
 
-__all__ = ["check_contact_rows", "check_dense_mass", "check_sparse_mass", "check_definite", "dense_mass", "mass_ccs_values",
+__all__ = ["check_contact_rows", "check_free_symbols", "contact_rows_degenerate", "check_dense_mass", "check_sparse_mass", "check_definite", "dense_mass", "mass_ccs_values",
            "null_space", "sparse_mass"]
 
 
@@ -134,17 +136,79 @@ def null_space(G: np.ndarray) -> np.ndarray:
     return vt[rank:].T
 
 
-def check_contact_rows(system, q) -> None:
-    """The tangent rows of each contact must be independent of each other and of its normal."""
+def contact_rows_degenerate(system, q, j):
+    """(rows [H_N; H_T] of contact j at q, their singular values) if they are dependent there, else None."""
     H = system.contact_jacobian(q)
     m, off = system.n_contacts, system.tangent_offsets
+    rows = H[np.r_[j, m + off[j]:m + off[j + 1]]]
+    s = np.linalg.svd(rows, compute_uv=False)
+    if not np.all(np.isfinite(s)):
+        raise ValueError(f"contact {system.contacts[j].name!r}: its Jacobian rows are not finite at q0 = {q}")
+    return (rows, s) if s[-1] <= 1e-10 * max(s[0], 1e-300) else None
+
+
+def check_contact_rows(system, q) -> None:
+    """The tangent rows of each contact must be independent of each other and of its normal.
+
+    Checked once, at q0 (anywhere when the kinematics are constant). Where the rows depend on q,
+    a configuration can be singular for a contact (a double pendulum hanging straight down has
+    a zero normal row for a floor under its tip) while the contact is sound elsewhere; the
+    message then says that it is this configuration, by checking one nearby.
+    """
+    q = np.asarray(q, dtype=float)
     for j, c in enumerate(system.contacts):
-        rows = H[np.r_[j, m + off[j]:m + off[j + 1]]]
-        s = np.linalg.svd(rows, compute_uv=False)
-        if not np.all(np.isfinite(s)):
-            raise ValueError(f"contact {c.name!r}: its Jacobian rows are not finite at q = {q}")
-        if s[-1] <= 1e-10 * max(s[0], 1e-300):
-            which = "normal" if s[0] == 0 else ("tangent rows" if rows.shape[0] > 2 else "tangent row")
-            raise ValueError(f"contact {c.name!r}: its {which} must be independent of each other and of "
-                             f"the normal (the rows [H_N; H_T] are rank deficient, singular values {s})")
+        bad = contact_rows_degenerate(system, q, j)
+        if bad is None:
+            continue
+        rows, s = bad
+        if s[0] == 0:
+            what = "its normal and tangent rows are all zero"
+        elif np.linalg.norm(rows[0]) <= 1e-10 * s[0]:
+            what = "its normal row H_N (the gradient of its gap) is zero"
+        else:
+            what = (f"its {'tangent rows are' if rows.shape[0] > 2 else 'tangent row is'} not independent "
+                    f"of {'each other and of ' if rows.shape[0] > 2 else ''}the normal")
+        detail = f"(rows [H_N; H_T] rank deficient, singular values {s})"
+        if system.kinematics_is_constant:
+            raise ValueError(f"contact {c.name!r}: {what} {detail}; the kinematics are constant, so "
+                             "this holds in every configuration")
+        # a deterministic nearby configuration: is it q0, or the contact?
+        near = q + 1e-3 * (1.0 + np.abs(q)) * np.sin(1.0 + np.arange(q.size))
+        if contact_rows_degenerate(system, near, j) is None:
+            raise ValueError(f"contact {c.name!r}: at q0 = {q} (where the contact rows are checked) "
+                             f"{what} {detail}. Only this configuration is singular for the contact: "
+                             "at a nearby one the rows are independent. Start from a q0 off it")
+        raise ValueError(f"contact {c.name!r}: {what} {detail}, at q0 = {q} (where the contact rows are "
+                         "checked) and at a nearby configuration too")
     system.contact_rows_checked = True
+
+
+def check_free_symbols(system, no_t_given, gap, H, phi_t) -> None:
+    """A ValueError naming a symbol that an expression uses but the System does not know (CasADi
+    would only say "variables [t] are free ... set option 'allow_free'"), typically a time
+    symbol not passed as ``t=``."""
+    known = [system.t_sym, system.q_sym, system.v_sym]
+    if system.control_sym is not None:
+        known.append(system.control_sym)
+    known = ca.vertcat(*known)
+    parts = [("mass", system.mass_expr), ("force", getattr(system, "controlled_force_expr", system.force_expr)),
+             ("constraints", system.constraints_expr), ("constraints' time derivative", phi_t),
+             ("contact gaps", gap), ("contact Jacobian", H)]
+    for label, expr in parts:
+        free = [str(x) for x in ca.symvar(expr) if not ca.depends_on(x, known)]
+        if not free:
+            continue
+        one = len(free) == 1
+        names = ", ".join(repr(f) for f in free)
+        cand = next((f for f in free if f.lower() in ("t", "time")), free[0])
+        if no_t_given:
+            time = (f"if {cand!r} is the time, pass it to System as t={cand} (no t= was given, so "
+                    f"the System's time is a symbol of its own); ")
+        else:
+            time = (f"the System's time is the symbol given as t= ({str(system.t_sym)!r}), and a symbol "
+                    "of the same name made by another SX.sym call is a different one; ")
+        raise ValueError(f"the {label} uses the symbol{'' if one else 's'} {names}, which "
+                         f"{'is' if one else 'are'} not the System's q, v, t"
+                         f"{' or control' if system.control_sym is not None else ''}: {time}otherwise "
+                         f"give {'it a number' if one else 'them numbers'} or make "
+                         f"{'it a coordinate' if one else 'them coordinates'}")

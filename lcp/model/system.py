@@ -254,12 +254,16 @@ class System:
                             and self.force_is_affine and not self.force_depends_on_t)
 
         args = [self.t_sym, q, v]
-        self.mass_fn = ca.Function("mass", [self.t_sym, q], [self.mass_expr])
-        self.force_fn = ca.Function("force", args, [self.force_expr])
-        self.force_jac_fn = ca.Function("force_jac", args, [K, C])
-        self.constraints_fn = ca.Function("constraints", [self.t_sym, q], [self.constraints_expr, G, phi_t])
-        self.gap_fn = ca.Function("gap", [q], [gap])
-        self.H_fn = ca.Function("H", [q], [H])
+        try:
+            self.mass_fn = ca.Function("mass", [self.t_sym, q], [self.mass_expr])
+            self.force_fn = ca.Function("force", args, [self.force_expr])
+            self.force_jac_fn = ca.Function("force_jac", args, [K, C])
+            self.constraints_fn = ca.Function("constraints", [self.t_sym, q], [self.constraints_expr, G, phi_t])
+            self.gap_fn = ca.Function("gap", [q], [gap])
+            self.H_fn = ca.Function("H", [q], [H])
+        except RuntimeError:
+            state_checks.check_free_symbols(self, t is None, gap, H, phi_t)  # names a symbol the System lacks
+            raise
         if m and not ca.depends_on(ca.vec(H), q):
             state_checks.check_contact_rows(self, np.zeros(n))  # constant kinematics: checked once, here
         # everything one Moreau-Jean step needs at (t, q, v), in one call

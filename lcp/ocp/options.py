@@ -9,8 +9,7 @@ __all__ = ["OCP_STATUS_MESSAGES", "HomotopyOptions"]
 
 #: status code -> meaning; success is ``status >= 0``.
 OCP_STATUS_MESSAGES = {
-    0: "Solved: the complementarity residual is within tolerance (and the replay miss, when the replay "
-       "check ran: see the replay's note at the end).",
+    0: "Solved: the complementarity residual is within tolerance.",
     1: "Solved by the relaxation homotopy; the polishing solve was rejected and the homotopy iterate kept.",
     -1: "IPOPT failed during the relaxation homotopy.",
     -2: "The homotopy ended with a complementarity residual above tolerance.",

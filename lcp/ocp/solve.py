@@ -17,7 +17,7 @@ from lcp.ocp.replay import replay_check
 from lcp.ocp.results import OCPGuess, OCPResult
 from lcp.ocp.transcription import Transcription
 
-__all__ = ["bound_steps_note", "guess_from", "result_of", "solve_problem"]
+__all__ = ["bound_steps_note", "guess_from", "result_of", "solve_problem", "unbounded_note"]
 
 
 def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
@@ -53,7 +53,8 @@ def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
         except RuntimeError as exc:
             solved = res.message
             res.status = -3
-            res.message = f"{OCP_STATUS_MESSAGES[-3]} The replay failed: {exc} Before the replay: {solved}"
+            res.message = (f"{OCP_STATUS_MESSAGES[-3]} The replay failed: {exc}{unbounded_note(problem)} "
+                           f"Before the replay: {solved}")
             return res
         rc = res.replay
         if res.status >= 0 and not rc.ok:
@@ -63,17 +64,31 @@ def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
                     "contact_law='gap'." if problem.contact_law == "velocity" else "")
             res.message = (f"{OCP_STATUS_MESSAGES[-3]} Replayed by {rc.method}: final-state miss "
                            f"{rc.final_miss:.2e}, path violation {rc.path_violation:.2e} > {problem.replay_tol:.1e}"
-                           f"{'; ' + rc.where if rc.where else ''}.{hint} Before the replay: {solved}")
+                           f"{'; ' + rc.where if rc.where else ''}.{hint}{unbounded_note(problem)} "
+                           f"Before the replay: {solved}")
         elif res.status >= 0:
             res.message += (f" Replayed by {rc.method}: final-state miss {rc.final_miss:.2e}, path violation "
                             f"{rc.path_violation:.2e}, within replay_tol = {problem.replay_tol:.1e}.")
     return res
 
 
+def unbounded_note(problem) -> str:
+    """Said when the replay fails and a control component has no bound on one side or both."""
+    free = np.flatnonzero(~(np.isfinite(problem.u_min) & np.isfinite(problem.u_max)))
+    if not free.size:
+        return ""
+    return (f" The control {'component' if free.size == 1 else 'components'} {free.tolist()} "
+            f"{'has' if free.size == 1 else 'have'} no bound (u_min, u_max or the system's control_bounds): "
+            "the optimizer may use forces and steps that the replay cannot follow.")
+
+
 def guess_from(problem, guess) -> OCPGuess:
     if guess is None:
-        mid = np.where(np.isfinite(problem.u_min) & np.isfinite(problem.u_max), 0.5 * (problem.u_min + problem.u_max),
-                       np.clip(0.0, problem.u_min, problem.u_max))
+        # the middle of finite bounds, else 0 clipped to the one finite bound (computed only where both
+        # are finite: inf + -inf would warn)
+        both = np.isfinite(problem.u_min) & np.isfinite(problem.u_max)
+        mid = np.array(np.clip(0.0, problem.u_min, problem.u_max), dtype=float)
+        mid[both] = 0.5 * (problem.u_min[both] + problem.u_max[both])
         return problem.guess(u=mid)
     if isinstance(guess, (OCPResult, OCPGuess)):
         rows = problem.control_rows
