@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lcp.model.start import consistent_start
 from lcp.timestepping import compiled_step as compiled
 from lcp.timestepping.activation import CLOSE_ULPS, OPEN_ULPS
 from lcp.timestepping.assembly import StepAssembly
@@ -152,6 +153,15 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     if not (isinstance(t_end, (int, float, np.floating)) and np.isfinite(t_end) and t_end > 0):
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
     q0, v0 = system.check_state(q0, v0)
+    q0, v0, note = consistent_start(system, q0, v0)  # ValueError beyond the start tolerance
+    result = _run(system, q0, v0, t_end, options)
+    if note is not None:
+        result.message = f"{result.message} {note}"
+    return result
+
+
+def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> SimulationResult:
+    """The body of :func:`moreau_jean` from a checked, consistent start."""
     h, th = float(options.h), float(options.theta)
     spatial = system.is_spatial
     solver = _spatial_solver(options) if spatial else make_solver(options.solver, **(options.solver_options or {}))
