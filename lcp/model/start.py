@@ -32,6 +32,7 @@ Then:
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 
@@ -63,8 +64,24 @@ def system_length(system, q, t: float = 0.0) -> float:
     return _length(J, c)
 
 
+#: (Jacobian, constants, names) of a system whose constraints and gaps are affine and constant
+_AFFINE = weakref.WeakKeyDictionary()
+
+
 def _rows(system, q, t):
     """(residuals r, names, Jacobian J, constants r(t, 0)) of the bilateral rows, then the gaps."""
+    if not system.n_bilateral and system.kinematics_is_constant:
+        # g(q) = g(0) + H_N q: the rows once per system, the residuals by one product (a CasADi
+        # evaluation of each costs more than the whole check)
+        known = _AFFINE.get(system)
+        if known is None:
+            known = _AFFINE[system] = _general_rows(system, np.zeros(system.n), t)[1:]
+        names, J, c = known
+        return c + J @ q, names, J, c
+    return _general_rows(system, q, t)
+
+
+def _general_rows(system, q, t):
     n, nb, m = system.n, system.n_bilateral, system.n_contacts
     r, J, c = [], [], []
     if nb:
