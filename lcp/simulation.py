@@ -12,6 +12,7 @@ from lcp.events import event_driven
 from lcp.model.conditioning import EVENT_LIMIT, mass_condition, resolvable
 from lcp.result import SimulationResult, flag_unresolvable
 from lcp.scenes.scene import Scene
+from lcp.model.start import consistent_affine_start
 from lcp.model.system import System
 from lcp.timestepping.moreau_jean import MoreauJeanOptions, model_condition, moreau_jean, moreau_jean_from_model
 
@@ -162,17 +163,27 @@ def _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, 
                                  fallback=fallback, save_every=save_every, fast=fast, projection=projection,
                                  projection_tol=projection_tol)
     q0, v0 = _check_state(model, q0, v0)
+    note = None
+    if not model.nb:  # with bilateral constraints no path here applies: the general path checks the start
+        q0, v0, note = consistent_affine_start(model.H[:model.m], model.gap0, model.A, q0, v0, model.contact_names)
     if method == "event":
         from lcp.events.single_contact import run_with_options
 
-        res = run_with_options(model, q0, v0, float(t_end), method_options)
+        res = _noted(run_with_options(model, q0, v0, float(t_end), method_options), note)
         return flag_unresolvable(res, resolvable(model_condition(model), EVENT_LIMIT))
     if method_options:
         raise ValueError(f"unknown options for method 'moreau-jean': {sorted(method_options)}")
     if h > t_end and not allow_large_step:
         raise ValueError(f"h = {h!r} is larger than the horizon t_end = {t_end!r}; pass "
                          "allow_large_step=True if one step beyond t_end is what you want")
-    return moreau_jean_from_model(model, q0, v0, float(t_end), opts)  # None where it does not apply
+    return _noted(moreau_jean_from_model(model, q0, v0, float(t_end), opts), note)  # None where it does not apply
+
+
+def _noted(result, note):
+    """``result`` with the start's projection ``note`` (if any) at the end of its message."""
+    if result is not None and note is not None:
+        result.message = f"{result.message} {note}"
+    return result
 
 
 def _plain_moreau_jean_options(h, theta, solver, solver_options, save_every, projection, projection_tol) -> bool:

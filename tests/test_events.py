@@ -287,7 +287,7 @@ def test_bad_input_names_the_parameter():
     with pytest.raises(ValueError, match="closed-form"):
         lcp.simulate(lcp.scenes.block_chain(2), method="event", smooth="closed-form")
     with pytest.raises(ValueError, match="penetrates"):
-        event_driven(sc.system, np.array([0.0, -1e-3]), sc.v0, 0.3)
+        event_driven(sc.system, np.array([0.0, -1e-2]), sc.v0, 0.3)
 
 
 # ------------------------------------------------------------------------ time-dependent load: located events
@@ -366,7 +366,7 @@ def test_a_warm_system_still_checks_the_initial_state():
     with pytest.raises(ValueError, match=r"q0 must have shape \(2,\)"):
         event_driven(sc.system, np.zeros(3), sc.v0, 0.3)
     with pytest.raises(ValueError, match="penetrates"):
-        event_driven(sc.system, np.array([0.0, -1e-3]), sc.v0, 0.3)
+        event_driven(sc.system, np.array([0.0, -1e-2]), sc.v0, 0.3)
     with pytest.raises(ValueError, match="t_eval must be a non-empty array of finite times"):
         event_driven(sc.system, sc.q0, sc.v0, 0.3, t_eval=[0.0, float("nan"), 0.2])
     with pytest.raises(ValueError, match="t_eval must be strictly increasing"):

@@ -85,13 +85,20 @@ def test_bead_inside_a_circular_track_stays_on_it():
 
 
 def test_projection_failure_is_reported():
-    # a cylinder x^2 + y^2 = 1 and a plane x = 2 never meet: Newton cannot converge
+    # a cylinder x^2 + y^2 = 1 and a plane x = 2 never meet: the start is refused (lcp.model.start),
+    # and the projection's Newton iteration cannot converge
     q, v = ca.SX.sym("q", 3), ca.SX.sym("v", 3)
     s = System(q, v, ca.SX.eye(3), [0, 0, -9.81], constraints=[q[0] ** 2 + q[1] ** 2 - 1, q[0] - 2])
-    res = lcp.simulate(s, 0.01, h=1e-3, q0=[0.6, 0.8, 0.0], v0=[0, 0, 0])
+    with pytest.raises(ValueError, match="bilateral constraint 1 by 1.4"):
+        lcp.simulate(s, 0.01, h=1e-3, q0=[0.6, 0.8, 0.0], v0=[0, 0, 0])
+    assert not PositionProjection(s).project(0.0, np.array([0.6, 0.8, 0.0]))[1]
+    # a circle shrinking to nothing at t = 0.1 (x^2 + y^2 = 1 - 10 t): the run stops there
+    q, v, t = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("t")
+    s = System(q, v, ca.SX.eye(2), [0, -9.81], t=t, constraints=q[0] ** 2 + q[1] ** 2 - 1 + 10 * t)
+    res = lcp.simulate(s, 0.2, h=1e-3, q0=[0.6, 0.8], v0=[-3.0, -4.0])
     assert res.status == -5 and not res.success
-    assert "projection did not converge" in res.message and "Step 0" in res.message
-    assert res.t.size == 1  # nothing past the failure
+    assert "projection did not converge" in res.message and "Step 99" in res.message
+    assert res.t.size == 100  # nothing past the failure
 
 
 def test_projector_contact_working_set():

@@ -7,6 +7,7 @@ import numpy as np
 
 from lcp.events.integrator import Integrator
 from lcp.events.model import check_state
+from lcp.model.start import consistent_start
 from lcp.events.options import EventOptions
 from lcp.events.phases import closed_form_output
 from lcp.events.records import EventResult
@@ -94,14 +95,17 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
 
         return spatial_event_driven(system, q0, v0, t_end, opts, frozenset(options), scene)
     q0, v0 = check_state(system, q0, v0)
+    # the one check of a start for both methods (lcp.model.start): projected within its tolerance
+    q0, v0, start_note = consistent_start(system, q0, v0)
     t_out = opts.output_times(t_end)
     try:
         integ = Integrator(system, q0, v0, t_end, opts)
         integ.model.state_checked = integ.model.constant  # the mass matrix is the same at every state
-        integ.check_initial(q0, v0)
     except FloatingPointError as exc:  # the start itself: bad input, named
         raise ValueError(f"the initial state cannot be integrated: {exc}") from None
     phases, status, message, t_fail = integ.run(q0, v0)
+    if start_note is not None:
+        message = f"{message} {start_note}"
     n, m = system.n, system.n_contacts
     for note in integ.notes:
         message = f"{message} {note}"

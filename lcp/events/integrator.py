@@ -14,7 +14,7 @@ from lcp.events.modes import ModeSelector
 from lcp.events.ode_phase import OdePhase
 from lcp.events.options import EVENT_STATUS_MESSAGES, EventOptions, SmoothIntegrator
 from lcp.events.phases import ClosedFormPhase
-from lcp.events.projection import StateProjector, check_initial
+from lcp.events.projection import StateProjector
 from lcp.events.records import Event, Impact, Impulse, Phase, make_record
 
 __all__ = ["CASCADE_ROUNDS", "Inconsistent", "Integrator"]
@@ -72,10 +72,6 @@ class Integrator:
             bp = np.asarray(bp, dtype=float).ravel()
             self.breakpoints = np.unique(bp[(bp > 0) & (bp < t_end)]).tolist()
         self.selector.breakpoints = tuple(self.breakpoints)
-
-    def check_initial(self, q0, v0):
-        """ValueError if (q0, v0) violates the bilateral constraints or penetrates a contact."""
-        check_initial(self.sys, self.model, q0, v0, self.scales, self.gap_tol)
 
     # --- the acceleration-level problem and the next mode
     def classify(self, q, v):

@@ -11,7 +11,7 @@ import numpy as np
 
 from lcp.events.model import coordinate_rows, mass_projection
 
-__all__ = ["StateProjector", "check_initial"]
+__all__ = ["StateProjector"]
 
 
 class StateProjector:
@@ -106,21 +106,3 @@ class StateProjector:
                 v[i] = val
         return q, v
 
-
-
-def check_initial(system, model, q0, v0, scales, gap_tol):
-    """ValueError if (q0, v0) violates the bilateral constraints (beyond 1e-9 of the length and
-    velocity scales) or penetrates a contact (beyond the gap tolerance)."""
-    n = system.n
-    if system.n_bilateral:
-        phi, G, phi_t = (np.array(x, dtype=float) for x in system.constraints_fn(0.0, q0))
-        G = G.reshape(system.n_bilateral, n)
-        if np.max(np.abs(phi)) > 1e-9 * scales["L"]:
-            raise ValueError(f"q0 violates the bilateral constraints (residual {np.max(np.abs(phi)):.3g})")
-        if np.max(np.abs(G @ v0 + phi_t.ravel())) > 1e-9 * scales["V"]:
-            raise ValueError("v0 violates the velocity form of the bilateral constraints")
-    if system.n_contacts:
-        gap = model.gaps(q0)
-        bad = np.flatnonzero(gap < -gap_tol) if min(gap.tolist()) < -gap_tol else ()
-        if len(bad):
-            raise ValueError(f"q0 penetrates contact {bad[0]} (gap {gap[bad[0]]:.3g} < 0)")

@@ -51,6 +51,7 @@ from lcp.events.event_location import approach_gap, first_terminal_event, too_ma
 from lcp.events.model import EPS, coordinate_rows, mass_projection
 from lcp.events.options import EVENT_STATUS_MESSAGES
 from lcp.events.records import Event, EventResult, Impact, Impulse, Phase
+from lcp.model.start import consistent_start
 from lcp.events.spatial_modes import AccelDisk, SpatialModel, group_motions, impact_impulse
 
 __all__ = ["SpatialIntegrator", "SpatialPhase", "spatial_event_driven"]
@@ -558,15 +559,14 @@ def spatial_event_driven(system, q0, v0, t_end, opts, given, scene=None) -> Even
                              f"(the event method integrates their phases with solve_ivp and solves the disk "
                              f"problems itself); leave {name} at {default!r}")
     q0, v0 = system.check_state(q0, v0)
+    q0, v0, start_note = consistent_start(system, q0, v0)  # the one check of a start (lcp.model.start)
     rtol = opts.rtol if "rtol" in given else SPATIAL_RTOL
     atol = opts.atol if "atol" in given else SPATIAL_ATOL
     t_out = opts.output_times(t_end)
     integ = SpatialIntegrator(system, q0, v0, t_end, opts, rtol, atol)
-    gap = integ.model.gaps(q0)
-    if system.n_contacts and np.min(gap) < -integ.gap_tol:
-        j = int(np.argmin(gap))
-        raise ValueError(f"q0 penetrates contact {j} (gap {gap[j]:.3g} < 0)")
     phases, status, message, t_fail = integ.run(q0, v0)
+    if start_note is not None:
+        message = f"{message} {start_note}"
     for note in integ.notes:
         message = f"{message} {note}"
     if status < 0:

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lcp.model.conditioning import MOREAU_JEAN_LIMIT, mass_condition, reduced_condition, resolvable
+from lcp.model.start import consistent_start
 from lcp.timestepping import compiled_step as compiled
 from lcp.timestepping.activation import CLOSE_ULPS, OPEN_ULPS
 from lcp.timestepping.assembly import StepAssembly
@@ -158,7 +159,16 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     if not (isinstance(t_end, (int, float, np.floating)) and np.isfinite(t_end) and t_end > 0):
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
     q0, v0 = system.check_state(q0, v0)
-    unresolvable = resolvable(mass_condition(system, q0), MOREAU_JEAN_LIMIT)
+    q0, v0, note = consistent_start(system, q0, v0)  # ValueError beyond the start tolerance
+    result = flag_unresolvable(_run(system, q0, v0, t_end, options),
+                               resolvable(mass_condition(system, q0), MOREAU_JEAN_LIMIT))
+    if note is not None:
+        result.message = f"{result.message} {note}"
+    return result
+
+
+def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> SimulationResult:
+    """The body of :func:`moreau_jean` from a checked, consistent start."""
     h, th = float(options.h), float(options.theta)
     spatial = system.is_spatial
     solver = _spatial_solver(options) if spatial else make_solver(options.solver, **(options.solver_options or {}))
@@ -171,16 +181,14 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     proj = _projector(system, options)
     # the path, chosen once: the compiled paths only where nothing needs Python per step
     if options.fast and proj is None and solver.name in ("auto", "enum") and compiled.applicable(system):
-        return flag_unresolvable(run_compiled_step(asm, q0, v0, n_steps, every, solver.name), unresolvable)
+        return run_compiled_step(asm, q0, v0, n_steps, every, solver.name)
     if options.fast and proj is None and not spatial and system.n_contacts >= 2 and system.is_constant:
         # imported here: numba loads only where the compiled loop may run
         from lcp.timestepping import compiled_loop
 
         if compiled_loop.applicable(asm, solver, options):
-            res = compiled_loop.moreau_jean_loop(asm, q0, v0, n_steps, every, solver, options.fallback)
-            return flag_unresolvable(res, unresolvable)
-    res = run_python_loop(system, asm, q0, v0, h, th, n_steps, every, solver, options.fallback, proj)
-    return flag_unresolvable(res, unresolvable)
+            return compiled_loop.moreau_jean_loop(asm, q0, v0, n_steps, every, solver, options.fallback)
+    return run_python_loop(system, asm, q0, v0, h, th, n_steps, every, solver, options.fallback, proj)
 
 
 

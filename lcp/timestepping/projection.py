@@ -14,17 +14,26 @@ corrections of the constraints linearized at the current iterate,
 
     dq = A^-1 J' mu,   (J A^-1 J') mu = -r,   J = [G; H_N,W],   r = [phi(t, q); g_W(q)],
 
-where W is a working set of contacts held at g_j = 0. The contacts closed in the step (a normal
-impulse p_N > 0 and no bounce: the position-level form of 0 <= g_j perp p_N,j >= 0) are held at
-g_j = 0 as equalities, so that a loaded pivot or a curved resting contact neither sinks nor drifts
-open. Any other contact enters W when its gap is negative beyond the tolerance, and leaves it when
-its multiplier mu_j would pull (mu_j < 0): for those the result solves the inequality-constrained
-problem (the convex QP's optimality conditions), and an open or separating contact is never pulled
-shut. W is carried from one step to the next, so that a resting contact costs no extra evaluation.
+where W is a working set of contacts held at g_j = 0. The projection acts on the bilateral
+constraints and on the contacts closed in the step (a normal impulse p_N > 0, no bounce, and a
+normal velocity after the step that does not separate: the position-level form of
+0 <= g_j perp p_N,j >= 0), held at g_j = 0 as equalities, so that a loaded pivot or a curved resting
+contact neither sinks nor drifts open. A contact whose normal velocity separates after the step
+(or that bounced by restitution) is *opening*: it is left alone whatever its gap, never pulled shut
+nor pushed out (its own motion opens it; a cam follower thrown off at 16 m/s was held on the cam).
+Any other contact enters W when its gap is negative beyond the tolerance, and leaves it when its
+multiplier mu_j would pull (mu_j < 0). W starts afresh at every call: nothing of a previous step's
+working set is carried over (a contact that entered it once was pulled shut from 2 mm away in the
+next call).
 
 Converged when |phi_i| <= tol s_i and g_j >= -tol s_j (contacts in W: |g_j| <= tol s_j), with
-s_i = sum_k |J_ik q_k| the size of the terms of the linearized constraint (for x^2 + y^2 - L^2,
-s = 2 L^2: the relative length error is at most tol).
+
+    s_i = sum_k |J_ik| (|q_k| + L_k) + |r_i(t, 0)|,
+
+the size of the terms of the linearized constraint (for x^2 + y^2 - L^2, about 3 L^2), its own
+constant r_i(t, 0) (a floor's height), and L the lengths of the coordinates: the system's length
+(:func:`lcp.model.start.system_length`) plus the step's motion h |v|. With |J||q| alone the scale
+vanished at q = 0, where a gap of -1e-199 was "not converged".
 
 Cost: the whole Newton update (two iterations, unrolled) and the residuals and scales at its result
 are one CasADi Function evaluated through a preallocated buffer, so a step that needs no working-set
@@ -84,17 +93,18 @@ def _needs_projection(system) -> bool:
 
 
 def _update_function(system, iterations: int) -> ca.Function:
-    """(t, q, w) -> (q_new, r, s, pull): ``iterations`` Newton steps towards phi = 0 and g_W = 0 (w
-    is the 0/1 mask of the working set), then the residuals r = [phi; g] and scales s at q_new, and
-    the multipliers of the last step in length units, mu_j (J A^-1 J')_jj (zero outside W; negative
-    where the row pulls)."""
+    """(t, q, w, L) -> (q_new, r, s, pull): ``iterations`` Newton steps towards phi = 0 and g_W = 0
+    (w is the 0/1 mask of the working set), then the residuals r = [phi; g] and scales
+    s = |J| (|q_new| + L) + |r(t, 0)| at q_new (L: the lengths of the coordinates, module docstring),
+    and the multipliers of the last step in length units, mu_j (J A^-1 J')_jj (zero outside W;
+    negative where the row pulls)."""
     n, nb, m = system.n, system.n_bilateral, system.n_contacts
     sym = ca.SX if n + nb + m <= _SX_MAX_SIZE else ca.MX
     qs, ts = system.q_sym, system.t_sym
     J_expr = ca.vertcat(ca.jacobian(system.constraints_expr, qs), system.H_expr[:m, :])
     data = ca.Function("projection_data", [ts, qs],
                        [system.mass_expr, ca.vertcat(system.constraints_expr, system.gap_expr), J_expr])
-    t, q, w = sym.sym("t"), sym.sym("q", n), sym.sym("w", m)
+    t, q, w, L = sym.sym("t"), sym.sym("q", n), sym.sym("w", m), sym.sym("L", n)
     mask = ca.vertcat(sym.ones(nb), w)
     free = ca.diag(1 - mask)  # rows outside W: mu = 0 there
     mu, d = sym.zeros(nb + m), sym.zeros(nb + m)
@@ -110,8 +120,9 @@ def _update_function(system, iterations: int) -> ca.Function:
         d = ca.diag(S)
         qk = qk + AiJt @ mu
     _, r, J = data(t, qk)
-    s = ca.mtimes(ca.fabs(J), ca.fabs(qk))
-    return ca.Function("position_projection", [t, q, w], [qk, r, s, mu * d], ["t", "q", "w"],
+    _, r0, _ = data(t, sym.zeros(n))  # the rows' own constants (a floor's height, a rod's length squared)
+    s = ca.mtimes(ca.fabs(J), ca.fabs(qk) + L) + ca.fabs(r0)
+    return ca.Function("position_projection", [t, q, w, L], [qk, r, s, mu * d], ["t", "q", "w", "L"],
                        ["q_new", "r", "s", "pull"])
 
 
@@ -153,15 +164,19 @@ class PositionProjection:
         self._t = np.zeros(1)
         self._q = np.zeros(self.n)
         self._w = np.zeros(self.m)
+        self._L = np.zeros(self.n)
         self._qo, self._r, self._s, self._mu = np.zeros(self.n), np.zeros(k), np.zeros(k), np.zeros(k)
-        for i, a in enumerate((self._t, self._q, self._w)):
+        for i, a in enumerate((self._t, self._q, self._w, self._L)):
             self._buf.set_arg(i, memoryview(a))
         for i, a in enumerate((self._qo, self._r, self._s, self._mu)):
             self._buf.set_res(i, memoryview(a))
-        self.working = np.zeros(self.m, dtype=bool)  # carried from step to step
+        self.length = None  # the system's length (lcp.model.start.system_length), found at the first call
+        self.working = np.zeros(self.m, dtype=bool)  # the last call's working set (never carried over)
 
-    def project(self, t: float, q: np.ndarray, closed=None):
-        """Project q at time t; ``closed`` (bool mask over the contacts, optional) are held at g = 0.
+    def project(self, t: float, q: np.ndarray, closed=None, opening=None, lengths=None):
+        """Project q at time t; ``closed`` (bool mask over the contacts, optional) are held at g = 0,
+        ``opening`` (bool mask) are left alone whatever their gap; ``lengths`` (scalar or one per
+        coordinate) is L of the tolerance's scale (module docstring), by default the system's length.
 
         Returns
         -------
@@ -176,8 +191,17 @@ class PositionProjection:
         nb, tol = self.nb, self.tol
         self._t[0] = t
         self._q[:] = q
+        if lengths is None:
+            if self.length is None:
+                from lcp.model.start import system_length
+
+                self.length = system_length(self.sys, q, t)
+            lengths = self.length
+        self._L[:] = lengths
         hold = np.zeros(self.m, dtype=bool) if closed is None else np.asarray(closed, dtype=bool)
-        w = self.working | hold
+        free = np.ones(self.m, dtype=bool) if opening is None else ~np.asarray(opening, dtype=bool)
+        hold = hold & free
+        w = hold.copy()
         ok = False
         evals = 0
         while evals < self.max_evals:
@@ -189,7 +213,7 @@ class PositionProjection:
             if self.m:
                 g, lg = r[nb:], lim[nb:]
                 pull = w & ~hold & (self._mu[nb:] < -lg)  # would pull the gap shut by more than tol
-                pen = ~w & (g < -lg)
+                pen = ~w & free & (g < -lg)  # an opening contact is never moved: its motion opens it
                 closed_ok = bool(np.all(np.abs(g[w]) <= lg[w])) if w.any() else True
                 changed = bool(pull.any() or pen.any())
                 if changed:
@@ -200,14 +224,14 @@ class PositionProjection:
             if bil_ok and closed_ok and not changed:
                 ok = True
                 break
-        self.working = w & ~hold
+        self.working = w
         violation = float(np.max(np.abs(self._r[:nb]))) if nb else 0.0
         if self.m:
             violation = max(violation, float(-np.min(self._r[nb:])), 0.0)
         return self._qo.copy(), ok, evals * NEWTON_PER_EVAL, violation
 
     def reset(self):
-        """Forget the working set (a new run)."""
+        """Forget the last call's working set (nothing of it is used by the next call)."""
         self.working = np.zeros(self.m, dtype=bool)
 
 

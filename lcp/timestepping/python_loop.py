@@ -17,7 +17,7 @@ import numpy as np
 
 from lcp.contact.problem import MODE_NAMES, ModeArray
 from lcp.result import STATUS_MESSAGES, SimulationResult
-from lcp.timestepping.activation import Activation
+from lcp.timestepping.activation import CLOSE_ULPS, EPS, Activation
 from lcp.timestepping.assembly import kahan_add
 from lcp.timestepping.force_check import StepRejected
 from lcp.timestepping.contact_step import ContactStep
@@ -70,6 +70,11 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
     step = ContactStep(system, asm, solver, fallback, notes)
     activation = Activation(asm, m)
     closed = np.zeros(m, dtype=bool)  # contacts closed in the step, held at g = 0 by the projection
+    loaded = np.zeros(m, dtype=bool)  # loaded in the step and not bounced off (restitution)
+    if proj is not None:
+        from lcp.model.start import system_length
+
+        ell = system_length(system, q0)  # the system's length, part of the projection's tolerance
     worst = violation_function(system)(q0[None, :], np.zeros(1)) if proj is not None else 0.0
     k_done = 0
     for k in range(n_steps):
@@ -93,7 +98,7 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
             stats.free_steps += 1
             if m:
                 activation.release()
-                closed[:] = False
+                loaded[:] = False
         else:
             dv, p, md, cols, sol = step.solve(k, tk, active, v, vfree, dvf, SHt, W, H, uN_minus)
             if dv is None:
@@ -106,9 +111,9 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
                 record_impacts(impacts, tk, h, active, pa, p[active.size:], activation.loaded, gap, uN_minus,
                                uN_free, names, dims)
             activation.carried(active, pa)
-            if proj is not None:  # closed in this step: loaded, and not bounced off (restitution)
-                closed[:] = False
-                closed[active] = (pa > 0) & ((e[active] == 0) | (uN_minus[active] >= 0))
+            if proj is not None:  # loaded in this step, and not bounced off (restitution)
+                loaded[:] = False
+                loaded[active] = (pa > 0) & ((e[active] == 0) | (uN_minus[active] >= 0))
             if row >= 0:
                 PN[row, active] = pa
                 PT[row, cols] = p[active.size:]
@@ -124,7 +129,16 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
             message = f"{STATUS_MESSAGES[-2]} Step {k} (t = {tk:.10g})."
             break
         if proj is not None:
-            q_proj, ok, iters, viol = proj.project(tk + h, q, closed)
+            # a contact whose normal velocity separates after the step (beyond rounding) is opening:
+            # the projection neither holds it nor pushes it (its motion opens it); closed in this
+            # step: loaded and not opening
+            if m:
+                HN = H[:m]
+                opening = HN @ v > (CLOSE_ULPS * EPS) * (np.abs(HN) @ np.abs(v))
+                np.logical_and(loaded, ~opening, out=closed)
+            else:
+                opening = None
+            q_proj, ok, iters, viol = proj.project(tk + h, q, closed, opening, ell + h * np.abs(v))
             stats.projections += 1
             stats.projection_iterations += iters
             if not ok or not math.isfinite(viol):
