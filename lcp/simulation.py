@@ -32,7 +32,8 @@ def simulate(scene: Scene | System, t_end: float | None = None, h: float = 1e-3,
              v0: ArrayLike | None = None, solver_options: dict | None = None, fallback: bool = True,
              save_every: int = 1, fast: bool = True, allow_large_step: bool = False,
              control: ControlSchedule | None = None, projection: bool | str = "auto",
-             projection_tol: float = 1e-12, **method_options) -> SimulationResult | EventResult:
+             projection_tol: float = 1e-12, scheme: str = "moreau-jean",
+             **method_options) -> SimulationResult | EventResult:
     """Simulate a scene (or a bare :class:`~lcp.model.system.System` with ``q0`` and ``v0``).
 
     Parameters
@@ -68,7 +69,15 @@ def simulate(scene: Scene | System, t_end: float | None = None, h: float = 1e-3,
         Moreau-Jean only: project the positions onto the constraints after each step
         (:mod:`lcp.timestepping.projection`); ``"auto"`` does it where a constraint is nonlinear in q.
     projection_tol : float
-        Relative tolerance of that projection.
+        Relative tolerance of that projection (and of SHAKE under ``scheme="order2"``).
+    scheme : {"moreau-jean", "order2"}
+        Moreau-Jean only: ``"moreau-jean"`` (the default) takes every step by the theta-method,
+        of order one on smooth motion with nonlinear constraints or a q-dependent mass matrix.
+        ``"order2"`` takes the steps in which no contact acts by RATTLE (velocity Verlet with
+        SHAKE/RATTLE constraints: order two, no secular energy drift on conservative systems with a
+        constant mass matrix) and the others by the same Moreau-Jean step, so impacts, sticking
+        and sliding keep their velocity-level impulses (docs/numerical_methods.md, "The order-two
+        scheme"). Runs in the Python loop; forces are explicit there (stable for h omega < 2).
     allow_large_step : bool
         Moreau-Jean only: accept a step h larger than the horizon (one step then overshoots
         ``t_end``). Without it such an h is taken for a mistake and raises.
@@ -111,7 +120,7 @@ def simulate(scene: Scene | System, t_end: float | None = None, h: float = 1e-3,
     if model is not None:
         result = _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, solver_options,
                                       fallback, save_every, fast, allow_large_step, projection,
-                                      projection_tol, method_options)
+                                      projection_tol, method_options, scheme)
         if result is not None:
             return result
         system = scene.system  # a path the numbers alone do not serve: the CasADi model
@@ -129,7 +138,7 @@ def simulate(scene: Scene | System, t_end: float | None = None, h: float = 1e-3,
     # options a method ignores are still validated: a typo must not pass silently
     opts = MoreauJeanOptions(h=h, theta=theta, solver=solver, solver_options=solver_options,
                              fallback=fallback, save_every=save_every, fast=fast, projection=projection,
-                             projection_tol=projection_tol)
+                             projection_tol=projection_tol, scheme=scheme)
     if method == "moreau-jean":
         if h > t_end and not allow_large_step:
             raise ValueError(f"h = {h!r} is larger than the horizon t_end = {t_end!r}; pass "
@@ -145,7 +154,8 @@ def simulate(scene: Scene | System, t_end: float | None = None, h: float = 1e-3,
 
 
 def _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, solver_options, fallback,
-                         save_every, fast, allow_large_step, projection, projection_tol, method_options):
+                         save_every, fast, allow_large_step, projection, projection_tol, method_options,
+                         scheme="moreau-jean"):
     """The paths that run from a scene's :class:`~lcp.timestepping.constant_model.ConstantModel` alone (no CasADi
     work): the compiled single-contact Moreau-Jean step and the closed-form single-contact event
     path. None when neither applies (the caller then builds the System and takes the general path),
@@ -154,14 +164,14 @@ def _from_constant_model(model, scene, q0, v0, t_end, h, theta, solver, method, 
         raise ValueError(f"unknown method {method!r}; known methods: {sorted(METHODS)}")
     if not isinstance(t_end, (int, float, np.floating)) or not np.isfinite(t_end) or t_end <= 0:
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
-    if method == "event" and _plain_moreau_jean_options(h, theta, solver, solver_options, save_every, projection,
-                                                        projection_tol) \
+    if method == "event" and scheme == "moreau-jean" and _plain_moreau_jean_options(
+            h, theta, solver, solver_options, save_every, projection, projection_tol) \
             and isinstance(fallback, (bool, np.bool_)) and isinstance(fast, (bool, np.bool_)):
         opts = None  # valid, and unused by the event method: no need to build them
     else:
         opts = MoreauJeanOptions(h=h, theta=theta, solver=solver, solver_options=solver_options,
                                  fallback=fallback, save_every=save_every, fast=fast, projection=projection,
-                                 projection_tol=projection_tol)
+                                 projection_tol=projection_tol, scheme=scheme)
     q0, v0 = _check_state(model, q0, v0)
     note = None
     if not model.nb:  # with bilateral constraints no path here applies: the general path checks the start

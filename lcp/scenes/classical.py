@@ -17,7 +17,9 @@ Each builder returns a :class:`lcp.scenes.Scene` (system, initial state, horizon
 - :func:`box_on_corners`: a box on its two bottom corners under a ramp force P = c t applied on
   its side; it slides (exact) or tips about its front corner (reference: ``solve_ivp``);
 - :func:`rocking_block`: Housner's rocking block (e = 0, no slip): rotation about a corner, and at
-  each impact theta' <- (1 - 3/2 sin^2 alpha) theta' (reference: ``solve_ivp`` with events).
+  each impact theta' <- (1 - 3/2 sin^2 alpha) theta' (reference: ``solve_ivp`` with events);
+- :func:`slider_crank` (from :mod:`lcp.scenes.slider_crank`): a slider-crank with a q-dependent mass
+  matrix and nonlinear loop-closure constraints (reference: ``solve_ivp`` of the reduced equation).
 
 The references are derived here, independently of the simulators, so that tests can compare.
 """
@@ -32,6 +34,7 @@ from lcp.scenes.jean_pratt_exact import Segment
 from lcp.model.forces import point_force
 from lcp.scenes.scene import Scene
 from lcp.model.system import Contact, System
+from lcp.scenes.slider_crank import SliderCrankReference, slider_crank
 
 __all__ = [
     "BouncingBallExact",
@@ -40,12 +43,14 @@ __all__ = [
     "PendulumExact",
     "PiecewiseQuadratic",
     "RockingReference",
+    "SliderCrankReference",
     "bouncing_ball",
     "box_on_corners",
     "incline",
     "painleve_rod",
     "pendulum",
     "rocking_block",
+    "slider_crank",
     "stacked_blocks",
 ]
 

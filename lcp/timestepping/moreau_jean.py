@@ -41,6 +41,7 @@ from lcp.timestepping.assembly import StepAssembly
 from lcp.timestepping.outcome import compiled_step_result
 from lcp.timestepping.projection import PositionProjection, needs_projection
 from lcp.timestepping.python_loop import run_python_loop
+from lcp.timestepping.second_order import SCHEMES, run_second_order
 from lcp.result import SimulationResult, flag_unresolvable
 from lcp.contact.solvers import SOLVERS, OneStepSolver, make_solver
 
@@ -79,6 +80,10 @@ class MoreauJeanOptions:
         False: never.
     projection_tol : float
         Relative tolerance of the projection, in [1e-15, 1) (see :mod:`lcp.timestepping.projection`).
+    scheme : {"moreau-jean", "order2"}
+        ``"moreau-jean"`` (the default): every step by the theta-method. ``"order2"``: the steps
+        without an active contact by RATTLE, of order two on smooth constrained motion, the others
+        by the same Moreau-Jean step (:mod:`lcp.timestepping.second_order`); Python loop only.
     """
 
     h: float
@@ -90,6 +95,7 @@ class MoreauJeanOptions:
     fast: bool = True
     projection: bool | str = "auto"
     projection_tol: float = 1e-12
+    scheme: str = "moreau-jean"
 
     def __post_init__(self):
         h = self.h
@@ -115,6 +121,8 @@ class MoreauJeanOptions:
         tol = self.projection_tol
         if not isinstance(tol, (int, float, np.floating)) or not 1e-15 <= tol < 1:
             raise ValueError(f"projection_tol must lie in [1e-15, 1), got {tol!r}")
+        if not isinstance(self.scheme, str) or self.scheme not in SCHEMES:
+            raise ValueError(f"scheme must be one of {list(SCHEMES)}, got {self.scheme!r}")
 
 
 def _cone_solvers() -> dict:
@@ -179,6 +187,9 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
     except FloatingPointError as exc:
         raise ValueError(str(exc)) from exc
     proj = _projector(system, options)
+    if options.scheme == "order2":
+        return run_second_order(system, asm, q0, v0, h, th, n_steps, every, solver, options.fallback, proj,
+                                float(options.projection_tol))
     # the path, chosen once: the compiled paths only where nothing needs Python per step
     if options.fast and proj is None and solver.name in ("auto", "enum") and compiled.applicable(system):
         return run_compiled_step(asm, q0, v0, n_steps, every, solver.name)
@@ -205,7 +216,8 @@ def model_path_applies(model, options: MoreauJeanOptions) -> bool:
     """Whether :func:`moreau_jean_from_model` serves a run: the compiled single-contact step
     (``fast``, the closed-form solver by name without options, one contact, no bilateral
     constraint, no projection asked for)."""
-    return bool(options.fast and options.solver in ("auto", "enum") and not options.solver_options
+    return bool(options.fast and options.scheme == "moreau-jean" and options.solver in ("auto", "enum")
+                and not options.solver_options
                 and model.m == 1 and not model.nb and options.projection in ("auto", False))
 
 
