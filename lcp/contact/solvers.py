@@ -75,18 +75,18 @@ class StepSolution:
 class OneStepSolver:
     """Base class: solve a ContactProblem, then check the Coulomb law independently.
 
-    Parameters
-    ----------
-    residual_tol : float
-        Largest accepted Coulomb residual, relative to the larger of the problem's impulse scale
-        and the largest impulse of the solution.
-
     Every solution also carries its normalised natural-map error (``StepSolution.error``,
     Siconos's measure). An exact solver's answer above :attr:`error_target` (``error_tol`` where
     the solver takes one, else ``residual_tol``) has stopped short by that measure: status -1,
     with the error in the message. The two measures differ where the problem's impulse scale
     (``ContactProblem.scale``, the impulse that would cancel each contact's free velocity alone)
     is far above the impulses of the solution, as with redundant contacts.
+
+    Parameters
+    ----------
+    residual_tol : float
+        Largest accepted Coulomb residual, relative to the larger of the problem's impulse scale
+        and the largest impulse of the solution.
     """
 
     name = "base"

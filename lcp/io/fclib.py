@@ -94,7 +94,8 @@ class ContactFile:
     q : ndarray, shape (d k,)
     mu : ndarray, shape (k,)
     form : {"local", "global"}
-    M, H, f, w : global data when ``form == "global"`` (else None)
+    M, H, f, w : scipy.sparse matrix, scipy.sparse matrix, ndarray, ndarray, or None
+        The global data when ``form == "global"`` (else None).
     name : str
     storage : str
         How the file stored its matrix ("dense", "sparse-block", "csparse-triplet", "csc", ...).

@@ -175,7 +175,7 @@ class OCPResult(StepImpulses):
     steps : ndarray, shape (N,)
         Step lengths.
     p_N, p_T : ndarray, shape (N, m)
-        Contact impulses per step; :attr:`N` and :attr:`f` are the mean forces p / h.
+        Contact impulses per step; :attr:`~lcp.ocp.results.OCPResult.N` and :attr:`~lcp.ocp.results.OCPResult.f` are the mean forces p / h.
     modes : ndarray of int8, shape (N, m)
         Contact mode per step (:data:`lcp.contact.problem.MODE_NAMES`).
     T, h : float
