@@ -110,5 +110,19 @@ def escape_bars(app, what, name, obj, options, lines):
             literal_indent = indent
 
 
+# A type such as "ndarray, shape (N, m)" names the array's shape with the symbols of the text, not
+# with Python objects: Sphinx would look each word up (N, m, k, ...) as a cross-reference and find
+# the attributes of that name on other classes. The shape is written as a literal instead.
+_TYPE_FIELD = re.compile(r"^(\s*:(?:vartype|type|rtype)(?: [^:]+)?: )(.*\bshape\b.*)$")
+
+
+def literal_shapes(app, what, name, obj, options, lines):
+    for i, line in enumerate(lines):
+        m = _TYPE_FIELD.match(line)
+        if m and "`" not in m.group(2):
+            lines[i] = m.group(1) + "``" + m.group(2) + "``"
+
+
 def setup(app):
     app.connect("autodoc-process-docstring", escape_bars)
+    app.connect("autodoc-process-docstring", literal_shapes)

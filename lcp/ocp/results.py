@@ -31,8 +31,10 @@ class Step:
         linear in between for the linear hold.
     p_N, p_T : casadi.SX, shape (m, 1)
         Contact impulses over the step.
-    N, f : casadi.SX, shape (m, 1)
-        Mean normal and friction forces over the step, p_N / h and p_T / h.
+    N : casadi.SX, shape (m, 1)
+        Mean normal force over the step, p_N / h.
+    f : casadi.SX, shape (m, 1)
+        Mean friction force over the step, p_T / h.
     """
 
     k: int
