@@ -20,7 +20,7 @@ PACKAGE = ROOT / "lcp"
 #: the layers, bottom to top: a module may import its own unit and the units of lower layers
 LAYERS: list[tuple[str, ...]] = [
     ("lcp.numerics",),
-    ("lcp.model", "lcp.contact"),
+    ("lcp.model", "lcp.contact", "lcp.plotting"),
     ("lcp.io", "lcp.result"),
     ("lcp.timestepping",),
     ("lcp.events",),

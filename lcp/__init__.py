@@ -39,6 +39,7 @@ _EXPORTS = {
     "fclib": ("lcp.fclib", None),
     "batch": ("lcp.batch", None),
     "classical": ("lcp.classical", None),
+    "plotting": ("lcp.plotting", None),
 }
 
 __all__ = sorted(_EXPORTS)

@@ -114,7 +114,7 @@ class SimulationResult(StepImpulses):
         Coordinates and velocities (v is the right limit v+ at each time).
     p_N, p_T : ndarray, shape (n_points - 1, m)
         Normal and tangential contact impulses over each step (zero for inactive contacts). The
-        mean contact forces over a step are ``p_N / h`` and ``p_T / h`` (:attr:`N`, :attr:`f`).
+        mean contact forces over a step are ``p_N / h`` and ``p_T / h`` (:attr:`~lcp.result.StepImpulses.N`, :attr:`~lcp.result.StepImpulses.f`).
         With spatial contacts ``p_T`` has one column per tangent row, shape (n_points - 1,
         n_tangent): contact j's components are columns ``system.tangent_offsets[j]`` to
         ``system.tangent_offsets[j + 1]``.
@@ -166,6 +166,24 @@ class SimulationResult(StepImpulses):
         if callable(self.violation):
             self.violation = float(self.violation())
         return float(self.violation)
+
+    def plot(self, system=None, **kwargs):
+        """Draw the result against time: coordinates, velocities, contact forces and modes.
+
+        Parameters
+        ----------
+        system : System, optional
+            Names the coordinates and the contacts in the legends.
+        **kwargs
+            ``names``, ``exact``, ``fig``: see :func:`lcp.plotting.plot_result`.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from lcp.plotting import plot_result
+
+        return plot_result(self, system, **kwargs)
 
     def __repr__(self) -> str:
         return (f"SimulationResult(method={self.method!r}, solver={self.solver!r}, h={self.h:g}, "

@@ -102,9 +102,10 @@ def floored(ax, x, y, floor: float, fmt: str = "o-", label: str | None = None, *
     if zero.any():
         ax.plot(x[zero], np.full(zero.sum(), floor), "x", color=color, ms=7,
                 label=f"{label}: exactly 0" if label else None)
-    if (tiny.any() or zero.any()) and not getattr(ax, "_floor_noted", False):
-        # the note is a legend entry (a proxy without data, which legend() keeps), so that it sits
-        # beside the axes and never over the markers it explains
-        ax.plot([], [], " ", label=f"markers at {floor:g}: ▽ below {floor:g}, × exactly 0")
+    if label is None and (tiny.any() or zero.any()) and not getattr(ax, "_floor_noted", False):
+        # unlabelled series: the legend explains the floor's markers with the markers themselves
+        # (proxies without data, which legend() keeps)
+        ax.plot([], [], "v", color="0.3", mfc="none", ms=7, ls="none", label=f"below {floor:g} (drawn at it)")
+        ax.plot([], [], "x", color="0.3", ms=7, ls="none", label=f"exactly 0 (drawn at {floor:g})")
         ax._floor_noted = True
     return line

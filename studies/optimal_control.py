@@ -390,14 +390,38 @@ def _trajectory_panels(axes, v: dict, title: str, u_max: float, lower_visible: b
     axes[3].set_xlabel("time t [s]; contact mode per step")
 
 
+#: widest figure, inches: at the study's 130 dpi about 2000 px, readable at normal size
+MAX_WIDTH_IN = 15.0
+
+
+def _checked_title(title: str, res) -> str:
+    """The panel title, with a warning when the replay did not confirm the solution."""
+    if res.replay is None:
+        return title + "\nUNCHECKED: not replayed"
+    if not res.success:
+        return title + f"\nREPLAY FAILED (miss {res.replay.final_miss:.1e}): not a solution"
+    return title
+
+
 def _fig_trajectories(cases, path, suptitle):
-    """cases: list of (v, title, u_max). One column per case."""
-    fig, axes = plt.subplots(4, len(cases), figsize=(5.2 * len(cases), 12), sharex="col", squeeze=False,
-                             gridspec_kw={"height_ratios": [1, 1, 1, 0.45]})
+    """cases: list of (v, title, u_max). One column per case, at most three columns to a row."""
+    ncol = min(3, len(cases))
+    nrow = -(-len(cases) // ncol)
+    fig, axes = plt.subplots(4 * nrow, ncol, figsize=(min(5.0 * ncol, MAX_WIDTH_IN), 11 * nrow), squeeze=False,
+                             gridspec_kw={"height_ratios": [1, 1, 1, 0.45] * nrow})
     for j, (v, title, u_max) in enumerate(cases):
-        _trajectory_panels(axes[:, j], v, title, u_max)
+        r, c = divmod(j, ncol)
+        col = axes[4 * r:4 * r + 4, c]
+        _trajectory_panels(col, v, _checked_title(title, v["result"]), u_max)
+        if not v["result"].success:
+            for ax in col:
+                ax.set_facecolor("#fde8e8")
+    for j in range(len(cases), nrow * ncol):
+        r, c = divmod(j, ncol)
+        for ax in axes[4 * r:4 * r + 4, c]:
+            ax.axis("off")
     fig.suptitle(suptitle, fontsize=11)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.6 / (11 * nrow)))  # room for the suptitle above the titles
     return save(fig, path)
 
 
@@ -439,21 +463,47 @@ _PROBLEMS = {"min_time": "minimum time", "min_effort": "minimum effort", "hold":
 FLOOR = 1e-16
 
 
+def _floored(values):
+    """(plotted values, mask of exact zeros): values at or below FLOOR are drawn at FLOOR, and the
+    exact zeros among them are drawn apart (a cross on the floor), so they are not read as
+    round-off."""
+    a = np.abs(np.asarray(values, dtype=float))
+    return np.maximum(a, FLOOR), a == 0
+
+
 def _fig_convergence(rows, path):
-    """Per problem: replay miss (top) and relative gap of the objective (bottom) against N per method."""
-    fig, axes = plt.subplots(2, 3, figsize=(15, 8.5))
+    """Per problem: replay miss (top) and relative gap of the objective (bottom) against N per method.
+
+    Solutions whose replay failed (not solutions of the system) and unchecked ones are ringed in
+    red; an objective below the continuous optimum J* (possible only for such a solution, or for
+    a transcription that is not exact) is drawn with an open marker; exact zeros sit on the floor
+    as crosses."""
+    from matplotlib.lines import Line2D
+
+    fig, axes = plt.subplots(2, 3, figsize=(MAX_WIDTH_IN, 8.5))
+    any_failed = any_below = any_zero = False
     for j, (prob, label) in enumerate(_PROBLEMS.items()):
         for meth, (col, mk, ls) in _METHOD_STYLE.items():
             rr = sorted((r for r in rows if r["problem"] == prob and r["method"] == meth), key=lambda r: r["N"])
             if not rr:
                 continue
-            N = [r["N"] for r in rr]
-            axes[0, j].loglog(N, np.maximum([r["final_miss"] for r in rr], FLOOR), mk + ls, color=col, label=meth)
-            axes[1, j].loglog(N, np.maximum(np.abs([r["rel_gap"] for r in rr]), FLOOR), mk + ls, color=col,
-                              label=meth + " (open: below J*)")
-            below = [(n, abs(r["rel_gap"])) for n, r in zip(N, rr) if r["rel_gap"] < 0]
-            if below:
-                axes[1, j].loglog(*zip(*below), mk, color="white", ms=4)
+            N = np.array([r["N"] for r in rr])
+            for ax, key in ((axes[0, j], "final_miss"), (axes[1, j], "rel_gap")):
+                y, zero = _floored([r[key] for r in rr])
+                ax.loglog(N, y, ls, color=col, lw=1)
+                ax.loglog(N[~zero], y[~zero], mk, color=col, ls="none", label=meth)
+                if zero.any():
+                    any_zero = True
+                    ax.loglog(N[zero], y[zero], "x", color=col, ms=8, mew=1.5, ls="none")
+                failed = np.array([not r.get("success", True) or r.get("replay_method", "x") in (None, "") for r in rr])
+                if failed.any():
+                    any_failed = True
+                    ax.loglog(N[failed], y[failed], "o", mfc="none", mec="red", mew=1.6, ms=13, ls="none")
+            below = np.array([r["rel_gap"] < 0 for r in rr])
+            if below.any():
+                any_below = True
+                yb, _ = _floored([r["rel_gap"] for r in rr])
+                axes[1, j].loglog(N[below], yb[below], mk, color="white", ms=4, ls="none")
         axes[0, j].axhline(REPLAY_TOL, color="k", ls=":", lw=1, label=f"replay_tol = {REPLAY_TOL:g} (success)")
         axes[0, j].set_title(f"{label}: replay miss of the final state", fontsize=10)
         axes[0, j].set_ylabel("max |x, xdot (opt) - (replay)| at T [m, m/s]")
@@ -465,12 +515,23 @@ def _fig_convergence(rows, path):
             ax.set_xticklabels([str(n) for n in Ns])
             ax.minorticks_off()
             ax.set_xlabel("control intervals N")
+            ax.axhline(FLOOR, color="0.7", lw=0.8, ls="-")
             _legend_below(ax, ncol=1)
-    note = f"values below {FLOOR:g} (round-off) are drawn at {FLOOR:g}"
-    if not any(r["method"] == NOSNOC for r in rows):
-        note += "; nosnoc (the optional peer, extra 'ocp-peers') is not installed: its series are skipped"
-    fig.text(0.5, 0.005, note, ha="center", fontsize=8)
-    fig.tight_layout()
+    keys = []
+    if any_failed:
+        keys.append((Line2D([], [], marker="o", mfc="none", mec="red", mew=1.6, ms=11, ls="none"),
+                     "replay failed or not replayed: not a solution of the system"))
+    if any_below:
+        keys.append((Line2D([], [], marker="s", mfc="white", mec="0.3", ls="none"),
+                     "open marker: objective below the optimum J*"))
+    if any_zero:
+        keys.append((Line2D([], [], marker="x", color="0.3", ls="none"), "exactly zero (drawn on the floor)"))
+    keys.append((Line2D([], [], color="0.7", lw=0.8), f"floor {FLOOR:g}: smaller values (round-off) drawn on it"))
+    fig.legend(*zip(*keys), loc="lower center", ncol=len(keys), fontsize=8, frameon=False)
+    note = "" if any(r["method"] == NOSNOC for r in rows) else \
+        "nosnoc (the optional peer, extra 'ocp-peers') is not installed: its series are skipped"
+    fig.text(0.5, 0.03, note, ha="center", fontsize=8)
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
     return save(fig, path)
 
 
@@ -490,17 +551,23 @@ def _fig_homotopy(histories, N_hist, path):
     cols = {"min_time": "tab:red", "min_effort": "tab:green", "hold": "tab:purple", "shock": "tab:blue"}
     for prob, hist in histories.items():
         hs = [s for s in hist if s.sigma > 0]
-        ax.loglog([s.sigma for s in hs], [max(s.residual, FLOOR) for s in hs], "o-", color=cols[prob],
+        sig = np.array([s.sigma for s in hs])
+        y, zero = _floored([s.residual for s in hs])
+        ax.loglog(sig, y, "-", color=cols[prob], lw=1)
+        ax.loglog(sig[~zero], y[~zero], "o", color=cols[prob], ls="none",
                   label=f"{prob} ({sum(s.iterations for s in hist)} IPOPT it.)")
+        ax.loglog(sig[zero], y[zero], "x", color=cols[prob], ms=8, mew=1.5, ls="none")
         pol = [s for s in hist if s.sigma == 0]
         if pol:
-            ax.loglog([hs[-1].sigma * 0.1], [max(pol[0].residual, FLOOR)], "o", color=cols[prob], mfc="none", ms=9)
+            yp, zp = _floored([pol[0].residual])
+            ax.loglog([hs[-1].sigma * 0.1], yp, "x" if zp[0] else "o", color=cols[prob], mfc="none", ms=9)
     ax.axhline(1e-8, color="k", ls=":", lw=1, label="target 1e-8")
+    ax.axhline(FLOOR, color="0.7", lw=0.8, label=f"floor {FLOOR:g}; crosses: exactly zero")
+    ax.plot([], [], "o", color="0.3", mfc="none", ms=9, ls="none", label="polishing solve (sigma = 0)")
     ax.invert_xaxis()
-    ax.set_xlabel(r"Scholtes relaxation $\sigma$ [W] (open markers: polishing solve)")
+    ax.set_xlabel(r"Scholtes relaxation $\sigma$: bound on each product $a\,w$ (force $\times$ velocity) [W]")
     ax.set_ylabel("Coulomb residual (impulse) [N s]")
-    ax.set_title(f"homotopy history, free steps, constant hold (N = {N_hist}); residuals < {FLOOR:g} drawn at it",
-                 fontsize=9)
+    ax.set_title(f"homotopy history, free steps, constant hold (N = {N_hist})", fontsize=9)
     _legend_below(ax, ncol=2)
     fig.tight_layout()
     return save(fig, path)
@@ -509,11 +576,17 @@ def _fig_homotopy(histories, N_hist, path):
 def _fig_sweep(sweep, path):
     fig, ax = plt.subplots(figsize=(6, 4.5))
     k = [r["kappa"] for r in sweep]
-    ax.semilogy(k, [r["N0"] for r in sweep], "o-", color="0.4", label="uncontrolled peak N0 = (m+M)g/(1-kappa)")
-    ax.semilogy(k, [r["peak_uncontrolled"] for r in sweep], "x", color="k", ms=9, label="uncontrolled, simulated")
-    ax.semilogy(k, [r["peak_opt"] for r in sweep], "s-", color="tab:blue", label="optimal control: peak (optimizer)")
-    ax.semilogy(k, [r["peak_replay"] for r in sweep], "+", ms=12, color="tab:red", label="optimal control: peak (replay)")
-    ax.semilogy(k, [r["bound"] for r in sweep], ":", color="tab:blue", label="bound (m+M)g + Mt v0/T")
+    k = np.asarray(k, dtype=float)
+    dk = 0.012 * (np.ptp(k) if len(k) > 1 else 1.0)  # side by side: equal values stay visible
+    ax.semilogy(k - dk, [r["N0"] for r in sweep], "o", color="0.4", mfc="none", ms=8,
+                label="uncontrolled peak N0 = (m+M)g/(1-kappa)")
+    ax.semilogy(k - dk, [r["peak_uncontrolled"] for r in sweep], "x", color="k", ms=7, label="uncontrolled, simulated")
+    ax.semilogy(k + dk, [r["peak_opt"] for r in sweep], "s", color="tab:blue", mfc="none", ms=8,
+                label="optimal control: peak (optimizer)")
+    ax.semilogy(k + dk, [r["peak_replay"] for r in sweep], "+", ms=10, color="tab:red",
+                label="optimal control: peak (replay)")
+    ax.semilogy(k, [r["bound"] for r in sweep], "_", ms=16, mew=2, color="tab:blue", label="bound (m+M)g + Mt v0/T")
+    ax.set_xticks(k)
     ax.set_xlabel(r"shock number $\kappa$ = R M tan(alpha) / A [-]")
     ax.set_ylabel("peak normal force [N]")
     ax.set_title(f"stopping from v0 = {SHOCK['v0']} m/s by T = {SHOCK['T']} s", fontsize=10)

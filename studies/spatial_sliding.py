@@ -30,6 +30,7 @@ import math
 import time
 
 import matplotlib.pyplot as plt
+from matplotlib.ticker import LogLocator, NullFormatter
 import numpy as np
 
 import lcp
@@ -233,6 +234,9 @@ def plot_work_precision(rows, outdir):
                 floored(ax, x, y, FLOOR, fmt=fmt, label=method)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        # run times span less than a decade: matplotlib would label every minor tick, overprinted
+        ax.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 3.0), numticks=6))
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel("run time [s]")
         ax.set_ylabel("max |position - exact| [m]")
         ax.set_title(label)

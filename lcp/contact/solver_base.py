@@ -71,12 +71,6 @@ class StepSolution:
 class OneStepSolver:
     """Base class: solve a problem of the solver's law, then check the Coulomb law independently.
 
-    Parameters
-    ----------
-    residual_tol : float
-        Largest accepted Coulomb residual, relative to the larger of the problem's impulse scale
-        and the largest impulse of the solution.
-
     Every solution also carries its normalised natural-map error (``StepSolution.error``,
     Siconos's measure). An exact solver's answer above :attr:`error_target` (``error_tol`` where
     the solver takes one, else ``residual_tol``) has stopped short by that measure: status -1,
@@ -87,6 +81,12 @@ class OneStepSolver:
 
     A subclass sets ``name``, ``law`` (the law of the problems it takes; ``"planar"`` by default)
     and implements ``_solve``.
+
+    Parameters
+    ----------
+    residual_tol : float
+        Largest accepted Coulomb residual, relative to the larger of the problem's impulse scale
+        and the largest impulse of the solution.
     """
 
     name = "base"

@@ -16,7 +16,9 @@ impulse) is rejected with status -2.
   on ``problem.key``, finished by a branch refinement (:meth:`ConeContactProblem.refine_modes`).
 
 Polished solvers return a :class:`ConeStepSolution` whose ``modes`` are those of the refined
-impulse, so a time stepper needs neither a second refinement nor a second classification.
+impulse, so a time stepper needs neither a second refinement nor a second classification. The
+others:
+
 - ``"newton"``: NSGS sweeps, then semismooth Newton on the Alart-Curnier function with its exact
   generalized Jacobian (sparse LU when W is sparse), Armijo line search, to rounding level.
 - ``"tresca"``: the Tresca fixed point on the friction bound s = mu p_N: for fixed s the convex

@@ -93,8 +93,10 @@ RECORD_FIELDS = {cls: tuple(f.name for f in fields(cls)) for cls in (Event, Phas
 class EventResult(SimulationResult):
     """Result of :func:`event_driven`: a :class:`~lcp.result.SimulationResult` plus the events.
 
-    Attributes (besides those of SimulationResult)
-    ----------------------------------------------
+    The attributes below are those that differ from or add to :class:`~lcp.result.SimulationResult`'s.
+
+    Attributes
+    ----------
     t : ndarray, shape (n_points,)
         The requested output times (``t_eval``); q and v are exact-in-time values there (right
         limits at an impulse).
@@ -108,6 +110,7 @@ class EventResult(SimulationResult):
     t_events : list of float
         Times of the events (mode switches and impulses), in order.
     events : list of Event
+        Every event, in order.
     impulses : list of Impulse
         Every impulse: impacts, the tangential impacts of the impulsive fallback and the summed
         impulses of accumulations of impacts (kind ``"accumulation"``).

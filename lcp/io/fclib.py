@@ -94,7 +94,14 @@ class ContactFile:
     q : ndarray, shape (d k,)
     mu : ndarray, shape (k,)
     form : {"local", "global"}
-    M, H, f, w : global data when ``form == "global"`` (else None)
+    M : scipy.sparse matrix or None
+        Global data (when ``form == "global"``, else None): the mass matrix ...
+    H : scipy.sparse matrix or None
+        ... the contact matrix ...
+    f : ndarray or None
+        ... the force vector ...
+    w : ndarray or None
+        ... and the contact offset, of M v = H r + f, u = H' v + w.
     name : str
     storage : str
         How the file stored its matrix ("dense", "sparse-block", "csparse-triplet", "csc", ...).

@@ -31,8 +31,10 @@ class Step:
         linear in between for the linear hold.
     p_N, p_T : casadi.SX, shape (m, 1)
         Contact impulses over the step.
-    N, f : casadi.SX, shape (m, 1)
-        Mean normal and friction forces over the step, p_N / h and p_T / h.
+    N : casadi.SX, shape (m, 1)
+        Mean normal force over the step, p_N / h.
+    f : casadi.SX, shape (m, 1)
+        Mean friction force over the step, p_T / h.
     """
 
     k: int
@@ -180,7 +182,7 @@ class OCPResult(StepImpulses):
     steps : ndarray, shape (N,)
         Step lengths.
     p_N, p_T : ndarray, shape (N, m)
-        Contact impulses per step; :attr:`N` and :attr:`f` are the mean forces p / h.
+        Contact impulses per step; :attr:`~lcp.ocp.results.OCPResult.N` and :attr:`~lcp.ocp.results.OCPResult.f` are the mean forces p / h.
     modes : ndarray of int8, shape (N, m)
         Contact mode per step (:data:`lcp.contact.problem.MODE_NAMES`).
     T, h : float

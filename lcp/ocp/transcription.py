@@ -4,7 +4,7 @@ The unknowns are, at the nodes k = 0..N, the state (q_k, v_k); the control, one 
 (piecewise-constant hold, the default) or per node (linear hold); over each step k the contact
 impulses, lifted into the complementarity pairs of the discrete Coulomb law; and, with
 ``steps="free"``, the step lengths h_k (summing to T). Each step is one step of
-:mod:`lcp.timestepping` with the control's impulse integrated exactly over the step:
+:mod:`lcp.timestepping` with the control's impulse integrated exactly over the step::
 
     W_h (v_{k+1} - v_k) = r_k + H' p_k + G' lambda_k,     G v_{k+1} + phi_t = 0,
     q_{k+1} = q_k + h_k ((1 - theta) v_k + theta v_{k+1}),
@@ -18,7 +18,7 @@ with K = -dF/dq, C = -dF/dv at the step's start. :class:`lcp.timestepping.assemb
 optimizer's trajectory to round-off.
 
 The discrete Coulomb law of each contact is the LCP of
-:meth:`lcp.contact.problem.ContactProblem.to_lcp`, with p_T = h (beta+ - beta-):
+:meth:`lcp.contact.problem.ContactProblem.to_lcp`, with p_T = h (beta+ - beta-)::
 
     0 <= N      perp  wN = u_N + e min(u_N-, 0)    >= 0,
     0 <= beta+  perp  wp = lambda + u_T            >= 0,
