@@ -4,13 +4,15 @@ When the mass matrix, the contact kinematics and the (affine) forces are constan
 planar contact, a whole Moreau-Jean step is a fixed arithmetic expression: the free velocity is
 affine in the state, and the contact problem has the closed form :func:`~lcp.contact.problem.planar_enum`.
 CasADi builds that step as an SX Function, ``mapaccum`` chains it over a chunk of steps, and the
-chunk is compiled to C once per machine (cached by a hash of its source), so no Python runs per step.
+chunk is compiled to C once per machine (in the compiled-code cache, :mod:`lcp.numerics.cache`, by a
+hash of its source), so no Python runs per step.
 
 The step takes the state x = (q, v) and a vector c of per-scene constants (:func:`pack`), so the same
 compiled code serves one scene (:func:`simulate_compiled`) and many scenes at once (``lcp.sweeps.batch``).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 import functools
 import hashlib
 import math
@@ -20,13 +22,17 @@ import shutil
 import subprocess
 import sys
 import tempfile
+from typing import TypeVar
 
 import casadi as ca
 import numpy as np
 
 from lcp.contact.problem import CASADI_OPS, MODE_NAMES, planar_enum, planar_refine
+from lcp.numerics import cache
 
-__all__ = ["applicable", "pack", "step_function", "chunk_function", "simulate_compiled", "cache_dir"]
+__all__ = ["applicable", "pack", "step_function", "chunk_function", "simulate_compiled"]
+
+T = TypeVar("T")
 
 #: steps per compiled chunk: long enough that the per-call overhead (~10 us) vanishes per step
 CHUNK = 2000
@@ -160,15 +166,6 @@ def step_function(n: int, affine: bool = True, lean: bool = False) -> ca.Functio
                        ["x", "c"], ["x_next", "info"])
 
 
-def cache_dir() -> Path:
-    """Where compiled chunks are kept (``$LCP_LEM_CACHE``, else the user cache folder)."""
-    base = os.environ.get("LCP_LEM_CACHE")
-    if base:
-        return Path(base)
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    return (Path(xdg) if xdg else Path.home() / ".cache") / "lcp-lem"
-
-
 def c_compiler():
     return shutil.which(os.environ.get("CC", "gcc")) or shutil.which("cc")
 
@@ -200,41 +197,45 @@ def generate_c(fn: ca.Function) -> bytes:
         return src.read_bytes()
 
 
-def build_library(name: str, code: bytes, openmp: bool = False) -> Path | None:
-    """Compile C source to a shared library, cached per machine by a hash of source, flags and
-    versions. None when no working compiler is found."""
+def build_library(name: str, code: bytes, openmp: bool = False, load: Callable[[str], T] | None = None) -> T | None:
+    """Compile C source to a shared library in the compiled-code cache (:mod:`lcp.numerics.cache`)
+    and load it: ``load(path)`` (default :class:`ctypes.CDLL`).
+
+    The entry is named by a hash of source, flags and versions; it is built under an inter-process
+    lock into a temporary file beside it and moved into place, and an entry that fails to load
+    (truncated, corrupt) is rebuilt. None when no working compiler is found.
+    """
     cc = c_compiler()
     if cc is None:
         return None
+    if load is None:
+        import ctypes
+
+        load = ctypes.CDLL
     flags = ["-O3", "-fPIC", "-shared"] + (["-fopenmp"] if openmp else [])
     key = hashlib.sha256(code + " ".join(flags).encode() + sys.version.encode()
                          + ca.__version__.encode()).hexdigest()[:16]
-    lib = cache_dir() / f"{name}_{key}.so"
+    lib = cache.cache_dir() / f"{name}_{key}.so"
+
+    def build(part: Path) -> None:
+        fd, src = tempfile.mkstemp(dir=lib.parent, prefix=f".{name}.", suffix=".c")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(code)
+            subprocess.run([cc, *flags, src, "-o", str(part), "-lm"], check=True, capture_output=True, timeout=300)
+        finally:
+            os.unlink(src)
+
     try:
-        lib.parent.mkdir(parents=True, exist_ok=True)
-    except OSError:  # a read-only home: keep the cache in the temporary folder instead
-        lib = Path(tempfile.gettempdir()) / f"lcp-lem-{os.getuid() if hasattr(os, 'getuid') else 0}" / lib.name
-        lib.parent.mkdir(parents=True, exist_ok=True)
-    if not lib.exists():
-        # built beside the cache entry and renamed into place: os.replace is atomic within one file
-        # system, so parallel processes (Dask workers, pytest-xdist) never load a half-written library
-        with tempfile.TemporaryDirectory(dir=lib.parent) as tmp:
-            src = Path(tmp) / f"{name}.c"
-            src.write_bytes(code)
-            part = Path(tmp) / lib.name
-            try:
-                subprocess.run([cc, *flags, str(src), "-o", str(part), "-lm"],
-                               check=True, capture_output=True, timeout=300)
-            except (subprocess.SubprocessError, OSError):
-                return None
-            os.replace(part, lib)
-    return lib
+        return cache.cached_entry(lib, build, lambda path: load(str(path)))
+    except (subprocess.SubprocessError, OSError):  # no working compiler after all
+        return None
 
 
 def _compile(fn: ca.Function) -> ca.Function:
     """Compile a CasADi Function once per machine; the CasADi VM (slower, same results) without a compiler."""
-    lib = build_library(fn.name(), generate_c(fn))
-    return ca.external(fn.name(), str(lib)) if lib is not None else fn
+    ext = build_library(fn.name(), generate_c(fn), load=lambda path: ca.external(fn.name(), path))
+    return ext if ext is not None else fn
 
 
 #: C of each SX operation the lean step uses; comparisons give 0/1 like CasADi's
@@ -313,7 +314,7 @@ def batch_library(n: int, affine: bool = False):
     lib = build_library(name, soa_source(step, name).encode(), openmp=openmp)
     if lib is None:
         return None
-    fn = getattr(ctypes.CDLL(str(lib)), name)
+    fn = getattr(lib, name)
     dp = ctypes.POINTER(ctypes.c_double)
     fn.argtypes = [dp, dp, ctypes.c_long, ctypes.c_long, ctypes.c_long]
     fn.restype = None
@@ -386,7 +387,7 @@ def run_library(n: int, affine: bool = True):
     lib = build_library(name, generate_c(step) + driver.encode())
     if lib is None:
         return None
-    fn = getattr(ctypes.CDLL(str(lib)), name)
+    fn = getattr(lib, name)
     dp = ctypes.POINTER(ctypes.c_double)
     fn.argtypes = [dp, dp, ctypes.c_long, dp, dp]
     fn.restype = ctypes.c_long
