@@ -38,8 +38,8 @@ from lcp.timestepping.compiled_step import step_function
 __all__ = ["BLOCK", "kernel_source", "batch_kernel"]
 
 #: scenes per block: the block's state and constants (29 doubles per planar scene) stay in L1/L2
-#: over all its steps, and the loop over them is long enough for the vector lanes
-BLOCK = 256
+#: over all its steps (128 x 29 x 8 bytes = 30 kB: L1), and the loop over them is long enough for the vector lanes
+BLOCK = 128
 
 #: Python of each SX operation the lean step uses; comparisons give 1.0/0.0 like CasADi's, and
 #: fmax/fmin are the selects of C's ``a > b ? a : b`` (the same value for the step's arguments)
