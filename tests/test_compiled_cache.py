@@ -117,3 +117,11 @@ def test_fifty_processes_compile_the_same_code_at_once(tmp_path):
     res = race(50, tmp_path / "cache", tmp_path)
     assert res.crashes == 0, [e for e in res.stderr_tails if e.strip()][:3]
     assert None not in res.digests and len(set(res.digests)) == 1
+
+
+def test_numba_is_a_core_dependency():
+    """`pip install .` brings the compiled loops; the test extra does not have to."""
+    tomllib = pytest.importorskip("tomllib")
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert any(d.replace(" ", "").startswith("numba>=") for d in project["dependencies"])
+    assert project["optional-dependencies"]["fast"] == []  # kept so that old install lines work
