@@ -185,8 +185,9 @@ def build_library(name: str, code: bytes, load: Callable[[str], T] | None = None
     and load it: ``load(path)`` (default :class:`ctypes.CDLL`).
 
     The entry is named by a hash of source, flags and versions; it is built under an inter-process
-    lock into a temporary file beside it and moved into place, and an entry that fails to load
-    (truncated, corrupt) is rebuilt. None when no working compiler is found.
+    lock into a temporary file beside it and moved into place, and an entry whose content differs
+    from the digest recorded at its build (truncated, overwritten) is rebuilt, not loaded. None when
+    no working compiler is found.
     """
     cc = c_compiler()
     if cc is None:
