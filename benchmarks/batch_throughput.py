@@ -131,7 +131,7 @@ def _peak_div(x, reps):
     return x
 
 
-def peak(kernel, per_element, threads, reps=20000, width=256):
+def peak(kernel, per_element, threads, reps=100_000, width=256):
     """Operations per second of ``kernel`` on all threads (L1-resident arrays, one per thread)."""
     from concurrent.futures import ThreadPoolExecutor
 
@@ -141,6 +141,15 @@ def peak(kernel, per_element, threads, reps=20000, width=256):
     with ThreadPoolExecutor(threads) as pool:
         list(pool.map(lambda x: kernel(x, reps), xs))
     return threads * width * reps * per_element / (time.perf_counter() - t0)
+
+
+def limits(p_madd, p_div):
+    """The step's arithmetic limit in scene-steps/s, (low, high): every non-division operation on
+    the multiply/add pipes at ``p_madd`` per second, divisions at ``p_div``; the two in series
+    (low) or overlapped (high)."""
+    flops, div, other, _ = op_counts()
+    t_flop, t_div = (flops + other) / p_madd, div / p_div
+    return 1 / (t_flop + t_div), 1 / max(t_flop, t_div)
 
 
 def main(argv=None):
@@ -170,8 +179,10 @@ def main(argv=None):
         steps_np = max(10, int(2e6 // n))
         simulate_batch(c, 10 * h, h=h, path="compiled")  # compiled or loaded before timing
         rates = {"compiled": [], "compiled1": [], "numpy": []}
-        ratio, ratio1 = [], []
+        ratio, ratio1, frac_lo, frac_hi = [], [], [], []
         for _ in range(rounds):
+            # the machine's peak measured in the same round: the fraction of the limit is a ratio too
+            lim_lo, lim_hi = limits(peak(_peak_madd, 34, threads), peak(_peak_div, 8, threads))
             r_c = simulate_batch(c, steps * h, h=h, path="compiled")
             r_1 = simulate_batch(c, steps * h, h=h, path="compiled", threads=1)
             r_n = simulate_batch(c, steps_np * h, h=h, path="numpy")
@@ -180,10 +191,13 @@ def main(argv=None):
             rates["numpy"].append(r_n.scene_steps_per_second)
             ratio.append(rates["compiled"][-1] / rates["numpy"][-1])
             ratio1.append(rates["compiled1"][-1] / rates["numpy"][-1])
+            frac_lo.append(rates["compiled"][-1] / lim_lo)
+            frac_hi.append(rates["compiled"][-1] / lim_hi)
         rows.append(dict(scenes=n, steps=steps, steps_numpy=steps_np, threads=r_c.stats["threads"],
                          compiled=statistics.median(rates["compiled"]), compiled_1thread=statistics.median(rates["compiled1"]),
                          numpy=statistics.median(rates["numpy"]), ratio=statistics.median(ratio),
-                         ratio_1thread=statistics.median(ratio1), ratio_min=min(ratio)))
+                         ratio_1thread=statistics.median(ratio1), ratio_min=min(ratio),
+                         of_limit_overlapped=statistics.median(frac_hi), of_limit_in_series=statistics.median(frac_lo)))
         # checks on the last compiled run, and the two paths on the same steps
         r_cs = simulate_batch(c, steps_np * h, h=h, path="compiled")
         agree = float(max(np.max(np.abs(r_cs.q - r_n.q)), np.max(np.abs(r_cs.v - r_n.v))))
@@ -201,12 +215,7 @@ def main(argv=None):
     flops, div, other, ops = op_counts()
     p_madd = statistics.median(peak(_peak_madd, 34, threads) for _ in range(3))
     p_div = statistics.median(peak(_peak_div, 8, threads) for _ in range(3))
-    best = max(r["compiled"] for r in rows)
-    # limits: everything on the multiply/add pipes, divisions on theirs; the two overlapping (max)
-    # or not (sum) bracket the machine's arithmetic limit for this step
-    t_flop = (flops + other) / p_madd
-    t_div = div / p_div
-    lim_hi, lim_lo = 1 / max(t_flop, t_div), 1 / (t_flop + t_div)
+    lim_lo, lim_hi = limits(p_madd, p_div)
     load1 = os.getloadavg()
 
     args.out.mkdir(parents=True, exist_ok=True)
@@ -222,17 +231,19 @@ def main(argv=None):
           f"{threads} threads, load average before {tuple(round(x, 2) for x in load0)}, after "
           f"{tuple(round(x, 2) for x in load1)}; {rounds} alternating rounds, medians")
     print()
-    print("| scenes | compiled (scene-steps/s) | compiled, 1 thread | numpy | compiled / numpy (min) | 1 thread / numpy |")
-    print("|---|---|---|---|---|---|")
+    print("| scenes | compiled (scene-steps/s) | compiled, 1 thread | numpy | compiled / numpy (min) | 1 thread / numpy "
+          "| of the arithmetic limit |")
+    print("|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['scenes']} | {r['compiled']:.3g} | {r['compiled_1thread']:.3g} | {r['numpy']:.3g} | "
-              f"{r['ratio']:.1f}x ({r['ratio_min']:.1f}x) | {r['ratio_1thread']:.1f}x |")
+              f"{r['ratio']:.1f}x ({r['ratio_min']:.1f}x) | {r['ratio_1thread']:.1f}x | "
+              f"{r['of_limit_overlapped']:.0%} to {r['of_limit_in_series']:.0%} |")
     print()
     print(f"per scene-step: {flops} flops (add/sub/mul/neg), {div} divisions, {other} other vector ops "
           f"(comparisons, selects, abs, min/max); {dict(ops)}")
-    print(f"measured peak, {threads} threads: {p_madd:.3g} multiply/add flops/s, {p_div:.3g} divisions/s")
-    print(f"arithmetic limit of the step: {lim_lo:.3g} (pipes in series) to {lim_hi:.3g} (overlapped) scene-steps/s; "
-          f"best compiled {best:.3g} = {best / lim_hi:.0%} to {best / lim_lo:.0%} of it")
+    print(f"measured peak at the end, {threads} threads: {p_madd:.3g} multiply/add flops/s, {p_div:.3g} divisions/s: "
+          f"arithmetic limit of the step {lim_lo:.3g} (pipes in series) to {lim_hi:.3g} (overlapped) scene-steps/s "
+          f"(the table's fractions use the peaks measured in each round)")
     print(f"compile (fresh process, empty cache): {cold['compile_s']:.3g} s; load of the cached kernel "
           f"(fresh process): {warm['compile_s']:.3g} s; import of lcp.batch: {warm['import_s']:.3g} s")
     for line in checks:
