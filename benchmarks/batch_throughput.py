@@ -1,26 +1,25 @@
-"""Batch-mode throughput: 1e5 Jean-Pratt scenes with different parameters stepped together.
+"""Batch-mode throughput: Jean-Pratt scenes with different parameters stepped together.
 
-Run: ``python benchmarks/batch_throughput.py [--quick] [--scenes N] [--steps K]``. Prints a table
-and writes ``benchmarks/out/batch_throughput.csv`` (untracked; pass ``--out`` to write elsewhere).
+Run: ``python benchmarks/batch_throughput.py [--quick] [--sizes 1000,10000,100000] [--rounds R]``.
+Prints tables and writes ``benchmarks/out/batch_throughput.csv`` (untracked; ``--out`` elsewhere).
 
 Scenes: m, M uniform in [0.5, 2], alpha in [0.2, 1.2], R such that kappa is uniform in [0.05, 0.95],
 v0 uniform in [-2, 2]; 30 % of them carry a tangential load phi = f R (m+M) g with f uniform in
 [-0.9, 0.9] (a loaded stick after the stop). h = 1e-3, theta = 1/2.
 
-Measured in one run (medians of repeats), scene-steps per second = scenes x steps / run time:
+Measured in one run, rounds alternating the paths (the machine is shared: ratios within a round
+are what counts; the median of the rounds' ratios is reported), scene-steps per second = scenes x
+steps / run time:
 
-- ``compiled``: :func:`lcp.batch.simulate_batch` with ``path="compiled"`` (the CasADi step compiled
-  to C with an OpenMP driver, cached per machine), all threads, and in a subprocess with
-  ``OMP_NUM_THREADS=1`` (the cost per scene-step of one core);
-- ``numpy``: the same closed form on arrays of scenes (``path="numpy"``), a plain NumPy loop over
-  steps;
-- compile time, separately: a cold build in a subprocess with an empty cache
-  (``LCP_LEM_CACHE``), and the warm load of the cached library;
-- ``SoA prototype`` (NOT package code, ``--no-prototype`` to skip): the same step hand-written in C
-  for n = 2 with constant forces, scenes in blocks of 512 stored as structure-of-arrays so that the
-  loop over scenes vectorizes (AVX), divisions by per-scene constants hoisted out of the step loop,
-  ``-O3 -march=native``, OpenMP over blocks. It measures what restructuring the batch driver would
-  give, and is checked against the package's compiled path.
+- ``compiled``: :func:`lcp.batch.simulate_batch` with ``path="compiled"`` (the numba kernel of
+  :mod:`lcp.sweeps.batch_kernel`), all cores, and with ``threads=1``;
+- ``numpy``: the same closed-form step on arrays of scenes (``path="numpy"``), a NumPy-vectorised
+  loop over steps;
+- the arithmetic limit: operations per scene-step counted on the step's SX instructions, and the
+  machine's peak for them measured by simple numba kernels (vectorised multiply-add chains,
+  vectorised division chains) on all cores;
+- compile time: a cold build in a fresh process with an empty cache (``LCP_CACHE_DIR``), and the
+  warm load of the cached kernel in a fresh process.
 
 Checks: the compiled and NumPy paths agree on every final state; scenes without load stop where
 the exact solution stops (|x - x*| <= B h^2/8, stop time within h); no lift-off (max |gap| <= 1e-12).
@@ -28,6 +27,7 @@ the exact solution stops (|x - x*| <= B h^2/8, stop time within h); no lift-off 
 from __future__ import annotations
 
 import argparse
+from collections import Counter
 import csv
 import json
 import os
@@ -38,87 +38,13 @@ import tempfile
 import time
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 
-from lcp.timestepping import compiled_step as compiled
 from lcp.batch import jean_pratt_constants, simulate_batch
+from lcp.numerics.jit import njit
+from lcp.timestepping import compiled_step as compiled
 
-TARGET = 3e7  # scene-steps per second
-
-#: prototype kernel (see the module docstring): state rows q0 q1 v0 v1 cq0 cq1 cv0 cv1 nslide maxgap,
-#: constants rows as lcp.batch.jean_pratt_constants (a, SHt, W, H row-major, gap0, mu, e, h, theta)
-SOA_SOURCE = r"""#include <math.h>
-#include <stdlib.h>
-#define BLK 512
-/* Z: state, row per scene (10 doubles: q0 q1 v0 v1 cq0 cq1 cv0 cv1 nslide maxgap)
-   C: constants, row per scene (19): a0 a1 SHt00 SHt01 SHt10 SHt11 W00 W01 W10 W11 H00 H01 H10 H11 gap0 mu e h th */
-int soa_run(double* Z, const double* C, long nscenes, long steps) {
-  #pragma omp parallel for schedule(dynamic, 1)
-  for (long b0 = 0; b0 < nscenes; b0 += BLK) {
-    long nb = nscenes - b0 < BLK ? nscenes - b0 : BLK;
-    double q0[BLK], q1[BLK], v0[BLK], v1[BLK], cq0[BLK], cq1[BLK], cv0[BLK], cv1[BLK], ns[BLK], mg[BLK];
-    double a0[BLK], a1[BLK], s00[BLK], s01[BLK], s10[BLK], s11[BLK], W00[BLK], W01[BLK], W10[BLK], W11[BLK];
-    double H00[BLK], H01[BLK], H10[BLK], H11[BLK], g0[BLK], mu[BLK], e[BLK], h[BLK], th[BLK];
-    double iW00[BLK], iW11[BLK], idet[BLK], detok[BLK], iap[BLK], okp[BLK], iam[BLK], okm[BLK];
-    for (long j = 0; j < nb; ++j) {
-      const double* z = Z + (b0 + j) * 10; const double* c = C + (b0 + j) * 19;
-      q0[j]=z[0]; q1[j]=z[1]; v0[j]=z[2]; v1[j]=z[3]; cq0[j]=z[4]; cq1[j]=z[5]; cv0[j]=z[6]; cv1[j]=z[7]; ns[j]=z[8]; mg[j]=z[9];
-      a0[j]=c[0]; a1[j]=c[1]; s00[j]=c[2]; s01[j]=c[3]; s10[j]=c[4]; s11[j]=c[5];
-      W00[j]=c[6]; W01[j]=c[7]; W10[j]=c[8]; W11[j]=c[9]; H00[j]=c[10]; H01[j]=c[11]; H10[j]=c[12]; H11[j]=c[13];
-      g0[j]=c[14]; mu[j]=c[15]; e[j]=c[16]; h[j]=c[17]; th[j]=c[18];
-      iW00[j] = 1.0 / W00[j]; iW11[j] = 1.0 / W11[j];
-      double det = W00[j]*W11[j] - W01[j]*W10[j]; detok[j] = det > 0; idet[j] = 1.0 / (det > 0 ? det : 1.0);
-      double ap = W00[j] - mu[j]*W01[j]; okp[j] = ap > 0; iap[j] = 1.0 / (ap > 0 ? ap : 1.0);
-      double am = W00[j] + mu[j]*W01[j]; okm[j] = am > 0; iam[j] = 1.0 / (am > 0 ? am : 1.0);
-    }
-    for (long k = 0; k < steps; ++k) {
-      #pragma omp simd
-      for (long j = 0; j < nb; ++j) {
-        double vf0 = v0[j] + a0[j], vf1 = v1[j] + a1[j];
-        double uNm = H00[j]*v0[j] + H01[j]*v1[j];
-        double uNf = H00[j]*vf0 + H01[j]*vf1;
-        double uTf = H10[j]*vf0 + H11[j]*vf1;
-        double gap = g0[j] + H00[j]*q0[j] + H01[j]*q1[j];
-        long active = gap + h[j]*((1 - th[j])*uNm + th[j]*uNf) <= 0;
-        double qN = uNf + e[j]*uNm, qT = uTf;
-        double sa = fabs(qN)*iW00[j], sb = fabs(qT)*iW11[j]; double sc = sa > sb ? sa : sb; sc = sc > 1e-300 ? sc : 1e-300;
-        double tol = 1e-12 * sc;
-        long open_ok = qN*iW00[j] >= -tol;
-        double pNs = (-qN*W11[j] + qT*W01[j]) * idet[j];
-        double pTs = (-qT*W00[j] + qN*W10[j]) * idet[j];
-        long st_ok = detok[j] != 0 & pNs >= -tol & fabs(pTs) <= mu[j]*pNs + tol;
-        double pNp = -qN * iap[j];
-        double uTp = (W10[j] - mu[j]*W11[j])*pNp + qT;
-        long sp_ok = okp[j] != 0 & pNp >= -tol & uTp*iW11[j] > -tol;
-        double pNm = -qN * iam[j];
-        double uTm = (W10[j] + mu[j]*W11[j])*pNm + qT;
-        long sm_ok = okm[j] != 0 & pNm >= -tol & uTm*iW11[j] < tol;
-        double pN = open_ok ? 0.0 : (st_ok ? pNs : (sp_ok ? pNp : (sm_ok ? pNm : NAN)));
-        double pT = open_ok ? 0.0 : (st_ok ? pTs : (sp_ok ? -mu[j]*pNp : (sm_ok ? mu[j]*pNm : NAN)));
-        long sliding = (!open_ok) & (!st_ok) & (sp_ok | sm_ok);
-        pN = active ? pN : 0.0; pT = active ? pT : 0.0;
-        double i0 = a0[j] + s00[j]*pN + s01[j]*pT, i1 = a1[j] + s10[j]*pN + s11[j]*pT;
-        double y0 = i0 - cv0[j], y1 = i1 - cv1[j];
-        double t0 = v0[j] + y0, t1 = v1[j] + y1;
-        cv0[j] = (t0 - v0[j]) - y0; cv1[j] = (t1 - v1[j]) - y1;
-        double w0 = h[j]*((1 - th[j])*v0[j] + th[j]*t0) - cq0[j];
-        double w1 = h[j]*((1 - th[j])*v1[j] + th[j]*t1) - cq1[j];
-        v0[j] = t0; v1[j] = t1;
-        double r0 = q0[j] + w0, r1 = q1[j] + w1;
-        cq0[j] = (r0 - q0[j]) - w0; cq1[j] = (r1 - q1[j]) - w1;
-        q0[j] = r0; q1[j] = r1;
-        ns[j] += (active & sliding) ? 1.0 : 0.0;
-        double ag = fabs(gap); mg[j] = mg[j] > ag ? mg[j] : ag;
-      }
-    }
-    for (long j = 0; j < nb; ++j) {
-      double* z = Z + (b0 + j) * 10;
-      z[0]=q0[j]; z[1]=q1[j]; z[2]=v0[j]; z[3]=v1[j]; z[4]=cq0[j]; z[5]=cq1[j]; z[6]=cv0[j]; z[7]=cv1[j]; z[8]=ns[j]; z[9]=mg[j];
-    }
-  }
-  return 0;
-}
-"""
 G = 9.81
 
 
@@ -143,139 +69,155 @@ def exact_stops(p):
     return p["v0"] * np.abs(p["v0"]) / (2 * B), np.abs(p["v0"]) / B, B
 
 
-def run(c, steps, h, path, repeats):
-    times, res = [], None
-    for _ in range(repeats):
-        res = simulate_batch(c, steps * h, h=h, path=path)
-        times.append(res.run_time)
-    return statistics.median(times), res
-
-
 _CHILD = r"""
-import json, sys, time
-import numpy as np
-sys.path.insert(0, {here!r})
-from batch_throughput import parameters
-from lcp.batch import jean_pratt_constants, simulate_batch
-p = parameters({n})
-c = jean_pratt_constants(p["m"], p["M"], p["alpha"], p["R"], p["v0"], phi=p["phi"], h={h!r})
+import json, time
 t0 = time.perf_counter()
-r = simulate_batch(c, {steps} * {h!r}, h={h!r}, path="compiled")
-print(json.dumps(dict(compile_time=r.compile_time, run_time=r.run_time, total=time.perf_counter() - t0,
-                      rate=r.scene_steps_per_second, openmp=r.stats["openmp"])))
+import numpy as np
+from lcp.batch import jean_pratt_constants, simulate_batch
+t1 = time.perf_counter()
+r = simulate_batch(jean_pratt_constants(1.0, 1.0, 0.7, np.linspace(0.1, 0.9, 1000), h=1e-3), 0.01, h=1e-3)
+print(json.dumps(dict(import_s=t1 - t0, compile_s=r.compile_time, total_s=time.perf_counter() - t0)))
 """
 
 
-def child(n, steps, h, env_extra):
-    env = dict(os.environ, **env_extra)
-    code = _CHILD.format(here=str(Path(__file__).parent), n=n, steps=steps, h=h)
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=1800)
+def child(env_extra, drop=()):
+    env = {k: v for k, v in os.environ.items() if k not in drop}
+    env.update(env_extra)
+    out = subprocess.run([sys.executable, "-c", _CHILD], env=env, capture_output=True, text=True, timeout=1800)
     if out.returncode:
         raise RuntimeError(out.stderr[-2000:])
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def soa_prototype():
-    """Compile the prototype kernel into a temporary folder; a ctypes function or None."""
-    import ctypes
-
-    cc = compiled.c_compiler()
-    if cc is None:
-        return None
-    tmp = tempfile.mkdtemp(prefix="lcp_soa_")
-    src, lib = Path(tmp) / "soa.c", Path(tmp) / "soa.so"
-    src.write_text(SOA_SOURCE)
-    flags = ["-O3", "-march=native", "-fPIC", "-shared"] + (["-fopenmp"] if compiled.openmp_available() else [])
-    try:
-        subprocess.run([cc, *flags, str(src), "-o", str(lib), "-lm"], check=True, capture_output=True, timeout=300)
-    except (subprocess.SubprocessError, OSError):
-        return None
-    fn = ctypes.CDLL(str(lib)).soa_run
-    dp = ctypes.POINTER(ctypes.c_double)
-    fn.argtypes = [dp, dp, ctypes.c_long, ctypes.c_long]
-    fn.restype = ctypes.c_int
-    return fn
+#: the SX operations of the step, by what they cost: floating-point arithmetic (add, sub, mul, neg,
+#: sq, twice), divisions, and the rest (comparisons, selects, abs, min/max: one vector op each)
+_FLOPS = {"OP_ADD", "OP_SUB", "OP_MUL", "OP_NEG", "OP_SQ", "OP_TWICE"}
+_FREE = {"OP_INPUT", "OP_OUTPUT", "OP_CONST"}
 
 
-def run_soa(fn, c, x0, steps, repeats):
-    import ctypes
+def op_counts():
+    step = compiled.step_function(2, False, True)
+    names = {getattr(ca, k): k for k in dir(ca) if k.startswith("OP_")}
+    ops = Counter(names[step.instruction_id(k)] for k in range(step.n_instructions()))
+    flops = sum(v for k, v in ops.items() if k in _FLOPS)
+    div = ops.get("OP_DIV", 0)
+    other = sum(v for k, v in ops.items() if k not in _FLOPS and k not in _FREE and k != "OP_DIV")
+    return flops, div, other, ops
 
-    dp = ctypes.POINTER(ctypes.c_double)
-    times, Z = [], None
-    Cr = np.ascontiguousarray(c.T)
-    for _ in range(repeats):
-        Z = np.ascontiguousarray(np.vstack([x0, np.zeros((2, x0.shape[1]))]).T)
-        t0 = time.perf_counter()
-        fn(Z.ctypes.data_as(dp), Cr.ctypes.data_as(dp), Z.shape[0], steps)
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), Z
+
+@njit(nogil=True, cache=True)
+def _peak_madd(x, reps):
+    """32 flops per element and repetition in 16 independent multiply-add chains (no FMA: numba
+    compiles without fastmath, as the batch kernel); the loop over elements vectorises."""
+    for _ in range(reps):
+        for j in range(x.shape[0]):
+            y = x[j]
+            a0 = y; a1 = y + 1.0; a2 = y + 2.0; a3 = y + 3.0; a4 = y + 4.0; a5 = y + 5.0; a6 = y + 6.0; a7 = y + 7.0
+            for _r in range(2):
+                a0 = a0 * 0.999 + 0.001; a1 = a1 * 0.999 + 0.001; a2 = a2 * 0.999 + 0.001; a3 = a3 * 0.999 + 0.001
+                a4 = a4 * 0.999 + 0.001; a5 = a5 * 0.999 + 0.001; a6 = a6 * 0.999 + 0.001; a7 = a7 * 0.999 + 0.001
+            x[j] = ((a0 + a1) + (a2 + a3)) + ((a4 + a5) + (a6 + a7)) - 28.0 * 0.125
+    return x
+
+
+@njit(nogil=True, cache=True, error_model="numpy")
+def _peak_div(x, reps):
+    """8 divisions per element and repetition, in 8 independent chains; vectorised over elements."""
+    for _ in range(reps):
+        for j in range(x.shape[0]):
+            y = x[j]
+            a0 = 1.0 / y; a1 = 2.0 / y; a2 = 3.0 / y; a3 = 4.0 / y; a4 = 5.0 / y; a5 = 6.0 / y; a6 = 7.0 / y; a7 = 8.0 / y
+            x[j] = 1.0 + 1e-9 * (((a0 + a1) + (a2 + a3)) + ((a4 + a5) + (a6 + a7)))
+    return x
+
+
+def peak(kernel, per_element, threads, reps=100_000, width=256):
+    """Operations per second of ``kernel`` on all threads (L1-resident arrays, one per thread)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    xs = [np.full(width, 1.0) for _ in range(threads)]
+    kernel(xs[0], 1)
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(threads) as pool:
+        list(pool.map(lambda x: kernel(x, reps), xs))
+    return threads * width * reps * per_element / (time.perf_counter() - t0)
+
+
+def limits(p_madd, p_div):
+    """The step's arithmetic limit in scene-steps/s, (low, high): every non-division operation on
+    the multiply/add pipes at ``p_madd`` per second, divisions at ``p_div``; the two in series
+    (low) or overlapped (high)."""
+    flops, div, other, _ = op_counts()
+    t_flop, t_div = (flops + other) / p_madd, div / p_div
+    return 1 / (t_flop + t_div), 1 / max(t_flop, t_div)
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="1e4 scenes, fewer steps")
-    ap.add_argument("--scenes", type=int, default=None)
-    ap.add_argument("--steps", type=int, default=None, help="steps of the compiled runs (default 1000)")
-    ap.add_argument("--no-prototype", action="store_true", help="skip the SoA prototype kernel")
+    ap.add_argument("--quick", action="store_true", help="sizes 1e3, 1e4 and fewer rounds")
+    ap.add_argument("--sizes", type=str, default=None, help="comma-separated scene counts (default 1e3,1e4,1e5)")
+    ap.add_argument("--rounds", type=int, default=None, help="alternating rounds per size (default 5)")
     ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "out")
     args = ap.parse_args(argv)
-    n = args.scenes or (10_000 if args.quick else 100_000)
-    steps = args.steps or (200 if args.quick else 1000)
-    steps_np = max(10, steps // 10)
+    sizes = [int(float(s)) for s in args.sizes.split(",")] if args.sizes else (
+        [1000, 10_000] if args.quick else [1000, 10_000, 100_000])
+    rounds = args.rounds or (3 if args.quick else 5)
     h = 1e-3
-    reps = 3
+    threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     load0 = os.getloadavg()
-    p = parameters(n)
-    t0 = time.perf_counter()
-    c = jean_pratt_constants(p["m"], p["M"], p["alpha"], p["R"], p["v0"], phi=p["phi"], h=h)
-    t_pack = time.perf_counter() - t0
 
-    # compile time: a cold build with an empty cache, in a fresh process
     with tempfile.TemporaryDirectory() as tmp:
-        cold = child(1000, 10, h, {"LCP_LEM_CACHE": tmp})
-    # warm: the cached library, loaded once in this process
-    t0 = time.perf_counter()
-    compiled.batch_library(2)
-    t_load = time.perf_counter() - t0
+        cold = child({"LCP_CACHE_DIR": tmp}, drop=("NUMBA_CACHE_DIR",))
+        warm = child({"LCP_CACHE_DIR": tmp}, drop=("NUMBA_CACHE_DIR",))
 
-    t_comp, r_comp = run(c, steps, h, "compiled", reps)
-    t_np, r_np = run(c, steps_np, h, "numpy", reps)
-    _, r_c_short = run(c, steps_np, h, "compiled", 1)
-    single = child(n, max(10, steps // 5), h, {"OMP_NUM_THREADS": "1"})
-    soa = None if args.no_prototype else soa_prototype()
-    if soa is not None:
-        t_soa, _ = run_soa(soa, c[0], c[1], steps, reps)
-        _, Z_short = run_soa(soa, c[0], c[1], steps_np, 1)
-        soa_agree = float(max(np.max(np.abs(Z_short[:, :2] - r_c_short.q)), np.max(np.abs(Z_short[:, 2:4] - r_c_short.v))))
-        soa_slides = bool(np.array_equal(Z_short[:, 8].astype(np.int64), r_c_short.slide_steps))
+    rows, checks = [], []
+    for n in sizes:
+        p = parameters(n)
+        c = jean_pratt_constants(p["m"], p["M"], p["alpha"], p["R"], p["v0"], phi=p["phi"], h=h)
+        # about 2e7 scene-steps per compiled run, 2e6 per NumPy run; at least 10 steps
+        steps = max(10, int(2e7 // n))
+        steps_np = max(10, int(2e6 // n))
+        simulate_batch(c, 10 * h, h=h, path="compiled")  # compiled or loaded before timing
+        rates = {"compiled": [], "compiled1": [], "numpy": []}
+        ratio, ratio1, frac_lo, frac_hi = [], [], [], []
+        for _ in range(rounds):
+            # the machine's peak measured in the same round: the fraction of the limit is a ratio too
+            lim_lo, lim_hi = limits(peak(_peak_madd, 34, threads), peak(_peak_div, 8, threads))
+            r_c = simulate_batch(c, steps * h, h=h, path="compiled")
+            r_1 = simulate_batch(c, steps * h, h=h, path="compiled", threads=1)
+            r_n = simulate_batch(c, steps_np * h, h=h, path="numpy")
+            rates["compiled"].append(r_c.scene_steps_per_second)
+            rates["compiled1"].append(r_1.scene_steps_per_second)
+            rates["numpy"].append(r_n.scene_steps_per_second)
+            ratio.append(rates["compiled"][-1] / rates["numpy"][-1])
+            ratio1.append(rates["compiled1"][-1] / rates["numpy"][-1])
+            frac_lo.append(rates["compiled"][-1] / lim_lo)
+            frac_hi.append(rates["compiled"][-1] / lim_hi)
+        rows.append(dict(scenes=n, steps=steps, steps_numpy=steps_np, threads=r_c.stats["threads"],
+                         compiled=statistics.median(rates["compiled"]), compiled_1thread=statistics.median(rates["compiled1"]),
+                         numpy=statistics.median(rates["numpy"]), ratio=statistics.median(ratio),
+                         ratio_1thread=statistics.median(ratio1), ratio_min=min(ratio),
+                         of_limit_overlapped=statistics.median(frac_hi), of_limit_in_series=statistics.median(frac_lo)))
+        # checks on the last compiled run, and the two paths on the same steps
+        r_cs = simulate_batch(c, steps_np * h, h=h, path="compiled")
+        agree = float(max(np.max(np.abs(r_cs.q - r_n.q)), np.max(np.abs(r_cs.v - r_n.v))))
+        x_star, tau0, B = exact_stops(p)
+        T = steps * h
+        free = (p["phi"] == 0.0) & (tau0 < T - 2 * h)
+        ok_x = bool(np.all(np.abs(r_c.q[free, 0] - x_star[free]) <= B[free] * h * h / 8 + 1e-12))
+        ok_stop = bool(np.all(np.abs(r_c.slide_steps[free] * h - tau0[free]) <= h * (1 + 1e-9)))
+        gap = float(np.max(r_c.max_abs_gap))
+        checks.append(f"{n} scenes: compiled = numpy to {agree:.1e}; {int(free.sum())} unloaded scenes stopped: "
+                      f"stop distance within B h^2/8 {'pass' if ok_x else 'FAIL'}, stop time within h "
+                      f"{'pass' if ok_stop else 'FAIL'}; max |gap| = {gap:.1e} {'pass' if gap <= 1e-12 else 'FAIL'}; "
+                      f"all finite: {bool(r_c.success.all())}")
+
+    flops, div, other, ops = op_counts()
+    p_madd = statistics.median(peak(_peak_madd, 34, threads) for _ in range(3))
+    p_div = statistics.median(peak(_peak_div, 8, threads) for _ in range(3))
+    lim_lo, lim_hi = limits(p_madd, p_div)
     load1 = os.getloadavg()
 
-    rate_comp = n * steps / t_comp
-    rate_np = n * steps_np / t_np
-    # checks
-    agree = float(max(np.max(np.abs(r_c_short.q - r_np.q)), np.max(np.abs(r_c_short.v - r_np.v))))
-    x_star, tau0, B = exact_stops(p)
-    T = steps * h
-    free = (p["phi"] == 0.0) & (tau0 < T - 2 * h)
-    x_err = np.abs(r_comp.q[free, 0] - x_star[free])
-    stop_err = np.abs(r_comp.slide_steps[free] * h - tau0[free])
-    ok_x = bool(np.all(x_err <= B[free] * h * h / 8 + 1e-12))
-    ok_stop = bool(np.all(stop_err <= h * (1 + 1e-9)))
-    gap = float(np.max(r_comp.max_abs_gap))
-    step = compiled.step_function(2, False, True)
-    rows = [
-        dict(path="compiled (C + OpenMP, all threads)", scenes=n, steps=steps, run_time_s=t_comp,
-             scene_steps_per_s=rate_comp, ns_per_scene_step=1e9 / rate_comp, note=f"openmp={r_comp.stats['openmp']}"),
-        dict(path="compiled, OMP_NUM_THREADS=1 (subprocess)", scenes=n, steps=max(10, steps // 5),
-             run_time_s=single["run_time"], scene_steps_per_s=single["rate"], ns_per_scene_step=1e9 / single["rate"],
-             note="one core"),
-        dict(path="numpy (plain loop over steps, arrays of scenes)", scenes=n, steps=steps_np, run_time_s=t_np,
-             scene_steps_per_s=rate_np, ns_per_scene_step=1e9 / rate_np, note="single thread"),
-    ]
-    if soa is not None:
-        rows.append(dict(path="SoA prototype (not package code; AVX, OpenMP)", scenes=n, steps=steps, run_time_s=t_soa,
-                         scene_steps_per_s=n * steps / t_soa, ns_per_scene_step=1e9 * t_soa / (n * steps),
-                         note=f"agrees with compiled to {soa_agree:.1e}, slide counts equal: {soa_slides}"))
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "batch_throughput.csv"
     with path.open("w", newline="") as fh:
@@ -283,46 +225,31 @@ def main(argv=None):
         w.writeheader()
         for r in rows:
             w.writerow({k: repr(v) if isinstance(v, float) else v for k, v in r.items()})
-        fh.write(f"# compile_cold_s={cold['compile_time']!r}, load_warm_s={t_load!r}, pack_s={t_pack!r}, "
-                 f"load_before={load0}, load_after={load1}, cores={os.cpu_count()}\n")
-    print(f"{n} Jean-Pratt scenes (random m, M, alpha, kappa in [0.05, 0.95], v0, 30 % loaded), h = {h:g}, "
-          f"theta = 1/2; {os.cpu_count()} cores, load average before {tuple(round(x, 2) for x in load0)}, "
-          f"after {tuple(round(x, 2) for x in load1)}")
+        fh.write(f"# cold={cold}, warm={warm}, flops={flops}, div={div}, other={other}, peak_madd={p_madd!r}, "
+                 f"peak_div={p_div!r}, load_before={load0}, load_after={load1}, threads={threads}\n")
+    print(f"Jean-Pratt scenes (random m, M, alpha, kappa in [0.05, 0.95], v0, 30 % loaded), h = {h:g}, theta = 1/2; "
+          f"{threads} threads, load average before {tuple(round(x, 2) for x in load0)}, after "
+          f"{tuple(round(x, 2) for x in load1)}; {rounds} alternating rounds, medians")
     print()
-    print("| path | scenes | steps | run time (s) | scene-steps/s | ns per scene-step |")
-    print("|---|---|---|---|---|---|")
+    print("| scenes | compiled (scene-steps/s) | compiled, 1 thread | numpy | compiled / numpy (min) | 1 thread / numpy "
+          "| of the arithmetic limit |")
+    print("|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['path']} | {r['scenes']} | {r['steps']} | {r['run_time_s']:.3g} | {r['scene_steps_per_s']:.3g} | "
-              f"{r['ns_per_scene_step']:.3g} |")
+        print(f"| {r['scenes']} | {r['compiled']:.3g} | {r['compiled_1thread']:.3g} | {r['numpy']:.3g} | "
+              f"{r['ratio']:.1f}x ({r['ratio_min']:.1f}x) | {r['ratio_1thread']:.1f}x | "
+              f"{r['of_limit_overlapped']:.0%} to {r['of_limit_in_series']:.0%} |")
     print()
-    print(f"compile time (cold, empty cache, fresh process): {cold['compile_time']:.3g} s; "
-          f"load of the cached library: {t_load:.3g} s; packing the constants: {t_pack:.3g} s")
-    print(f"compiled / numpy: {rate_comp / rate_np:.2f}x; target >= {TARGET:.0e} scene-steps/s: "
-          f"{'met' if rate_comp >= TARGET else 'NOT met'} ({rate_comp:.3g})")
-    print(f"step: {step.n_instructions()} CasADi instructions per scene-step ({generated_divisions(step)} "
-          f"divisions, {generated_branches(step)} selects in the generated C)")
-    print(f"checks: compiled == numpy to {agree:.1e}; unloaded scenes that stopped ({int(free.sum())}): "
-          f"max |x - x*| / (B h^2/8) = {np.max(x_err / (B[free] * h * h / 8)):.3f} -> {'pass' if ok_x else 'FAIL'}; "
-          f"stop time within h: {'pass' if ok_stop else 'FAIL'}; max |gap| = {gap:.1e} -> "
-          f"{'pass' if gap <= 1e-12 else 'FAIL'}; all finite: {bool(r_comp.success.all())}")
-    if soa is not None:
-        print(f"SoA prototype: {n * steps / t_soa:.3g} scene-steps/s ({n * steps / t_soa / rate_comp:.2f}x the package's "
-              f"compiled path); agrees with it to {soa_agree:.1e}, slide counts equal: {soa_slides}")
+    print(f"per scene-step: {flops} flops (add/sub/mul/neg), {div} divisions, {other} other vector ops "
+          f"(comparisons, selects, abs, min/max); {dict(ops)}")
+    print(f"measured peak at the end, {threads} threads: {p_madd:.3g} multiply/add flops/s, {p_div:.3g} divisions/s: "
+          f"arithmetic limit of the step {lim_lo:.3g} (pipes in series) to {lim_hi:.3g} (overlapped) scene-steps/s "
+          f"(the table's fractions use the peaks measured in each round)")
+    print(f"compile (fresh process, empty cache): {cold['compile_s']:.3g} s; load of the cached kernel "
+          f"(fresh process): {warm['compile_s']:.3g} s; import of lcp.batch: {warm['import_s']:.3g} s")
+    for line in checks:
+        print("checks:", line)
     print(f"written to {path}")
     return rows
-
-
-def _c_body(step):
-    code = compiled.generate_c(step).decode()
-    return code[code.find("static int casadi_f0"):]
-
-
-def generated_divisions(step):
-    return sum(line.count("/") for line in _c_body(step).splitlines() if "=" in line and "//" not in line)
-
-
-def generated_branches(step):
-    return sum(line.count("?") for line in _c_body(step).splitlines())
 
 
 if __name__ == "__main__":

@@ -6,7 +6,7 @@ norms of powers of ``A`` to choose its Taylor degree; its arithmetic is a trunca
 with scaling (Al-Mohy and Higham, SIAM J. Sci. Comput. 33, 2011). :func:`expmv` runs the same
 algorithm with the exact 1-norm of ``A`` (cheap for a CSR matrix) and, compiled, cheap upper
 bounds of the norms of its powers (products of a row vector with ``|A|``) in place of the
-estimates, and the Taylor loop compiled with numba when it is installed (``pip install .[fast]``),
+estimates, and the Taylor loop compiled with numba (a dependency; the NumPy loop stays as the reference),
 in NumPy otherwise. There is no shift by trace(A)/n: for moment matrices (diagonal ~ degree x growth rate)
 the shift costs digits.
 

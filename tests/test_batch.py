@@ -69,17 +69,17 @@ def test_batch_bad_input():
 def test_batch_records_the_path_and_warns_on_fallback(monkeypatch):
     import warnings
 
-    from lcp.timestepping import compiled_step as compiled
+    from lcp.sweeps import batch as batch_module
 
     consts = jean_pratt_constants(1.0, 1.0, 0.6, np.array([0.3, 0.8]), 1.0, h=1e-3)
     ref = simulate_batch(consts, 0.1, h=1e-3, path="numpy")
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # an explicit NumPy run is no fallback
         assert simulate_batch(consts, 0.1, h=1e-3, path="numpy").path == "numpy"
-    monkeypatch.setattr(compiled, "batch_library", lambda n, affine=False: None)  # no compiler
+    monkeypatch.setattr(batch_module, "batch_kernel", lambda n: None)  # as without numba
     with pytest.warns(RuntimeWarning, match="NumPy path"):
         res = simulate_batch(consts, 0.1, h=1e-3)
-    assert res.path == "numpy" and "compiler" in res.stats["fallback"]
+    assert res.path == "numpy" and "numba" in res.stats["fallback"]
     np.testing.assert_array_equal(res.q, ref.q)
-    with pytest.raises(RuntimeError, match="compiler"):
+    with pytest.raises(RuntimeError, match="numba"):
         simulate_batch(consts, 0.1, h=1e-3, path="compiled")

@@ -3,13 +3,22 @@
 Every compiled kernel of the package is decorated with :func:`njit` from here, so that one flag,
 :data:`HAVE_NUMBA`, says whether the kernels run compiled. Without numba the decorated functions
 run as plain Python (correct but slow) and keep ``py_func`` as numba's do, so tests can call the
-Python reference of a kernel either way. Imports nothing of the package.
+Python reference of a kernel either way. numba is a dependency; the stand-in serves where it
+cannot be imported (and the reference is tested through ``py_func`` and ``compiled=False``).
+
+numba is first imported by the package here, so numba's cache folder is set here first
+(:func:`lcp.numerics.cache.configure_numba`: ``<LCP_CACHE_DIR>/numba`` unless ``NUMBA_CACHE_DIR``
+is set). Imports :mod:`lcp.numerics.cache` only.
 """
 from __future__ import annotations
 
 __all__ = ["HAVE_NUMBA", "njit"]
 
-try:  # optional: compiled sweeps
+from lcp.numerics.cache import configure_numba
+
+configure_numba()
+
+try:
     from numba import njit
 
     HAVE_NUMBA = True

@@ -1,10 +1,11 @@
 """Many single-contact scenes stepped together (parameter sweeps), by Moreau-Jean with exact Coulomb friction.
 
-The step is the compiled closed-form one of :mod:`lcp.timestepping.compiled_step` in its lean form, transcribed to
-straight-line C over structure-of-arrays blocks of scenes (SIMD across scenes, OpenMP threads across
-blocks, :func:`lcp.timestepping.compiled_step.soa_source`), compiled once per machine.
-A NumPy path (the same closed form, :func:`~lcp.contact.problem.planar_enum` on arrays) serves as
-a cross-check and as the fallback without a compiler.
+The step is the closed-form one of :mod:`lcp.timestepping.compiled_step` in its lean form, compiled by
+numba over structure-of-arrays blocks of scenes (:mod:`lcp.sweeps.batch_kernel`: SIMD lanes across
+the scenes of a block; threads, the GIL released, across contiguous ranges of blocks, one call per
+thread), compiled once per machine. A NumPy path (the same closed form,
+:func:`~lcp.contact.problem.planar_enum` on arrays) serves as a cross-check and as the fallback
+where numba cannot be imported.
 
 Only what a sweep needs is kept per scene: the final state, the number of sliding steps (so the
 stop time of a slide-then-stick motion), and the largest |gap| seen (lift-off or sinking).
@@ -12,8 +13,10 @@ stop time of a slide-then-stick motion), and the largest |gap| seen (lift-off or
 from __future__ import annotations
 
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 import math
+import os
 import time
 import warnings
 
@@ -21,6 +24,7 @@ import numpy as np
 
 from lem.jean_pratt import check_parameters, tan_alpha
 
+from lcp.sweeps.batch_kernel import BLOCK, batch_kernel
 from lcp.timestepping import compiled_step as compiled
 from lcp.contact.problem import NUMPY_OPS, planar_enum, planar_refine
 from lcp.scenes.scene import Scene
@@ -29,8 +33,6 @@ from lcp.timestepping.moreau_jean import MoreauJeanOptions
 
 __all__ = ["BatchResult", "jean_pratt_constants", "simulate_batch"]
 
-#: scenes per block of the compiled kernel: a block's state stays in cache over all its steps
-BLOCK = 512
 
 @dataclass
 class BatchResult:
@@ -52,10 +54,11 @@ class BatchResult:
     path : str
         The path that ran: ``"compiled"`` or ``"numpy"``.
     stats : dict
-        ``n_scenes``, whether OpenMP threads ran (``openmp``) and, when ``path="auto"`` fell back
-        to NumPy, why (``fallback``; a :class:`RuntimeWarning` says so too).
+        ``n_scenes``, the number of threads that ran (``threads``) and, when ``path="auto"`` fell
+        back to NumPy, why (``fallback``; a :class:`RuntimeWarning` says so too).
     run_time, compile_time : float
-        Seconds spent stepping, and building/compiling (0 when the compiled code was cached).
+        Seconds spent stepping, and generating/compiling or loading the compiled kernel (small when
+        it was cached).
     """
 
     q: np.ndarray
@@ -140,7 +143,7 @@ def _numpy_step(Z, c, n):
 
 
 def simulate_batch(scenes: Sequence[Scene] | tuple[dict, np.ndarray], t_end: float, h: float, theta: float = 0.5,
-                   path: str = "auto") -> BatchResult:
+                   path: str = "auto", threads: int | None = None) -> BatchResult:
     """Step many single-contact scenes together with Moreau-Jean (exact Coulomb per step).
 
     Parameters
@@ -154,9 +157,11 @@ def simulate_batch(scenes: Sequence[Scene] | tuple[dict, np.ndarray], t_end: flo
     h, theta : float
         Step size and theta (the same for all scenes).
     path : {"auto", "compiled", "numpy"}
-        ``"auto"`` is the compiled path (C with OpenMP threads, cached per machine), NumPy when no
-        compiler works (with a :class:`RuntimeWarning`; the result's ``path`` names the path that
-        ran).
+        ``"auto"`` is the compiled path (numba, vector lanes and threads, compiled once per machine
+        into the compiled-code cache), NumPy where numba cannot be imported (with a
+        :class:`RuntimeWarning`; the result's ``path`` names the path that ran).
+    threads : int, optional
+        Threads of the compiled path (default: the cores this process may run on).
 
     Returns
     -------
@@ -186,45 +191,66 @@ def simulate_batch(scenes: Sequence[Scene] | tuple[dict, np.ndarray], t_end: flo
         raise ValueError("scene constants have the wrong shape")
     if np.any(c[-2] != h) or np.any(c[-1] != theta):
         raise ValueError("the scene constants were packed for another h or theta")
+    if threads is None:
+        threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    elif isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+        raise ValueError(f"threads must be a positive integer, got {threads!r}")
     steps = int(np.ceil(t_end / h * (1 - 1e-12)))
     t0 = time.perf_counter()
     fallback = None
     try:
-        run = compiled.batch_library(n) if path in ("auto", "compiled") else None
+        run = batch_kernel(n) if path in ("auto", "compiled") else None
         if run is None and path != "numpy":
-            fallback = "no working C compiler"
-    except NotImplementedError as exc:  # an SX operation the C transcription does not know: NumPy instead
-        run, fallback = None, f"the C transcription does not know an operation of the step ({exc})"
+            fallback = "numba cannot be imported"
+    except NotImplementedError as exc:  # an SX operation the transcription does not know: NumPy instead
+        run, fallback = None, f"the compiled kernel does not know an operation of the step ({exc})"
     t_compile = time.perf_counter() - t0
     if run is None and path == "compiled":
         raise RuntimeError(f"the compiled batch path cannot run: {fallback}")
     if fallback is not None:
-        # the NumPy path gives the same numbers but runs far slower: a sweep should know
+        # the NumPy path gives the same numbers to rounding but runs far slower: a sweep should know
         warnings.warn(f"simulate_batch: compiled path unavailable ({fallback}); running the NumPy path",
                       RuntimeWarning, stacklevel=2)
     Z = np.vstack([x0, np.zeros((2, n_scenes))])
     t0 = time.perf_counter()
     if run is not None:
-        import ctypes
-
-        # Z (rows, N) and c (nc, N) row-major are the kernel's structure-of-arrays layout
-        Z = np.ascontiguousarray(Z)
-        C = np.ascontiguousarray(c, dtype=float)
-        dp = ctypes.POINTER(ctypes.c_double)
-        run(Z.ctypes.data_as(dp), C.ctypes.data_as(dp), n_scenes, steps, BLOCK)
+        Z, threads = _run_compiled(run, Z, c, steps, threads)
         used = "compiled"
     else:
         for _ in range(steps):
             _numpy_step(Z, c, n)
-        used = "numpy"
+        used, threads = "numpy", 1
     run_time = time.perf_counter() - t0
     q, v = Z[:n].T.copy(), Z[n:2 * n].T.copy()
     ok = np.all(np.isfinite(Z[:4 * n]), axis=0)
     return BatchResult(q=q, v=v, slide_steps=Z[4 * n].astype(np.int64), max_abs_gap=Z[4 * n + 1].copy(),
                        success=ok, steps=steps, h=float(h), theta=float(theta), path=used, run_time=run_time,
                        compile_time=t_compile,
-                       stats=dict(n_scenes=n_scenes, openmp=bool(run is not None and run.openmp),
+                       stats=dict(n_scenes=n_scenes, threads=threads,
                                   **({"fallback": fallback} if fallback is not None else {})))
+
+
+def _run_compiled(run, Z, c, steps, threads):
+    """Z advanced by the compiled kernel; returns (Z, threads used).
+
+    The scenes are padded to whole blocks (copies of the first scene, dropped afterwards), and the
+    blocks cut into one contiguous range per thread: one kernel call per thread, without the GIL.
+    """
+    n_scenes = Z.shape[1]
+    nb = -(-n_scenes // BLOCK)
+    width = nb * BLOCK
+    Zp = np.empty((Z.shape[0], width))
+    Cp = np.empty((c.shape[0], width))
+    Zp[:, :n_scenes], Zp[:, n_scenes:] = Z, Z[:, :1]
+    Cp[:, :n_scenes], Cp[:, n_scenes:] = c, c[:, :1]
+    threads = int(min(threads, nb))
+    cuts = [nb * i // threads for i in range(threads + 1)]
+    if threads == 1:
+        run(Zp, Cp, steps, 0, nb)
+    else:
+        with ThreadPoolExecutor(threads) as pool:
+            list(pool.map(lambda i: run(Zp, Cp, steps, cuts[i], cuts[i + 1]), range(threads)))
+    return Zp[:, :n_scenes], threads
 
 
 def _pack_scenes(scenes, h, theta):

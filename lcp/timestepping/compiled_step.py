@@ -4,29 +4,35 @@ When the mass matrix, the contact kinematics and the (affine) forces are constan
 planar contact, a whole Moreau-Jean step is a fixed arithmetic expression: the free velocity is
 affine in the state, and the contact problem has the closed form :func:`~lcp.contact.problem.planar_enum`.
 CasADi builds that step as an SX Function, ``mapaccum`` chains it over a chunk of steps, and the
-chunk is compiled to C once per machine (cached by a hash of its source), so no Python runs per step.
+chunk is compiled to C once per machine (in the compiled-code cache, :mod:`lcp.numerics.cache`, by a
+hash of its source), so no Python runs per step.
 
 The step takes the state x = (q, v) and a vector c of per-scene constants (:func:`pack`), so the same
-compiled code serves one scene (:func:`simulate_compiled`) and many scenes at once (``lcp.sweeps.batch``).
+step serves one scene (:func:`simulate_compiled`) and, in its lean form compiled by numba, many
+scenes at once (``lcp.sweeps.batch_kernel``).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 import functools
 import hashlib
-import math
 import os
 from pathlib import Path
 import shutil
 import subprocess
 import sys
 import tempfile
+from typing import TypeVar
 
 import casadi as ca
 import numpy as np
 
 from lcp.contact.problem import CASADI_OPS, MODE_NAMES, planar_enum, planar_refine
+from lcp.numerics import cache
 
-__all__ = ["applicable", "pack", "step_function", "chunk_function", "simulate_compiled", "cache_dir"]
+__all__ = ["applicable", "pack", "step_function", "chunk_function", "simulate_compiled"]
+
+T = TypeVar("T")
 
 #: steps per compiled chunk: long enough that the per-call overhead (~10 us) vanishes per step
 CHUNK = 2000
@@ -160,34 +166,8 @@ def step_function(n: int, affine: bool = True, lean: bool = False) -> ca.Functio
                        ["x", "c"], ["x_next", "info"])
 
 
-def cache_dir() -> Path:
-    """Where compiled chunks are kept (``$LCP_LEM_CACHE``, else the user cache folder)."""
-    base = os.environ.get("LCP_LEM_CACHE")
-    if base:
-        return Path(base)
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    return (Path(xdg) if xdg else Path.home() / ".cache") / "lcp-lem"
-
-
 def c_compiler():
     return shutil.which(os.environ.get("CC", "gcc")) or shutil.which("cc")
-
-
-@functools.lru_cache(maxsize=None)
-def openmp_available() -> bool:
-    """Whether the C compiler builds and links OpenMP code (checked once per process)."""
-    cc = c_compiler()
-    if cc is None:
-        return False
-    with tempfile.TemporaryDirectory() as tmp:
-        src = Path(tmp) / "t.c"
-        src.write_text("#include <omp.h>\nint f(void){return omp_get_max_threads();}\n")
-        try:
-            subprocess.run([cc, "-fopenmp", "-fPIC", "-shared", str(src), "-o", str(Path(tmp) / "t.so")],
-                           check=True, capture_output=True, timeout=60)
-        except (subprocess.SubprocessError, OSError):
-            return False
-    return True
 
 
 def generate_c(fn: ca.Function) -> bytes:
@@ -200,125 +180,46 @@ def generate_c(fn: ca.Function) -> bytes:
         return src.read_bytes()
 
 
-def build_library(name: str, code: bytes, openmp: bool = False) -> Path | None:
-    """Compile C source to a shared library, cached per machine by a hash of source, flags and
-    versions. None when no working compiler is found."""
+def build_library(name: str, code: bytes, load: Callable[[str], T] | None = None) -> T | None:
+    """Compile C source to a shared library in the compiled-code cache (:mod:`lcp.numerics.cache`)
+    and load it: ``load(path)`` (default :class:`ctypes.CDLL`).
+
+    The entry is named by a hash of source, flags and versions; it is built under an inter-process
+    lock into a temporary file beside it and moved into place, and an entry whose content differs
+    from the digest recorded at its build (truncated, overwritten) is rebuilt, not loaded. None when
+    no working compiler is found.
+    """
     cc = c_compiler()
     if cc is None:
         return None
-    flags = ["-O3", "-fPIC", "-shared"] + (["-fopenmp"] if openmp else [])
+    if load is None:
+        import ctypes
+
+        load = ctypes.CDLL
+    flags = ["-O3", "-fPIC", "-shared"]
     key = hashlib.sha256(code + " ".join(flags).encode() + sys.version.encode()
                          + ca.__version__.encode()).hexdigest()[:16]
-    lib = cache_dir() / f"{name}_{key}.so"
+    lib = cache.cache_dir() / f"{name}_{key}.so"
+
+    def build(part: Path) -> None:
+        fd, src = tempfile.mkstemp(dir=lib.parent, prefix=f".{name}.", suffix=".c")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(code)
+            subprocess.run([cc, *flags, src, "-o", str(part), "-lm"], check=True, capture_output=True, timeout=300)
+        finally:
+            os.unlink(src)
+
     try:
-        lib.parent.mkdir(parents=True, exist_ok=True)
-    except OSError:  # a read-only home: keep the cache in the temporary folder instead
-        lib = Path(tempfile.gettempdir()) / f"lcp-lem-{os.getuid() if hasattr(os, 'getuid') else 0}" / lib.name
-        lib.parent.mkdir(parents=True, exist_ok=True)
-    if not lib.exists():
-        # built beside the cache entry and renamed into place: os.replace is atomic within one file
-        # system, so parallel processes (Dask workers, pytest-xdist) never load a half-written library
-        with tempfile.TemporaryDirectory(dir=lib.parent) as tmp:
-            src = Path(tmp) / f"{name}.c"
-            src.write_bytes(code)
-            part = Path(tmp) / lib.name
-            try:
-                subprocess.run([cc, *flags, str(src), "-o", str(part), "-lm"],
-                               check=True, capture_output=True, timeout=300)
-            except (subprocess.SubprocessError, OSError):
-                return None
-            os.replace(part, lib)
-    return lib
+        return cache.cached_entry(lib, build, lambda path: load(str(path)))
+    except (subprocess.SubprocessError, OSError):  # no working compiler after all
+        return None
 
 
 def _compile(fn: ca.Function) -> ca.Function:
     """Compile a CasADi Function once per machine; the CasADi VM (slower, same results) without a compiler."""
-    lib = build_library(fn.name(), generate_c(fn))
-    return ca.external(fn.name(), str(lib)) if lib is not None else fn
-
-
-#: C of each SX operation the lean step uses; comparisons give 0/1 like CasADi's
-_C_OPS = {ca.OP_ADD: "{0} + {1}", ca.OP_SUB: "{0} - {1}", ca.OP_MUL: "{0} * {1}", ca.OP_DIV: "{0} / {1}",
-          ca.OP_NEG: "-{0}", ca.OP_FABS: "fabs({0})", ca.OP_SQ: "{0} * {0}", ca.OP_TWICE: "2.0 * {0}",
-          # select form (not fmax/fmin calls) so that gcc vectorizes; same value for a finite or
-          # NaN first argument, which is how the step uses them
-          ca.OP_FMAX: "({0} > {1} ? {0} : {1})", ca.OP_FMIN: "({0} < {1} ? {0} : {1})",
-          ca.OP_LE: "(double)({0} <= {1})", ca.OP_LT: "(double)({0} < {1})", ca.OP_EQ: "(double)({0} == {1})",
-          ca.OP_NE: "(double)({0} != {1})", ca.OP_NOT: "(double)(!{0})",
-          ca.OP_IF_ELSE_ZERO: "({0} != 0 ? {1} : 0.0)"}
-
-
-def _c_constant(x: float) -> str:
-    if x != x:
-        return "NAN"
-    if math.isinf(x):
-        return "INFINITY" if x > 0 else "-INFINITY"
-    return repr(float(x))
-
-
-def soa_source(fn: ca.Function, name: str) -> str:
-    """C for advancing many scenes by ``fn: (z, c) -> z_next`` (an SX Function), in structure-of-arrays
-    layout: ``name(Z, C, N, steps, B)`` with Z (nz, N) and C (nc, N) row-major, N scenes.
-
-    The step's SX instructions are written out as straight-line C in the body of a loop over scenes
-    (``omp simd``), inside the loop over steps, for blocks of B scenes that stay in cache, shared out
-    to threads (``omp parallel for``). The closed form is still the one of ``planar_enum``: only
-    its expression graph is transcribed, so results equal the CasADi evaluation bit for bit.
-    """
-    body = []
-    n_out = fn.nnz_out(0)
-    for k in range(fn.n_instructions()):
-        op, i, o = fn.instruction_id(k), fn.instruction_input(k), fn.instruction_output(k)
-        if op == ca.OP_INPUT:
-            body.append(f"w{o[0]} = {'Z' if i[0] == 0 else 'C'}[{i[1]} * N + j];")
-        elif op == ca.OP_OUTPUT:
-            body.append(f"r{o[1]} = w{i[0]};")
-        elif op == ca.OP_CONST:
-            body.append(f"w{o[0]} = {_c_constant(fn.instruction_constant(k))};")
-        elif op in _C_OPS:
-            body.append(f"w{o[0]} = " + _C_OPS[op].format(*(f"w{a}" for a in i)) + ";")
-        else:
-            raise NotImplementedError(f"SX operation {op} has no C transcription here")
-    ind = "\n" + " " * 8
-    return f"""#include <math.h>
-void {name}(double* restrict Z, const double* restrict C, long N, long steps, long B) {{
-  long nb = (N + B - 1) / B;
-  #pragma omp parallel for schedule(static)
-  for (long b = 0; b < nb; ++b) {{
-    long j0 = b * B, j1 = j0 + B < N ? j0 + B : N;
-    for (long k = 0; k < steps; ++k) {{
-      #pragma omp simd
-      for (long j = j0; j < j1; ++j) {{
-        double {", ".join(f"w{m}" for m in range(fn.sz_w()))};
-        double {", ".join(f"r{m}" for m in range(n_out))};{ind}{ind.join(body)}{ind}{ind.join(f"Z[{m} * N + j] = r{m};" for m in range(n_out))}
-      }}
-    }}
-  }}
-}}
-"""
-
-
-@functools.lru_cache(maxsize=None)
-def batch_library(n: int, affine: bool = False):
-    """The lean step as a compiled structure-of-arrays kernel (:func:`soa_source`), OpenMP threads
-    when the compiler has them.
-
-    Returns a ctypes function ``(Z, C, N, steps, B)`` or None without a working compiler.
-    """
-    import ctypes
-
-    step = step_function(n, affine, True)
-    name = f"lcp_batch_soa_{n}_{int(affine)}"
-    openmp = openmp_available()
-    lib = build_library(name, soa_source(step, name).encode(), openmp=openmp)
-    if lib is None:
-        return None
-    fn = getattr(ctypes.CDLL(str(lib)), name)
-    dp = ctypes.POINTER(ctypes.c_double)
-    fn.argtypes = [dp, dp, ctypes.c_long, ctypes.c_long, ctypes.c_long]
-    fn.restype = None
-    fn.openmp = openmp
-    return fn
+    ext = build_library(fn.name(), generate_c(fn), load=lambda path: ca.external(fn.name(), path))
+    return ext if ext is not None else fn
 
 
 @functools.lru_cache(maxsize=None)
@@ -386,7 +287,7 @@ def run_library(n: int, affine: bool = True):
     lib = build_library(name, generate_c(step) + driver.encode())
     if lib is None:
         return None
-    fn = getattr(ctypes.CDLL(str(lib)), name)
+    fn = getattr(lib, name)
     dp = ctypes.POINTER(ctypes.c_double)
     fn.argtypes = [dp, dp, ctypes.c_long, dp, dp]
     fn.restype = ctypes.c_long
