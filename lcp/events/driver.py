@@ -97,7 +97,7 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     t_out = opts.output_times(t_end)
     integ = Integrator(system, q0, v0, t_end, opts)
     integ.model.state_checked = integ.model.constant  # the mass matrix is the same at every state
-    integ.check_initial(q0, v0)
+    q0, v0 = integ.check_initial(q0, v0)  # the event method's start check (lcp.events.projection)
     phases, status, message, t_fail = integ.run(q0, v0)
     n, m = system.n, system.n_contacts
     for note in integ.notes:

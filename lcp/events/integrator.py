@@ -70,8 +70,12 @@ class Integrator:
         self.selector.breakpoints = tuple(self.breakpoints)
 
     def check_initial(self, q0, v0):
-        """ValueError if (q0, v0) violates the bilateral constraints or penetrates a contact."""
-        check_initial(self.sys, self.model, q0, v0, self.scales, self.gap_tol)
+        """ValueError if (q0, v0) violates the bilateral constraints or penetrates a contact deeply;
+        returns the start, projected onto a contact it penetrates slightly (a note says so)."""
+        q0, v0, note = check_initial(self.sys, self.model, q0, v0, self.scales, self.gap_tol, self.projector.project)
+        if note:
+            self.notes.append(note)
+        return q0, v0
 
     # --- the acceleration-level problem and the next mode
     def classify(self, q, v):

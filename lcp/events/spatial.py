@@ -51,6 +51,7 @@ from lcp.events.accumulation import BounceSequence
 from lcp.events.event_location import approach_gap, first_terminal_event, too_many_events
 from lcp.events.model import EPS, coordinate_rows, mass_projection
 from lcp.events.options import CASCADE_ROUNDS, EVENT_STATUS_MESSAGES
+from lcp.events.projection import check_initial
 from lcp.events.records import Event, EventResult, Impact, Impulse, Phase
 from lcp.events.spatial_accumulation import watch_bounces
 from lcp.events.spatial_modes import AccelDisk, SpatialModel, group_motions, impact_impulse
@@ -597,10 +598,10 @@ def spatial_event_driven(system, q0, v0, t_end, opts, given, scene=None) -> Even
     atol = opts.atol if "atol" in given else SPATIAL_ATOL
     t_out = opts.output_times(t_end)
     integ = SpatialIntegrator(system, q0, v0, t_end, opts, rtol, atol)
-    gap = integ.model.gaps(q0)
-    if system.n_contacts and np.min(gap) < -integ.gap_tol:
-        j = int(np.argmin(gap))
-        raise ValueError(f"q0 penetrates contact {j} (gap {gap[j]:.3g} < 0)")
+    q0, v0, note = check_initial(system, integ.model, q0, v0, integ.scales, integ.gap_tol,
+                                 lambda t, q, v, g, nr, tr: integ.project(t, q, v, list(g), list(nr), list(tr)))
+    if note:
+        integ.notes.append(note)
     phases, status, message, t_fail = integ.run(q0, v0)
     for note in integ.notes:
         message = f"{message} {note}"
