@@ -179,6 +179,10 @@ def sum_up(integ, t, q, v, P, at, closed, sol, flight):
     modes = sol.modes if sol is not None else ()
     stick = tuple(c for c, md in zip(closed, modes) if md == STICK)
     q_inf, v_inf = integ.projector.project(t_inf, q_inf, v_inf, contacts, contacts, stick)
+    if min(model.gaps(q_inf).tolist()) < -integ.gap_tol:
+        # the extrapolation moved another body into a contact (a bead flying just above the
+        # column): no jump, the bounces are resolved one by one
+        return None
     data = model.data(t, q, v)
     m, k = integ.m, at_a.size
     Hc = H[np.concatenate([at_a, m + at_a])]

@@ -59,6 +59,7 @@ class Integrator:
         self.projector = StateProjector(system, model)
         self.accumulations, self.impact_list = [], []
         self.nonunique = 0
+        self.penetrated = False  # a missed impact was said in the message
         self.notes = []  # said in the result's message
         self.bounces = BounceSequence()
         bp = getattr(system, "breakpoints", None)
@@ -284,6 +285,13 @@ class Integrator:
                 stick += (j,)
             gap_rows = closed if kind != "impact" else closed + (j,)
             q, v = self.projector.project(te, q, v, gap_rows, closed, stick)
+            if m and not self.penetrated and min(self.model.gaps(q).tolist()) < -self.gap_tol:
+                # no silent success: an open contact found penetrated was never landed on
+                gap = self.model.gaps(q)
+                j_p = int(np.argmin(gap))
+                self.penetrated = True
+                self.notes.append(f"At t = {te:.10g} contact {self.sys.contacts[j_p].name!r} penetrates by "
+                                  f"{-gap[j_p]:.3g} (an impact was missed): the motion after it is not reliable.")
             if not (all_finite(q) and all_finite(v)):
                 status, message = -2, f"{EVENT_STATUS_MESSAGES[-2]} At t = {te:.10g}."
                 break

@@ -327,6 +327,7 @@ class SpatialIntegrator:
         self.breakpoints = np.unique(bp[(bp > 0) & (bp < t_end)]).tolist()
         self.max_drift = 0.0
         self.bounces, self.accumulations = BounceSequence(), []
+        self.penetrated = False
 
     # ------------------------------------------------------------------ decisions
     def record_impulse(self, t, contacts, P, kind, reason):
@@ -551,6 +552,11 @@ class SpatialIntegrator:
                 stick.append(j)
             gap_rows = list(idx) + ([j] if kind == "impact" else [])
             q, v = self.project(te, q, v, gap_rows, list(idx), stick)
+            gap = self.model.gaps(q)
+            if self.m and not self.penetrated and min(gap.tolist()) < -self.gap_tol:
+                self.penetrated = True  # no silent success: an open contact penetrated unseen
+                self.notes.append(f"At t = {te:.10g} contact {self.sys.contacts[int(np.argmin(gap))].name!r} penetrates "
+                                  f"by {-float(np.min(gap)):.3g} (an impact was missed): the motion after it is not reliable.")
             if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
                 status, message = -2, f"{EVENT_STATUS_MESSAGES[-2]} At t = {te:.10g}."
                 break

@@ -80,6 +80,8 @@ def _sum_up(integ, t, q, v, P, at, idx, modes, flight):
     contacts = sorted(set(at) | set(idx))
     stick = [c for c, md in zip(idx, modes) if md == STICK]
     q_inf, v_inf = integ.project(t_inf, q_inf, v_inf, contacts, contacts, stick)
+    if min(model.gaps(q_inf).tolist()) < -integ.gap_tol:
+        return None  # the extrapolation moved another body into a contact: no jump
     # the tail's impulse: normal rows of the impacting contacts, then their tangent rows
     trows = [model.trows[j] for j in at]
     rows = np.concatenate([at_a] + trows).astype(int)
