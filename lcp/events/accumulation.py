@@ -127,15 +127,16 @@ class TailPhase:
     integrator = "accumulation"
     nfev = 0
 
-    def __init__(self, t0, t1, q0, q1, P0, names, full_modes, idx_t):
+    def __init__(self, t0, t1, q0, q1, P0, names, full_modes, idx_t, m=None):
         self.t0, self.t1 = t0, t1
         self.q0, self.P0 = q0, P0
         self.v0 = (q1 - q0) / (t1 - t0)
         self.qdd = np.zeros_like(q0)
-        m = P0.size // 2
-        self.N, self.f = np.zeros(m), np.zeros(m)
-        self.NF = np.zeros(2 * m)
+        m = P0.size // 2 if m is None else m  # m contacts: m normal rows, the rest tangent rows
+        self.N, self.f = np.zeros(m), np.zeros(P0.size - m)
+        self.NF = np.zeros(P0.size)
         self._names, self.full_modes, self.idx_t = names, full_modes, idx_t
+        self.idx = idx_t
         self.modes = ()
 
     def names(self):
@@ -178,6 +179,10 @@ def sum_up(integ, t, q, v, P, at, closed, sol, flight):
     modes = sol.modes if sol is not None else ()
     stick = tuple(c for c, md in zip(closed, modes) if md == STICK)
     q_inf, v_inf = integ.projector.project(t_inf, q_inf, v_inf, contacts, contacts, stick)
+    if min(model.gaps(q_inf).tolist()) < -integ.gap_tol:
+        # the extrapolation moved another body into a contact (a bead flying just above the
+        # column): no jump, the bounces are resolved one by one
+        return None
     data = model.data(t, q, v)
     m, k = integ.m, at_a.size
     Hc = H[np.concatenate([at_a, m + at_a])]

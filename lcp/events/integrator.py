@@ -12,17 +12,13 @@ from lcp.events.impacts import ImpactLaw
 from lcp.events.model import EPS, all_finite, system_model, zero_test_scales
 from lcp.events.modes import ModeSelector
 from lcp.events.ode_phase import OdePhase
-from lcp.events.options import EVENT_STATUS_MESSAGES, EventOptions, SmoothIntegrator
+from lcp.events.options import CASCADE_ROUNDS, EVENT_STATUS_MESSAGES, EventOptions, SmoothIntegrator
 from lcp.events.phases import ClosedFormPhase
 from lcp.events.projection import StateProjector
 from lcp.events.records import Event, Impact, Impulse, Phase, make_record
 
 __all__ = ["CASCADE_ROUNDS", "Inconsistent", "Integrator"]
 
-#: impacts at one instant solved round by round (each on the contacts then closed or approaching,
-#: as Moreau-Jean's steps do in the limit h -> 0) before the rest of the cascade is solved at once
-#: over every contact at the surface: a column of 10 beads (e = 0.5) needs up to 75 rounds
-CASCADE_ROUNDS = 1000
 
 
 class Inconsistent(Exception):
@@ -63,6 +59,7 @@ class Integrator:
         self.projector = StateProjector(system, model)
         self.accumulations, self.impact_list = [], []
         self.nonunique = 0
+        self.penetrated = False  # a missed impact was said in the message
         self.notes = []  # said in the result's message
         self.bounces = BounceSequence()
         bp = getattr(system, "breakpoints", None)
@@ -245,6 +242,12 @@ class Integrator:
                                                    tail.integrator, 0))
                     last = None
                     continue
+                if closed:
+                    # contacts closed by the zero tests after the impact (a bounce below the velocity
+                    # tolerance, or e = 0): the phase starts on them, as after an event; else their
+                    # residual normal velocity carries the body off the contact through the phase
+                    stick = tuple(c for c, md in zip(closed, sol.modes) if md == STICK)
+                    q, v = self.projector.project(t, q, v, closed, closed, stick)
             elif last is not None:
                 self.bounces.reset()
             while breakpoints and breakpoints[0] <= t:
@@ -277,6 +280,13 @@ class Integrator:
                 stick += (j,)
             gap_rows = closed if kind != "impact" else closed + (j,)
             q, v = self.projector.project(te, q, v, gap_rows, closed, stick)
+            if m and not self.penetrated and min(self.model.gaps(q).tolist()) < -self.gap_tol:
+                # no silent success: an open contact found penetrated was never landed on
+                gap = self.model.gaps(q)
+                j_p = int(np.argmin(gap))
+                self.penetrated = True
+                self.notes.append(f"At t = {te:.10g} contact {self.sys.contacts[j_p].name!r} penetrates by "
+                                  f"{-gap[j_p]:.3g} (an impact was missed): the motion after it is not reliable.")
             if not (all_finite(q) and all_finite(v)):
                 status, message = -2, f"{EVENT_STATUS_MESSAGES[-2]} At t = {te:.10g}."
                 break

@@ -47,10 +47,12 @@ import numpy as np
 
 from lcp.contact.problem import MODE_NAMES, OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, STICK
 from lcp.result import SolverStats
+from lcp.events.accumulation import BounceSequence
 from lcp.events.event_location import approach_gap, first_terminal_event, too_many_events
 from lcp.events.model import EPS, coordinate_rows, mass_projection
-from lcp.events.options import EVENT_STATUS_MESSAGES
+from lcp.events.options import CASCADE_ROUNDS, EVENT_STATUS_MESSAGES
 from lcp.events.records import Event, EventResult, Impact, Impulse, Phase
+from lcp.events.spatial_accumulation import watch_bounces
 from lcp.model.start import consistent_start
 from lcp.events.spatial_modes import AccelDisk, SpatialModel, group_motions, impact_impulse
 
@@ -324,6 +326,8 @@ class SpatialIntegrator:
         bp = np.asarray(getattr(system, "breakpoints", []), dtype=float).ravel()
         self.breakpoints = np.unique(bp[(bp > 0) & (bp < t_end)]).tolist()
         self.max_drift = 0.0
+        self.bounces, self.accumulations = BounceSequence(), []
+        self.penetrated = False
 
     # ------------------------------------------------------------------ decisions
     def record_impulse(self, t, contacts, P, kind, reason):
@@ -344,26 +348,41 @@ class SpatialIntegrator:
     def decide(self, t, q, v, last):
         """Impulses where needed, then the next modes: (v, closed contacts kept, modes, dirs)."""
         model, m = self.model, self.m
-        for _ in range(8):
+        rounds = tangential = 0
+        while True:
             fr = model.frame(t, q, v)
             ul = fr.H @ v
             gtol, vtol = self.gap_tol, self.vel_tol
-            closed, approaching = [], []
+            closed, approaching, separating = [], [], []
             for j in range(m):
                 if fr.gap[j] <= gtol:
                     if abs(ul[j]) <= vtol:
                         closed.append(j)
                     elif ul[j] < -vtol:
                         approaching.append(j)
+                    else:
+                        separating.append(j)
             if approaching:
-                at = sorted(closed + approaching)
+                # a cascade goes round by round, as in the planar integrator (lcp.events.integrator)
+                rounds += 1
+                if rounds <= CASCADE_ROUNDS:
+                    at, why = sorted(closed + approaching), "gap closed with approach velocity"
+                elif rounds <= CASCADE_ROUNDS + 8:
+                    at = sorted(closed + approaching + separating)
+                    why = f"impact cascade not ended after {CASCADE_ROUNDS} rounds: finished at once"
+                    if rounds == CASCADE_ROUNDS + 1:
+                        self.notes.append(f"At t = {t:.10g} an impact cascade did not end after {CASCADE_ROUNDS} "
+                                          "rounds; its rest was solved at once over every contact at the surface.")
+                else:
+                    raise Inconsistent(f"at t = {t:.17g}: contacts still approach after an impact cascade of "
+                                       f"{rounds - 1} rounds")
                 out = impact_impulse(model, fr, v, at)
                 self.stats.solver_calls += 1
                 if out is None:
                     raise Inconsistent(f"the impact problem at t = {t:.17g} has no solution")
                 dv, P, _ = out
                 v = v + dv
-                self.record_impulse(t, at, P, "impact", "gap closed with approach velocity")
+                self.record_impulse(t, at, P, "impact", why)
                 continue
             if not closed:
                 return v, [], [], []
@@ -388,13 +407,15 @@ class SpatialIntegrator:
                                    "not solved")
             out = impact_impulse(model, fr, v, closed, restitution=False, delta_b=True)
             if out is not None and np.max(np.abs(out[1])) > 1e-12 * self.scales["P"]:
+                tangential += 1
+                if tangential > 8:
+                    raise Inconsistent(f"at t = {t:.17g}: impulses did not lead to a consistent contact mode")
                 self.stats.fallbacks += 1
                 dv, P, _ = out
                 v = v + dv
                 self.record_impulse(t, closed, P, "tangential impact", why)
                 continue
             raise Inconsistent(f"at t = {t:.17g}: {why}; the impulsive fallback gives no sticking impulse")
-        raise Inconsistent(f"at t = {t:.17g}: impulses did not lead to a consistent contact mode")
 
     def _pick(self, group, acc, last):
         """One solution of a motion with several mode sets (a tie at a mode boundary): at a slip
@@ -482,6 +503,21 @@ class SpatialIntegrator:
             except Inconsistent as exc:
                 status, message = -3, f"{EVENT_STATUS_MESSAGES[-3]} {exc}"
                 break
+            if last is not None and last[0] == "impact":
+                jump = watch_bounces(self, t, q, v, P, idx, modes, run_phases[-1])
+                if jump is not None:
+                    t, q, v, tail = jump
+                    run_phases.append(tail)
+                    self.phases.append(Phase(float(tail.t0), float(tail.t1), tail.names(), tail.integrator, 0))
+                    last = None
+                    continue
+            elif last is not None:
+                self.bounces.reset()
+            if idx:
+                # contacts closed by the zero tests (a bounce below the velocity tolerance): the
+                # phase starts on them, as after an event (else their residual gap and normal
+                # velocity drift through the whole phase)
+                q, v = self.project(t, q, v, idx, idx, [c for c, md in zip(idx, modes) if md == STICK])
             while breakpoints and breakpoints[0] <= t:
                 breakpoints.pop(0)
             t_stop = breakpoints[0] if breakpoints else self.t_end
@@ -516,6 +552,11 @@ class SpatialIntegrator:
                 stick.append(j)
             gap_rows = list(idx) + ([j] if kind == "impact" else [])
             q, v = self.project(te, q, v, gap_rows, list(idx), stick)
+            gap = self.model.gaps(q)
+            if self.m and not self.penetrated and min(gap.tolist()) < -self.gap_tol:
+                self.penetrated = True  # no silent success: an open contact penetrated unseen
+                self.notes.append(f"At t = {te:.10g} contact {self.sys.contacts[int(np.argmin(gap))].name!r} penetrates "
+                                  f"by {-float(np.min(gap)):.3g} (an impact was missed): the motion after it is not reliable.")
             if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
                 status, message = -2, f"{EVENT_STATUS_MESSAGES[-2]} At t = {te:.10g}."
                 break
@@ -598,4 +639,4 @@ def spatial_event_driven(system, q0, v0, t_end, opts, given, scene=None) -> Even
                        status=status, message=message, stats=integ.stats, method="event",
                        solver="disk", t_events=[ev.t for ev in integ.events], force_N=FN, force_T=FT,
                        events=integ.events, impulses=integ.impulses, phases=integ.phases,
-                       impacts=integ.impact_list, accumulations=[], nonunique_forces=0)
+                       impacts=integ.impact_list, accumulations=integ.accumulations, nonunique_forces=0)

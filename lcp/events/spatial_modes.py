@@ -389,7 +389,9 @@ def impact_impulse(model: SpatialModel, fr: Frame, v, contacts, restitution: boo
     u = Hc @ v
     qv = u.copy()
     if restitution:
-        qv[:k] += model.e[idx] * u[:k]
+        # on the approaching contacts only (as in the planar impact law): a closed or separating
+        # contact of a cascade's round must not be pulled back
+        qv[:k] += model.e[idx] * np.minimum(u[:k], 0.0)
     mu = model.mu[idx]
     dims = model.dims[idx]
     q_solve = qv
