@@ -156,7 +156,7 @@ def test_readme_event_errors():
 
 
 def test_readme_million_steps():
-    err, bound, y = _stated(r"\|x − exact\| = {N} \(below B h²/8 = {N}\) and \|y\| ≤ {N}")
+    err, bound, y = _stated(r"\|x − exact\| = {N} \(below B h²/8 = {N}\) and \|y\| = {N} exactly")
     scene = lcp.scenes.jean_pratt()
     h = 0.3 / 1e6
     res = lcp.simulate(scene, 0.3, h=h, save_every=1000)

@@ -203,3 +203,21 @@ def test_timings_say_they_are_timings_and_where():
     sec = _flat(results_section())
     assert ("except times and speed ratios: those are timings, measured on a 2-core machine shared with "
             "other jobs") in sec
+
+
+# ----------------------------------------------------------------------------- stated as equalities
+def test_million_steps_to_the_printed_digits():
+    """The stability study's long-horizon case (1e6 compiled steps, save_every=1000) as printed."""
+    err, bound, y = stated(r"\|x − exact\| = {N} \(below B h²/8 = {N}\) and \|y\| = {N} exactly")
+    scene, h = lcp.scenes.jean_pratt(), 0.3 / 1e6
+    res = lcp.simulate(scene, 0.3, h=h, save_every=1000)
+    assert agrees(float(np.max(np.abs(res.q[:, 0] - scene.exact(res.t)["x"]))), err)
+    assert agrees(scene.B * h * h / 8, bound) and agrees(float(np.max(np.abs(res.q[:, 1]))), y)
+
+
+def test_event_errors_to_the_printed_digits():
+    default, reverse = stated(r"max \|x − exact\| = {N} / {N} at 1000 times")
+    for scene, token in ((lcp.scenes.jean_pratt(), default), (lcp.scenes.jean_pratt(v0=-1.0), reverse)):
+        res = lcp.simulate(scene, scene.t_end, method="event", n_eval=1000)
+        assert agrees(float(np.max(np.abs(res.q[:, 0] - scene.exact(res.t)["x"]))), token)
+        assert res.t_events[0] == scene.tau0  # "the stop time equal to tau0 to the last bit"
