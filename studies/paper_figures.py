@@ -8,6 +8,8 @@
   from Moreau-Jean, from the exact solution and from the printed series (4.1) / (4.2);
 - ``error_vs_h.png`` (+ ``convergence.csv``): Moreau-Jean's error against the exact solution,
   against the bound B h^2/8, with the observed orders for theta = 1/2 and 1;
+- ``error_table.csv`` (also printed): the README's results table, Moreau-Jean on the default scene
+  over [0, 0.3] s for every solver, at h = 1e-2 ... 1e-5 (``--quick``: 1e-2 and 1e-3 only);
 - ``errata.csv`` (also printed): the paper's claims against what the package computes.
 
 Examples
@@ -196,6 +198,46 @@ def convergence(scene, hs, outdir: Path):
     return orders, rows
 
 
+#: the solvers of the README's results table (``auto`` is what ``lcp.simulate`` takes by default)
+TABLE_SOLVERS = ("auto", "enum", "lemke", "osqp")
+
+
+def error_table(scene, hs, t_end: float = 0.3, solvers=TABLE_SOLVERS, theta: float = 0.5):
+    """Moreau-Jean on ``scene`` over [0, t_end] for every solver at every h: the README's results table.
+
+    Returns
+    -------
+    list of dict
+        One row per (h, solver): ``h``, ``solver``, ``x`` (max |x - exact|), ``bound`` (B h^2/8),
+        ``y`` (max |y|, the gap of a contact that stays closed) and ``residual`` (worst Coulomb
+        residual, checked apart from the solver).
+    """
+    rows = []
+    for h in hs:
+        for solver in solvers:
+            res = lcp.simulate(scene, t_end, h=h, theta=theta, solver=solver)
+            if not res.success:
+                raise RuntimeError(f"h = {h:g}, solver {solver}: {res.message}")
+            rows.append(dict(h=float(h), solver=solver,
+                             x=float(np.max(np.abs(res.q[:, 0] - scene.exact(res.t)["x"]))),
+                             bound=scene.B * h * h / 8, y=float(np.max(np.abs(res.q[:, 1]))),
+                             residual=float(res.stats.max_residual)))
+    return rows
+
+
+def table_lines(rows) -> list[str]:
+    """The error table as printed: per h, x and B h^2/8 (3 digits), and the largest |y| and residual
+    over the solvers (2 digits); x's spread over the solvers is printed beside it."""
+    lines = []
+    for h in dict.fromkeys(r["h"] for r in rows):
+        at = [r for r in rows if r["h"] == h]
+        xs = [r["x"] for r in at]
+        lines.append(f"  h = {h:<6g} max|x - exact| = {max(xs):.3g} (solvers differ by {max(xs) - min(xs):.1e})  "
+                     f"B h^2/8 = {at[0]['bound']:.3g}  max|y| = {max(r['y'] for r in at):.2g}  "
+                     f"worst residual = {max(r['residual'] for r in at):.2g}")
+    return lines
+
+
 # ----------------------------------------------------------------------------- errata
 def tanh_ode_q_at_tau0(v0: float) -> float:
     """q(tau0) B / v0^2 for the paper's own model (3.9), y'' = tanh y, y(0) = 0, y'(0) = v0 (x = B t)."""
@@ -257,7 +299,8 @@ def run(out=None, quick: bool = False) -> dict:
     -------
     dict
         ``errors_forward`` / ``errors_reverse``: {h: {x, bound, y, residual}};
-        ``orders``: {theta: observed order}; ``errata``: list of rows; ``files``: written paths.
+        ``orders``: {theta: observed order}; ``table``: the README's error table (rows of
+        :func:`error_table`); ``errata``: list of rows; ``files``: written paths; ``quick``.
     """
     outdir = out_dir(out, NAME)
     scene_f = lcp.scenes.jean_pratt()
@@ -275,13 +318,15 @@ def run(out=None, quick: bool = False) -> dict:
     err_o = trajectories(scene_o, hs[:2], "other_parameters", outdir)
     conv_hs = np.array([1e-2, 1e-3, 1e-4] if quick else [1e-2, 1e-3, 1e-4, 1e-5]) * (1 + 1 / 7)
     orders, _ = convergence(scene_o, conv_hs, outdir)
+    table = error_table(scene_f, hs[:2] if quick else [1e-2, 1e-3, 1e-4, 1e-5])
+    write_csv(outdir / "error_table.csv", list(table[0]), [tuple(r.values()) for r in table])
 
     rows = errata(scene_f, scene_r)
     write_csv(outdir / "errata.csv", ["claim", "printed", "computed", "verdict"],
               [(r["claim"], r["printed"], r["computed"], r["verdict"]) for r in rows])
     files = sorted(str(p.name) for p in outdir.iterdir())
-    return dict(errors_forward=err_f, errors_reverse=err_r, errors_other=err_o, orders=orders,
-                errata=rows, files=files, out=str(outdir))
+    return dict(errors_forward=err_f, errors_reverse=err_r, errors_other=err_o, orders=orders, table=table,
+                errata=rows, files=files, out=str(outdir), quick=quick)
 
 
 def main(argv=None):
@@ -293,7 +338,12 @@ def main(argv=None):
         for h, e in res[f"errors_{label}"].items():
             print(f"  {label:8s} h = {h:<7g} max|x - exact| = {e['x']:.3e}  (B h^2/8 = {e['bound']:.3e})"
                   f"  max|y| = {e['y']:.1e}  residual = {e['residual']:.1e}")
-    print("  observed order: " + ", ".join(f"theta = {k:g}: {v:.2f}" for k, v in res["orders"].items()))
+    decades = "three decades, --quick" if res["quick"] else "four decades"
+    print("  observed order (other parameters, " + decades + "): "
+          + ", ".join(f"theta = {k:g}: {v:.2f}" for k, v in res["orders"].items()))
+    print(f"\nThe README's results table (default scene, [0, 0.3] s, solvers {', '.join(TABLE_SOLVERS)}"
+          + ("; --quick: h = 1e-2 and 1e-3 only" if res["quick"] else "") + "):")
+    print("\n".join(table_lines(res["table"])))
     print("\nErrata (the paper's claims against what the package computes):")
     for r in res["errata"]:
         print(f"- {r['claim']}\n    printed : {r['printed']}\n    computed: {r['computed']}\n    verdict : {r['verdict']}")
