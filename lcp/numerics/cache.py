@@ -194,6 +194,12 @@ def _intact(entry: Path) -> bool:
 def cached_entry(entry: Path, build: Callable[[Path], None], load: Callable[[Path], T]) -> T:
     """``load(entry)``, building the entry first where it is missing or corrupt.
 
+    An entry is intact when its content has the digest recorded beside it (``<entry>.sha256``,
+    written after the entry, both atomically). The fast path (an intact entry) takes no lock.
+    Otherwise, under :func:`entry_lock`: check again (another process may have just built it), else
+    build, record the digest and load. A corrupt entry (truncated, overwritten) is thus rebuilt, not
+    loaded; a load that still fails (for instance when ``load`` raises) falls back to one rebuild.
+
     Parameters
     ----------
     entry : Path
@@ -203,12 +209,6 @@ def cached_entry(entry: Path, build: Callable[[Path], None], load: Callable[[Pat
         ``entry``); it may raise, and then nothing is cached.
     load : callable
         Loads the entry; its value is returned.
-
-    An entry is intact when its content has the digest recorded beside it (``<entry>.sha256``,
-    written after the entry, both atomically). The fast path (an intact entry) takes no lock.
-    Otherwise, under :func:`entry_lock`: check again (another process may have just built it), else
-    build, record the digest and load. A corrupt entry (truncated, overwritten) is thus rebuilt, not
-    loaded; a load that still fails (for instance when ``load`` raises) falls back to one rebuild.
     """
     entry.parent.mkdir(parents=True, exist_ok=True)
     if _intact(entry):
