@@ -38,6 +38,10 @@ def test_time_dependent_gap_and_tangent_accepted_with_their_rates():
         s.gaps(qq)
     with pytest.raises(ValueError, match="'cam'"):
         s.contact_jacobian(qq)
+    # a caller written for fixed contacts (g(q), H(q)) is refused, never handed g without b
+    for fn in (s.gap_fn, s.H_fn):
+        with pytest.raises(ValueError, match="'cam' has a time-dependent gap"):
+            fn(qq)
 
 
 def test_fixed_contacts_have_no_rate_and_keep_their_functions():
@@ -167,3 +171,20 @@ def test_conveyor_block_reaches_the_belt_speed(V, v0, mu):
         sliding = r.t < sc.solution.t_stick - h
         # the friction impulse drags the block at mu N h per step
         np.testing.assert_allclose(r.p_T[sliding[1:], 0], sc.solution.accel * h, rtol=1e-9)
+
+
+def test_ball_riding_the_table_is_held_on_it_by_the_projection():
+    # A w^2 = 0.45 < g: the ball put on the table with its speed rides it (e = 0); the projection
+    # ("auto": on, the gap's speed varies) holds g(t, q) = 0 at its own time, t_k + h
+    a, w = 0.05, 3.0
+    sc = moving_table(amplitude=a, omega=w, e=0.0, height=1.0, t_end=3.0)
+    sc.q0[1], sc.v0[1] = 0.0, a * w
+    held = lcp.simulate(sc, h=1e-2)
+    free = lcp.simulate(sc, h=1e-2, projection=False)
+    assert held.success and free.success and held.stats.projections == 300 and free.stats.projections == 0
+    gap = held.q[:, 1] - a * np.sin(w * held.t)
+    assert np.abs(gap).max() < 1e-15
+    # without it the velocity-level law leaves an O(h^2) gap (theta = 1/2): a bound, and not zero
+    gap_free = free.q[:, 1] - a * np.sin(w * free.t)
+    assert 1e-7 < np.abs(gap_free).max() < a * w ** 3 * 1e-4
+    np.testing.assert_allclose(held.v[:, 1], a * w * np.cos(w * held.t), rtol=0, atol=1e-12)

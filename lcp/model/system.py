@@ -461,14 +461,27 @@ def _contact_functions(system, q, gap, H) -> tuple:
     t = system.t_sym
     if not system.contacts_depend_on_t:
         return ca.Function("gap", [q], [gap]), ca.Function("H", [q], [H]), None, None, None
-    return (None, None, ca.Function("gap_tq", [t, q], [gap]), ca.Function("H_tq", [t, q], [H]),
-            ca.Function("contact_rate", [t, q], [system.contact_rate_expr]))
+    return (_NeedsTime(system, "gap_fn"), _NeedsTime(system, "H_fn"), ca.Function("gap_tq", [t, q], [gap]),
+            ca.Function("H_tq", [t, q], [H]), ca.Function("contact_rate", [t, q], [system.contact_rate_expr]))
+
+
+class _NeedsTime:
+    """Stands for g(q) or H(q) of a system whose contacts move: calling it is a ValueError naming the
+    contact (a caller written for fixed contacts would otherwise drop b = (dg/dt, ds/dt) silently)."""
+
+    def __init__(self, system, what: str):
+        self.system, self.what = system, what
+
+    def __call__(self, *args):
+        raise ValueError(f"{self.what}: contact {moving_contact(self.system)!r} has a time-dependent gap or "
+                         "tangent, which this computation does not support (Moreau-Jean does: "
+                         "method='moreau-jean')")
 
 
 def _kinematics(system, fn_q, fn_tq, q, t, what: str) -> np.ndarray:
     """fn_q(q), or fn_tq(t, q) for moving contacts (ValueError naming the contact without t)."""
     if fn_tq is None:
-        return np.array(fn_q(q), dtype=float)
+        return np.array(fn_q(q), dtype=float)  # fixed contacts: g(q), H(q)
     if t is None:
         raise ValueError(f"{what}: contact {moving_contact(system)!r} has a time-dependent gap or tangent: give t")
     return np.array(fn_tq(t, q), dtype=float)
