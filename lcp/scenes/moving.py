@@ -64,9 +64,9 @@ class ConveyorExact:
 
     def __init__(self, V, mu, g, m, v0):
         self.V, self.mu, self.g, self.m, self.v0 = V, mu, g, m, v0
-        a = mu * g * np.sign(V - v0)
+        a = mu * g * float(np.sign(V - v0))
         self.accel = a
-        self.t_stick = (V - v0) / a if a else 0.0
+        self.t_stick = float((V - v0) / a) if a else 0.0
         self.switch_times = np.array([self.t_stick])
 
     def __call__(self, t) -> dict:
