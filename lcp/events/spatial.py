@@ -592,6 +592,10 @@ def spatial_event_driven(system, q0, v0, t_end, opts, given, scene=None) -> Even
     >>> res.success, res.mode_sequence, abs(res.t_events[0] - 0.4) < 1e-15
     (True, [('slide',), ('stick',)], True)
     """
+    if getattr(system, "contacts_depend_on_t", False):  # time-dependent gaps: refused (lcp.events.driver)
+        from lcp.model.system import moving_contact
+
+        raise ValueError(f"contact {moving_contact(system)!r} has a time-dependent gap: use method='moreau-jean'")
     for name, default in (("smooth", "auto"), ("mode_solver", "auto"), ("impact_solver", "auto"),
                           ("max_branches", 4096)):
         val = getattr(opts, name)

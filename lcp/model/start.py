@@ -90,9 +90,9 @@ def _general_rows(system, q, t):
         J.append(np.array(G, dtype=float).reshape(nb, n))
         c.append(np.array(system.constraints_fn(t, np.zeros(n))[0], dtype=float).ravel())
     if m:
-        r.append(system.gaps(q))
-        J.append(system.contact_jacobian(q)[:m])
-        c.append(system.gaps(np.zeros(n)))
+        r.append(system.gaps(q, t))
+        J.append(system.contact_jacobian(q, t)[:m])
+        c.append(system.gaps(np.zeros(n), t))
     names = [f"bilateral constraint {i}" for i in range(nb)] + [f"contact {ct.name!r}" for ct in system.contacts]
     if not r:
         return np.zeros(0), names, np.zeros((0, n)), np.zeros(0)

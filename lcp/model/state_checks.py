@@ -136,9 +136,9 @@ def null_space(G: np.ndarray) -> np.ndarray:
     return vt[rank:].T
 
 
-def contact_rows_degenerate(system, q, j):
-    """(rows [H_N; H_T] of contact j at q, their singular values) if they are dependent there, else None."""
-    H = system.contact_jacobian(q)
+def contact_rows_degenerate(system, q, j, t: float = 0.0):
+    """(rows [H_N; H_T] of contact j at (t, q), their singular values) if they are dependent there, else None."""
+    H = system.contact_jacobian(q, t)
     m, off = system.n_contacts, system.tangent_offsets
     rows = H[np.r_[j, m + off[j]:m + off[j + 1]]]
     s = np.linalg.svd(rows, compute_uv=False)
@@ -147,7 +147,7 @@ def contact_rows_degenerate(system, q, j):
     return (rows, s) if s[-1] <= 1e-10 * max(s[0], 1e-300) else None
 
 
-def check_contact_rows(system, q) -> None:
+def check_contact_rows(system, q, t: float = 0.0) -> None:
     """The tangent rows of each contact must be independent of each other and of its normal.
 
     Checked once, at q0 (anywhere when the kinematics are constant). Where the rows depend on q,
@@ -157,7 +157,7 @@ def check_contact_rows(system, q) -> None:
     """
     q = np.asarray(q, dtype=float)
     for j, c in enumerate(system.contacts):
-        bad = contact_rows_degenerate(system, q, j)
+        bad = contact_rows_degenerate(system, q, j, t)
         if bad is None:
             continue
         rows, s = bad
@@ -174,7 +174,7 @@ def check_contact_rows(system, q) -> None:
                              "this holds in every configuration")
         # a deterministic nearby configuration: is it q0, or the contact?
         near = q + 1e-3 * (1.0 + np.abs(q)) * np.sin(1.0 + np.arange(q.size))
-        if contact_rows_degenerate(system, near, j) is None:
+        if contact_rows_degenerate(system, near, j, t) is None:
             raise ValueError(f"contact {c.name!r}: at q0 = {q} (where the contact rows are checked) "
                              f"{what} {detail}. Only this configuration is singular for the contact: "
                              "at a nearby one the rows are independent. Start from a q0 off it")

@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike
 from lcp.model import state_checks
 from lcp.model.control import check_schedule, split_control
 
-__all__ = ["Contact", "System"]
+__all__ = ["Contact", "System", "moving_contact"]
 
 
 def _finite_nonneg(name: str, value) -> float:
@@ -214,14 +214,7 @@ class System:
         # contact kinematics: normal and tangent Jacobian rows
         m = len(self.contacts)
         self.n_contacts = m
-        gaps, HN, HT = [], [], []
-        for c in self.contacts:
-            g = _sx(c.gap, f"gap of {c.name}", (1, 1))
-            if ca.depends_on(g, v) or ca.depends_on(g, self.t_sym):
-                raise ValueError(f"gap of {c.name} must depend on q only")
-            gaps.append(g)
-            HN.append(ca.jacobian(g, q))
-            HT.append(_tangent_rows(c, q, v, self.t_sym, n))
+        gap, HN, HT, rate = _contact_kinematics(self.contacts, q, v, self.t_sym, n)
         self.mu = np.array([c.mu for c in self.contacts], dtype=float)
         self.e = np.array([c.e for c in self.contacts], dtype=float)
         #: tangent dimension of each contact: 1 (planar) or 2 (spatial, the Coulomb disk)
@@ -232,9 +225,11 @@ class System:
         #: rows of H (and of the Delassus operator): m normals, then the tangent rows
         self.n_contact_rows = m + self.n_tangent
         self.is_spatial = bool(np.any(self.tangent_dims == 2))
-        gap = ca.vertcat(*gaps) if m else ca.SX.zeros(0, 1)
         H = ca.vertcat(*(HN + HT)) if m else ca.SX.zeros(0, n)
-        self.gap_expr, self.H_expr = gap, H
+        # b(t, q) = (dg/dt, ds/dt): the local velocities are u = H(t, q) v + b; contacts_depend_on_t:
+        # whether any gap, tangent or contact Jacobian moves with t (a moving table, a cam, a belt)
+        self.gap_expr, self.H_expr, self.contact_rate_expr = gap, H, rate
+        self.contacts_depend_on_t = bool(m) and _moves(ca.vertcat(gap, ca.vec(H)), rate, self.t_sym)
         self.contact_rows_checked = False
         #: diagonal blocks of a constant sparse mass matrix, found by its check (lcp.numerics.block_diagonal)
         self.mass_blocks = None
@@ -248,7 +243,8 @@ class System:
 
         # constancy: decides whether a stepper may assemble once and skip CasADi in its loop
         self.mass_is_constant = not ca.depends_on(self.mass_expr, tq)
-        self.kinematics_is_constant = not ca.depends_on(ca.vertcat(ca.vec(H), ca.vec(G), ca.vec(phi_t)), tq)
+        self.kinematics_is_constant = (not ca.depends_on(ca.vertcat(ca.vec(H), ca.vec(G), ca.vec(phi_t)), tq)
+                                       and not self.contacts_depend_on_t)
         self.gap_is_affine = self.kinematics_is_constant
         self.is_constant = (self.mass_is_constant and self.kinematics_is_constant
                             and self.force_is_affine and not self.force_depends_on_t)
@@ -259,8 +255,8 @@ class System:
             self.force_fn = ca.Function("force", args, [self.force_expr])
             self.force_jac_fn = ca.Function("force_jac", args, [K, C])
             self.constraints_fn = ca.Function("constraints", [self.t_sym, q], [self.constraints_expr, G, phi_t])
-            self.gap_fn = ca.Function("gap", [q], [gap])
-            self.H_fn = ca.Function("H", [q], [H])
+            (self.gap_fn, self.H_fn, self.gap_tq_fn, self.H_tq_fn,
+             self.contact_rate_fn) = _contact_functions(self, q, gap, H)
         except RuntimeError:
             state_checks.check_free_symbols(self, t is None, gap, H, phi_t)  # names a symbol the System lacks
             raise
@@ -336,14 +332,19 @@ class System:
         """Generalized forces F(t, q, v) as an n-vector."""
         return np.array(self.force_fn(t, q, v), dtype=float).ravel()
 
-    def gaps(self, q) -> np.ndarray:
-        """Contact gaps g(q), one per contact."""
-        return np.array(self.gap_fn(q), dtype=float).ravel()
+    def gaps(self, q, t: float | None = None) -> np.ndarray:
+        """Contact gaps g(t, q), one per contact (t is needed only where a gap depends on time)."""
+        return _kinematics(self, self.gap_fn, self.gap_tq_fn, q, t, "gaps").ravel()
 
-    def contact_jacobian(self, q) -> np.ndarray:
-        """H(q): rows [H_N,1..H_N,m, then the tangent rows contact by contact], shape (m + n_tangent, n)
-        ((2m, n) when every contact is planar)."""
-        return np.array(self.H_fn(q), dtype=float).reshape(self.n_contact_rows, self.n)
+    def contact_rates(self, q, t: float) -> np.ndarray:
+        """b(t, q) = (dg/dt, ds/dt): the local velocities are u = H(t, q) v + b, rows as in H."""
+        fn = self.contact_rate_fn
+        return np.zeros(self.n_contact_rows) if fn is None else np.array(fn(t, q), dtype=float).ravel()
+
+    def contact_jacobian(self, q, t: float | None = None) -> np.ndarray:
+        """H(t, q): rows [H_N,1..H_N,m, then the tangent rows contact by contact], shape (m + n_tangent, n)
+        (t is needed only where a contact moves)."""
+        return _kinematics(self, self.H_fn, self.H_tq_fn, q, t, "contact_jacobian").reshape(self.n_contact_rows, -1)
 
     def contact_rows(self, active) -> np.ndarray:
         """Rows of H (and of the Delassus operator) of the contacts ``active``: their normal rows,
@@ -392,7 +393,7 @@ class System:
         if self.__dict__.get("_mass_checked_constant"):
             return q0, v0
         if self.n_contacts and not self.contact_rows_checked:
-            state_checks.check_contact_rows(self, q0)  # a constant mass matrix (and constraints) passed the check below once
+            state_checks.check_contact_rows(self, q0, t0)  # a constant mass matrix (and constraints) passed the check below once
         if not self.n_bilateral and self.n > 32 and self.mass_expr.nnz() <= self.n * self.n // 8:
             state_checks.check_sparse_mass(self, q0, t0)
         else:
@@ -415,8 +416,9 @@ class System:
         return state_checks.sparse_mass(self, q, t)
 
 
-def _tangent_rows(c: Contact, q, v, t, n: int) -> ca.SX:
-    """The tangent Jacobian rows of contact c: one (planar) or two (spatial), n columns each."""
+def _tangent_rows(c: Contact, q, v, t, n: int) -> tuple[ca.SX, ca.SX]:
+    """The tangent Jacobian rows of contact c: one (planar) or two (spatial), n columns each, and
+    the tangent's time derivative ds/dt (zero for a given ``tangent_jacobian``)."""
     if c.tangent is not None:
         s = _sx_any(c.tangent, f"tangent of {c.name}")
         if s.numel() not in (1, 2):
@@ -425,14 +427,83 @@ def _tangent_rows(c: Contact, q, v, t, n: int) -> ca.SX:
         s = ca.reshape(s, s.numel(), 1)
         if ca.depends_on(s, v):
             raise ValueError(f"tangent of {c.name} must depend on t and q only")
-        return ca.jacobian(s, q)
+        return ca.jacobian(s, q), ca.jacobian(s, t)
     J = _sx_any(c.tangent_jacobian, f"tangent_jacobian of {c.name}")
     if J.numel() == n:  # a row or a column: one tangent
-        return _sx(J, f"tangent_jacobian of {c.name}", (1, n))
+        return _sx(J, f"tangent_jacobian of {c.name}", (1, n)), ca.SX.zeros(1, 1)
     if J.shape == (2, n):
-        return _sx(J, f"tangent_jacobian of {c.name}", (2, n))
+        return _sx(J, f"tangent_jacobian of {c.name}", (2, n)), ca.SX.zeros(2, 1)
     raise ValueError(f"tangent_jacobian of {c.name} must have one row (1, {n}) or two rows (2, {n}), "
                      f"got {J.shape}")
+
+
+def _contact_kinematics(contacts, q, v, t, n: int) -> tuple:
+    """(gaps g(t, q), normal rows H_N, tangent rows H_T, b = (dg/dt, ds/dt)) of the contacts."""
+    gaps, HN, HT, gap_rates, tangent_rates = [], [], [], [], []
+    for c in contacts:
+        g = _sx(c.gap, f"gap of {c.name}", (1, 1))
+        if ca.depends_on(g, v):
+            raise ValueError(f"gap of {c.name} must depend on t and q only")
+        gaps.append(g)
+        HN.append(ca.jacobian(g, q))
+        rows, rate = _tangent_rows(c, q, v, t, n)
+        HT.append(rows)
+        gap_rates.append(ca.jacobian(g, t))
+        tangent_rates.append(rate)
+    if not contacts:
+        return ca.SX.zeros(0, 1), HN, HT, ca.SX.zeros(0, 1)
+    return ca.vertcat(*gaps), HN, HT, ca.vertcat(*(gap_rates + tangent_rates))
+
+
+def _contact_functions(system, q, gap, H) -> tuple:
+    """(g(q), H(q), g(t, q), H(t, q), b(t, q)) as CasADi Functions: the first two where no contact
+    moves, the last three where one does (None for the others)."""
+    t = system.t_sym
+    if not system.contacts_depend_on_t:
+        return ca.Function("gap", [q], [gap]), ca.Function("H", [q], [H]), None, None, None
+    return (_NeedsTime(system, "gap_fn"), _NeedsTime(system, "H_fn"), ca.Function("gap_tq", [t, q], [gap]),
+            ca.Function("H_tq", [t, q], [H]), ca.Function("contact_rate", [t, q], [system.contact_rate_expr]))
+
+
+class _NeedsTime:
+    """Stands for g(q) or H(q) of a system whose contacts move: calling it is a ValueError naming the
+    contact (a caller written for fixed contacts would otherwise drop b = (dg/dt, ds/dt) silently)."""
+
+    def __init__(self, system, what: str):
+        self.system, self.what = system, what
+
+    def __call__(self, *args):
+        raise ValueError(f"{self.what}: contact {moving_contact(self.system)!r} has a time-dependent gap or "
+                         "tangent, which this computation does not support (Moreau-Jean does: "
+                         "method='moreau-jean')")
+
+
+def _kinematics(system, fn_q, fn_tq, q, t, what: str) -> np.ndarray:
+    """fn_q(q), or fn_tq(t, q) for moving contacts (ValueError naming the contact without t)."""
+    if fn_tq is None:
+        return np.array(fn_q(q), dtype=float)  # fixed contacts: g(q), H(q)
+    if t is None:
+        raise ValueError(f"{what}: contact {moving_contact(system)!r} has a time-dependent gap or tangent: give t")
+    return np.array(fn_tq(t, q), dtype=float)
+
+
+def moving_contact(system) -> str | None:
+    """The name of the first contact of ``system`` whose gap, tangent or Jacobian depends on t, or None."""
+    if not getattr(system, "contacts_depend_on_t", False):
+        return None
+    m, off = system.n_contacts, system.tangent_offsets
+    for j, c in enumerate(system.contacts):
+        rows = [j] + [m + r for r in range(off[j], off[j + 1])]
+        if _moves(ca.vertcat(system.gap_expr[j], ca.vec(system.H_expr[rows, :])), system.contact_rate_expr[rows],
+                  system.t_sym):
+            return c.name
+    return system.contacts[0].name
+
+
+def _moves(kinematics: ca.SX, rate: ca.SX, t: ca.SX) -> bool:
+    """Whether contact kinematics move with time: g or H depends on t, or b = (dg/dt, ds/dt) is not
+    identically zero (a belt's tangent s = x - V t has a constant H but b = -V)."""
+    return bool(ca.depends_on(kinematics, t)) or not all(rate[i].is_zero() for i in range(rate.numel()))
 
 
 def _sx_any(expr, name: str) -> ca.SX:

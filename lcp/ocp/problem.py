@@ -7,7 +7,7 @@ from collections.abc import Callable
 import numpy as np
 
 from lcp.model.control import HOLDS, ControlSchedule
-from lcp.model.system import System
+from lcp.model.system import System, moving_contact
 from lcp.ocp.guess import multistart, simulate_guess
 from lcp.ocp.model import add_control
 from lcp.ocp.options import HomotopyOptions, positive
@@ -132,6 +132,7 @@ class OptimalControlProblem:
         if not isinstance(system, System):
             raise ValueError(f"system must be a System or a Scene, got {type(system).__name__}")
         system.require_planar("the optimal-control transcription")
+        _refuse_moving_contacts(system)
         if control_matrix is not None:
             system = add_control(system, control_matrix,
                                  -np.inf if u_min is None else u_min, np.inf if u_max is None else u_max)
@@ -319,6 +320,15 @@ class OptimalControlProblem:
             the MPCC: different optima mean the answer is the best found, not a proven global one.
         """
         return multistart(self, guesses, options, rtol, **option_kw)
+
+def _refuse_moving_contacts(system) -> None:
+    """The transcription writes each contact's law with H and g of q only: a gap or tangent that
+    moves with time (dg/dt, ds/dt) would be ignored, silently. Refused by name instead."""
+    name = moving_contact(system)
+    if name is not None:
+        raise ValueError(f"contact {name!r} has a time-dependent gap or tangent, which the optimal-control "
+                         "transcription does not model; simulate it with method='moreau-jean'")
+
 
 def _contact_law(system, q0, contact_law: str) -> str:
     """The transcription's contact law: "auto" is the gap law when a contact starts open."""

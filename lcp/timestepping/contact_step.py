@@ -109,8 +109,11 @@ class ContactStep:
                 self.cache[key] = local
         return local
 
-    def solve(self, k, tk, active, v, vfree, dvf, SHt, W, H, uN_minus):
+    def solve(self, k, tk, active, v, vfree, dvf, SHt, W, H, uN_minus, b=None):
         """The contact solve of step k (time tk) on ``active``.
+
+        ``b``, where given, is the moving contacts' b = (dg/dt, ds/dt) at the step's end (rows as in
+        H): the local velocity is then u = H v+ + b, and the problem's free velocity gets + b.
 
         Returns (dv, p, modes, tangent columns of p, solution): the velocity increment with the
         impulses, the active contacts' impulses (normals, then tangents) and modes. ``dv`` is None
@@ -121,6 +124,9 @@ class ContactStep:
             local = self.local(active, SHt, W, H)
         idx, Ha, SHta, ea, template, cols = local
         qa = Ha @ vfree
+        ba = None if b is None else b[idx]
+        if ba is not None:
+            qa = qa + ba
         if ea is not None:
             # Newton restitution u_N+ >= -e u_N- acts only on approaching contacts: with a
             # separating one (u_N- > 0) it would pull the body back and create energy
@@ -162,6 +168,8 @@ class ContactStep:
                 # planar branch (the refinement above works on W p + q, whose rounding in the
                 # generalized velocities would leave a stuck body at 1e-19 m/s for some steps)
                 r = Ha @ (v + dv)
+                if ba is not None:
+                    r = r + ba
                 if ea is not None:
                     r[: active.size] += shift
                 dp = pb.solve_linear(pb.W, -r)
@@ -174,6 +182,8 @@ class ContactStep:
             # one refinement on the branch: with an ill-conditioned mass matrix the solve leaves
             # cond(W) eps in the velocities, which would let a stuck block creep and a pressed one sink
             r = Ha @ (v + dv)
+            if ba is not None:
+                r = r + ba
             if ea is not None:
                 r[: active.size] += shift
             dp = pb.with_q(r).solve_branch(md)

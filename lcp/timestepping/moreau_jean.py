@@ -188,6 +188,11 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
         raise ValueError(str(exc)) from exc
     proj = _projector(system, options)
     if options.scheme == "order2":
+        if system.contacts_depend_on_t:
+            from lcp.model.system import moving_contact
+
+            raise ValueError(f"contact {moving_contact(system)!r} has a time-dependent gap or tangent: "
+                             "scheme='order2' does not support it; use scheme='moreau-jean'")
         return run_second_order(system, asm, q0, v0, h, th, n_steps, every, solver, options.fallback, proj,
                                 float(options.projection_tol))
     # the path, chosen once: the compiled paths only where nothing needs Python per step

@@ -89,6 +89,8 @@ def _needs_projection(system) -> bool:
         phi_t = ca.jacobian(system.constraints_expr, t)
         if ca.depends_on(ca.vertcat(ca.vec(G), ca.vec(phi_t)), tq):
             return True
+    if m and getattr(system, "contacts_depend_on_t", False) and ca.depends_on(system.contact_rate_expr[:m], tq):
+        return True  # a moving gap of varying speed: held at the velocity level only, it drifts by O(h)
     return bool(m) and bool(ca.depends_on(ca.vec(system.H_expr[:m, :]), q))
 
 

@@ -75,6 +75,8 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
         from lcp.model.start import system_length
 
         ell = system_length(system, q0)  # the system's length, part of the projection's tolerance
+    moving = system.contacts_depend_on_t  # gaps or tangents of t: u = H v + b (lcp.model.system)
+    b1 = None
     worst = violation_function(system)(q0[None, :], np.zeros(1)) if proj is not None else 0.0
     k_done = 0
     for k in range(n_steps):
@@ -86,7 +88,14 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
             status = -7 if isinstance(exc, StepRejected) else -2
             message = f"{STATUS_MESSAGES[status]} Step {k} (t = {tk:.10g}): {exc}."
             break
-        if m:
+        if moving:
+            # moving contacts: u = H v + b(t, q); b at the step's start for u-, at its end for the
+            # free (and the unknown) velocity u+, as u+ is the end-of-step velocity
+            b1 = system.contact_rates(q, tk + h)
+            uN_minus = H[:m] @ v + system.contact_rates(q, tk)[:m]
+            uN_free = H[:m] @ vfree + b1[:m]
+            active = activation(q, gap, H, uN_minus, uN_free, h, th)
+        elif m:
             uN_minus = H[:m] @ v
             uN_free = H[:m] @ vfree
             active = activation(q, gap, H, uN_minus, uN_free, h, th)
@@ -100,7 +109,7 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
                 activation.release()
                 loaded[:] = False
         else:
-            dv, p, md, cols, sol = step.solve(k, tk, active, v, vfree, dvf, SHt, W, H, uN_minus)
+            dv, p, md, cols, sol = step.solve(k, tk, active, v, vfree, dvf, SHt, W, H, uN_minus, b1)
             if dv is None:
                 status = -1
                 message = (f"{STATUS_MESSAGES[-1]} Step {k} (t = {tk:.10g}), solver '{solver.name}': "
@@ -134,7 +143,8 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
             # step: loaded and not opening
             if m:
                 HN = H[:m]
-                opening = HN @ v > (CLOSE_ULPS * EPS) * (np.abs(HN) @ np.abs(v))
+                uN = HN @ v + system.contact_rates(q, tk + h)[:m] if moving else HN @ v
+                opening = uN > (CLOSE_ULPS * EPS) * (np.abs(HN) @ np.abs(v))
                 np.logical_and(loaded, ~opening, out=closed)
             else:
                 opening = None
