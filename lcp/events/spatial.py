@@ -12,6 +12,12 @@ has s_j = 0 and U_j = 0; its direction d_j is then the one the mode decision fou
 motion defines it. The drift between s_j and |U_j| is checked at the end of each phase
 (``stats``-like note in the message when it exceeds 1e-8 of the velocity scale).
 
+Where the law allows, a phase is a quadratic in closed form instead
+(:mod:`lcp.events.spatial_closed_form`, integrator ``"closed-form"``): in a constant system (constant
+mass matrix, kinematics and forces), a straight slide (one closed contact, sliding, its tangential
+acceleration parallel to U to rounding, so that d and the friction force stay constant; the stop
+t0 + |U| / (-d . a_T) is exact) and a rest of sticking contacts. A curved slide stays numerical.
+
 The normal forces (and the sticking contacts' friction) come from the acceleration-level equations
 of the closed contacts at each evaluation: one small linear solve
 (:meth:`~lcp.events.spatial_modes.SpatialModel.phase_accel`; for constant mass matrix and
@@ -601,7 +607,8 @@ def spatial_event_driven(system, q0, v0, t_end, opts, given, scene=None) -> Even
     ``opts`` are the validated :class:`~lcp.events.options.EventOptions`, ``given`` the names of
     the options the caller set (rtol and atol default to 1e-13 and 1e-16 here). ``smooth="closed-form"`` and
     ``mode_solver``/``impact_solver``/``max_branches`` other than their defaults are rejected
-    (ValueError naming them): phases are integrated by ``solve_ivp``, and the disk problems by the
+    (ValueError naming them): phases are integrated by ``solve_ivp`` (or in closed form, see
+    :mod:`lcp.events.spatial_closed_form`), and the disk problems by the
     solvers of :mod:`lcp.events.spatial_modes`.
 
     Examples
