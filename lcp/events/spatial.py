@@ -12,6 +12,12 @@ has s_j = 0 and U_j = 0; its direction d_j is then the one the mode decision fou
 motion defines it. The drift between s_j and |U_j| is checked at the end of each phase
 (``stats``-like note in the message when it exceeds 1e-8 of the velocity scale).
 
+Where the law allows, a phase is a quadratic in closed form instead
+(:mod:`lcp.events.spatial_closed_form`, integrator ``"closed-form"``): in a constant system (constant
+mass matrix, kinematics and forces), a straight slide (one closed contact, sliding, its tangential
+acceleration parallel to U to rounding, so that d and the friction force stay constant; the stop
+t0 + |U| / (-d . a_T) is exact) and a rest of sticking contacts. A curved slide stays numerical.
+
 The normal forces (and the sticking contacts' friction) come from the acceleration-level equations
 of the closed contacts at each evaluation: one small linear solve
 (:meth:`~lcp.events.spatial_modes.SpatialModel.phase_accel`; for constant mass matrix and
@@ -53,6 +59,7 @@ from lcp.events.model import EPS, coordinate_rows, mass_projection
 from lcp.events.options import CASCADE_ROUNDS, EVENT_STATUS_MESSAGES
 from lcp.events.records import Event, EventResult, Impact, Impulse, Phase
 from lcp.events.spatial_accumulation import watch_bounces
+from lcp.events.spatial_closed_form import straight_slide
 from lcp.model.start import consistent_start
 from lcp.events.spatial_modes import AccelDisk, SpatialModel, group_motions, impact_impulse
 
@@ -129,6 +136,7 @@ class SpatialPhase:
         self.nfev = 0
         self._key = None
         self.t_left = np.inf
+        self.closed = None
 
     def names(self):
         return self._names
@@ -229,6 +237,9 @@ class SpatialPhase:
 
         if breakpoint:
             self.t_left = float(np.nextafter(t_stop, -np.inf))
+        cf = straight_slide(self, self.o.tol * self.integ.scales["F"], PAINLEVE_MARGIN)
+        if cf is not None:
+            return self._closed_form(cf, t_stop)
         n = self.model.n
         y0 = np.concatenate([self.q0, self.v0, self.P0, self.s0])
         evs, meta = self._events(y0)
@@ -255,6 +266,19 @@ class SpatialPhase:
             method, rtol = "Radau", max(rtol, 1000 * EPS)
             self.integrator = f"{o.ode_method}+Radau"
         return self._solve(t_start, t_stop, y0, method, rtol, atol, evs, meta)
+
+    def _closed_form(self, cf, t_stop):
+        """A straight slide (:mod:`lcp.events.spatial_closed_form`): the quadratic to t_stop or to
+        its stop, which is exact (s = 0 there)."""
+        self.closed, self.integrator = cf, "closed-form"
+        self.segments = [(self.t0, cf)]
+        if cf.t_stop < t_stop:
+            self.t1 = cf.t_stop
+            self.y1 = cf.sol(cf.t_stop)
+            self.y1[-1] = 0.0
+            return self.t1, "stop", self.idx[0]
+        self.t1, self.y1 = t_stop, cf.sol(t_stop)
+        return None
 
     def _solve(self, ta, tb, y0, method, rtol, atol, evs, meta):
         from scipy.integrate import solve_ivp
@@ -303,6 +327,9 @@ class SpatialPhase:
         out[:] = Y[:r]
         N = np.zeros((t.size, model.m))
         f = np.zeros((t.size, model.H_rows - model.m))
+        if self.closed is not None:
+            N[:], f[:] = self.closed.N, self.closed.f
+            return N, f
         for i in range(t.size):
             _, N[i], f[i] = self.evaluate(float(t[i]), Y[:, i])
         return N, f
@@ -580,7 +607,8 @@ def spatial_event_driven(system, q0, v0, t_end, opts, given, scene=None) -> Even
     ``opts`` are the validated :class:`~lcp.events.options.EventOptions`, ``given`` the names of
     the options the caller set (rtol and atol default to 1e-13 and 1e-16 here). ``smooth="closed-form"`` and
     ``mode_solver``/``impact_solver``/``max_branches`` other than their defaults are rejected
-    (ValueError naming them): phases are integrated by ``solve_ivp``, and the disk problems by the
+    (ValueError naming them): phases are integrated by ``solve_ivp`` (or in closed form, see
+    :mod:`lcp.events.spatial_closed_form`), and the disk problems by the
     solvers of :mod:`lcp.events.spatial_modes`.
 
     Examples

@@ -171,6 +171,18 @@ class SpatialModel(ContactKinematics):
         return qdd, x[:k], x[k:], singular
 
 
+_SCAN = []
+
+
+def _scan_angles():
+    """The 1441 angles of the scan for sliding directions from rest, with their cosines and sines
+    (those of :func:`math.cos` and :func:`math.sin`, as in the scalar function), computed once."""
+    if not _SCAN:
+        ths = np.linspace(-math.pi, math.pi, 1441)
+        _SCAN.append((ths, np.array([math.cos(t) for t in ths]), np.array([math.sin(t) for t in ths])))
+    return _SCAN[0]
+
+
 class DiskSolution:
     """One solution of the acceleration-level disk problem.
 
@@ -304,8 +316,12 @@ class AccelDisk:
 
         from scipy.optimize import brentq
 
-        ths = np.linspace(-math.pi, math.pi, 1441)
-        vals = np.array([h(t) for t in ths])
+        ths, C, S = _scan_angles()
+        # h over the scan at once (the operations of h, elementwise): the signs bracket the roots
+        den = WNN - mu * (WNT[0] * C + WNT[1] * S)
+        v0 = -b[0] * (WTN[0] - mu * (WTT[0, 0] * C + WTT[0, 1] * S)) + den * b[k]
+        v1 = -b[0] * (WTN[1] - mu * (WTT[1, 0] * C + WTT[1, 1] * S)) + den * b[k + 1]
+        vals = C * v1 - S * v0
         ref = abs(b[0]) * (np.max(np.abs(WTN)) + mu * np.max(np.abs(WTT))) + (abs(WNN) + mu * np.max(np.abs(WNT))) \
             * np.max(np.abs(b[k:]))
         if np.max(np.abs(vals)) <= 1e-13 * ref:
