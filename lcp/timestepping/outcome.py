@@ -23,7 +23,8 @@ from lcp.contact.problem import ModeArray
 from lcp.result import STATUS_MESSAGES, Impact, SimulationResult, SolverStats
 from lcp.timestepping.projection import violation_function
 
-__all__ = ["RunNotes", "ambiguity_note", "lazy_violation", "record_impacts", "compiled_step_impacts",
+__all__ = ["RunNotes", "ambiguity_note", "lazy_violation", "loop_result", "projection_failure", "record_impacts",
+           "compiled_step_impacts",
            "compiled_step_result"]
 
 
@@ -134,3 +135,27 @@ def compiled_step_result(asm, raw, every, solver_name, contact_name=None, violat
                             solver=f"{solver_name} (compiled)", h=h, theta=asm.theta, impacts=impacts,
                             violation=(lazy_violation(asm.sys, Q, t) if violation is None
                                        else (lambda: violation(Q, t))))
+
+
+def projection_failure(k: int, t: float, viol: float, iters: int, tol: float) -> str:
+    """The message of a run stopped by a projection that did not converge (status -5)."""
+    return (f"{STATUS_MESSAGES[-5]} Step {k} (t = {t:.10g}): constraint violation {viol:.3g} after {iters} "
+            f"Newton iterations (tolerance {tol:g} relative).")
+
+
+def loop_result(system, Q, V, PN, PT, modes, k_done: int, every: int, h: float, th: float, status: int,
+                message: str, notes: RunNotes, solver_name: str, worst, measured: bool) -> SimulationResult:
+    """The result of a Python loop over steps: cut at the last good state (never a trajectory past an
+    unreported failure), the notes added to the message, the constraint violation as measured in
+    the steps (``measured``) or from the saved states."""
+    stats = notes.stats
+    stats.steps = k_done
+    message = notes.message(status, message)
+    last = k_done // every
+    t = every * h * np.arange(last + 1)
+    Qc = Q[:last + 1]
+    violation = worst if measured else lazy_violation(system, Qc, t)
+    return SimulationResult(t=t, q=Qc, v=V[:last + 1], p_N=PN[:last], p_T=PT[:last],
+                            modes=ModeArray.of(modes[:last]), status=status, message=message, stats=stats,
+                            method="moreau-jean", solver=solver_name, h=h, theta=th, impacts=notes.impacts,
+                            violation=violation)

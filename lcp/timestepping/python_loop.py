@@ -15,13 +15,13 @@ import math
 
 import numpy as np
 
-from lcp.contact.problem import MODE_NAMES, ModeArray
+from lcp.contact.problem import MODE_NAMES
 from lcp.result import STATUS_MESSAGES, SimulationResult
 from lcp.timestepping.activation import CLOSE_ULPS, EPS, Activation
 from lcp.timestepping.assembly import kahan_add
 from lcp.timestepping.force_check import StepRejected
 from lcp.timestepping.contact_step import ContactStep
-from lcp.timestepping.outcome import RunNotes, lazy_violation, record_impacts
+from lcp.timestepping.outcome import RunNotes, loop_result, projection_failure, record_impacts
 from lcp.timestepping.projection import violation_function
 
 __all__ = ["run_python_loop"]
@@ -152,23 +152,12 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
             stats.projections += 1
             stats.projection_iterations += iters
             if not ok or not math.isfinite(viol):
-                status = -5
-                message = (f"{STATUS_MESSAGES[-5]} Step {k} (t = {tk + h:.10g}): constraint violation "
-                           f"{viol:.3g} after {iters} Newton iterations (tolerance {proj.tol:g} relative).")
+                status, message = -5, projection_failure(k, tk + h, viol, iters, proj.tol)
                 break
             q, cq = q_proj, np.zeros(n)  # the projection is accurate to its tolerance: no compensation left
             worst = max(worst, viol)
         if row >= 0:
             Q[row + 1], V[row + 1] = q, v
         k_done = k + 1
-    stats.steps = k_done
-    message = notes.message(status, message)
-    # never return a trajectory past an unreported failure: cut at the last good state
-    last = k_done // every
-    t = every * h * np.arange(last + 1)
-    Qc = Q[:last + 1]
-    violation = worst if proj is not None else lazy_violation(system, Qc, t)
-    return SimulationResult(t=t, q=Qc, v=V[:last + 1], p_N=PN[:last], p_T=PT[:last],
-                            modes=ModeArray.of(modes[:last]), status=status, message=message, stats=stats,
-                            method="moreau-jean", solver=solver.name, h=h, theta=th, impacts=impacts,
-                            violation=violation)
+    return loop_result(system, Q, V, PN, PT, modes, k_done, every, h, th, status, message, notes, solver.name,
+                       worst, proj is not None)

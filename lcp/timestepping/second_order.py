@@ -30,12 +30,12 @@ import math
 
 import numpy as np
 
-from lcp.contact.problem import MODE_NAMES, ModeArray
+from lcp.contact.problem import MODE_NAMES
 from lcp.result import STATUS_MESSAGES, SimulationResult
 from lcp.timestepping.activation import CLOSE_ULPS, EPS, Activation
 from lcp.timestepping.assembly import kahan_add
 from lcp.timestepping.contact_step import ContactStep
-from lcp.timestepping.outcome import RunNotes, lazy_violation, record_impacts
+from lcp.timestepping.outcome import RunNotes, loop_result, projection_failure, record_impacts
 from lcp.timestepping.projection import violation_function
 from lcp.timestepping.rattle import RattleStep
 
@@ -159,9 +159,7 @@ def run_second_order(system, asm, q0, v0, h: float, th: float, n_steps: int, eve
                 stats.projections += 1
                 stats.projection_iterations += iters
                 if not ok or not math.isfinite(viol):
-                    status = -5
-                    message = (f"{STATUS_MESSAGES[-5]} Step {k} (t = {tk + h:.10g}): constraint violation "
-                               f"{viol:.3g} after {iters} Newton iterations (tolerance {proj.tol:g} relative).")
+                    status, message = -5, projection_failure(k, tk + h, viol, iters, proj.tol)
                     break
                 q, cq = q_proj, np.zeros(n)
                 worst = max(worst, viol)
@@ -172,17 +170,9 @@ def run_second_order(system, asm, q0, v0, h: float, th: float, n_steps: int, eve
         if row >= 0:
             Q[row + 1], V[row + 1] = q, v
         k_done = k + 1
-    stats.steps = k_done
-    message = notes.message(status, message)
-    last = k_done // every
-    t = every * h * np.arange(last + 1)
-    Qc = Q[:last + 1]
     # the violation: measured where every step was projected or SHAKE'n, else from the saved states
-    violation = worst if proj is not None or (system.n_bilateral and not m) else lazy_violation(system, Qc, t)
-    return SimulationResult(t=t, q=Qc, v=V[:last + 1], p_N=PN[:last], p_T=PT[:last],
-                            modes=ModeArray.of(modes[:last]), status=status, message=message, stats=stats,
-                            method="moreau-jean", solver=solver.name, h=h, theta=th, impacts=impacts,
-                            violation=violation)
+    return loop_result(system, Q, V, PN, PT, modes, k_done, every, h, th, status, message, notes, solver.name,
+                       worst, bool(proj is not None or (system.n_bilateral and not m)))
 
 
 def _mj_data(asm, tk, q, v, activation, h, th):
