@@ -83,3 +83,20 @@ def test_batch_records_the_path_and_warns_on_fallback(monkeypatch):
     np.testing.assert_array_equal(res.q, ref.q)
     with pytest.raises(RuntimeError, match="numba"):
         simulate_batch(consts, 0.1, h=1e-3, path="compiled")
+
+
+def test_a_penetrating_start_is_refused_by_name_not_stepped():
+    # the batch has no per-scene message: a start beyond rounding is refused (lcp.simulate projects
+    # it within the tolerance, with a note), never stepped from inside the floor
+    import lcp
+
+    good = lcp.scenes.jean_pratt()
+    bad = lcp.scenes.jean_pratt(R=0.3)
+    bad.q0 = bad.q0.copy()
+    bad.q0[1] = -1e-4
+    with pytest.raises(ValueError, match="scene 'jean_pratt.*start is not consistent"):
+        simulate_batch([good, bad], 0.1, 1e-3)
+    bad.q0[1] = 0.0  # on the floor: accepted, and the same run as lcp.simulate's
+    res = simulate_batch([good, bad], 0.1, 1e-3)
+    assert res.q.shape == (2, 2)
+    np.testing.assert_allclose(res.q[1], lcp.simulate(bad, 0.1, h=1e-3).q[-1], rtol=0, atol=1e-14)

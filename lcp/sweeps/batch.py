@@ -27,6 +27,7 @@ from lem.jean_pratt import check_parameters, tan_alpha
 from lcp.sweeps.batch_kernel import BLOCK, batch_kernel
 from lcp.timestepping import compiled_step as compiled
 from lcp.contact.problem import NUMPY_OPS, planar_enum, planar_refine
+from lcp.model.start import consistent_start
 from lcp.scenes.scene import Scene
 from lcp.timestepping.assembly import StepAssembly, kahan_add
 from lcp.timestepping.moreau_jean import MoreauJeanOptions
@@ -269,6 +270,12 @@ def _pack_scenes(scenes, h, theta):
         elif s.n != n:
             raise ValueError("all scenes of a batch must have the same number of coordinates")
         q0, v0 = s.check_state(sc.q0, sc.v0)
+        # the common start check (lcp.model.start): beyond rounding, the batch refuses rather than
+        # projects, since it has no per-scene message to say so
+        _, _, note = consistent_start(s, q0, v0)
+        if note is not None:
+            raise ValueError(f"scene '{sc.name}': its start is not consistent with its contact ({note}); the "
+                             "batch path does not project starts: fix q0 or run lcp.simulate, which does")
         cols.append(compiled.pack(asm, affine=False))
         xs.append(np.concatenate([q0, v0, np.zeros(2 * n)]))
     if not cols:
