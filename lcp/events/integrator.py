@@ -12,7 +12,7 @@ from lcp.events.impacts import ImpactLaw
 from lcp.events.model import EPS, all_finite, system_model, zero_test_scales
 from lcp.events.modes import ModeSelector
 from lcp.events.ode_phase import OdePhase
-from lcp.events.options import CASCADE_ROUNDS, EVENT_STATUS_MESSAGES, EventOptions, SmoothIntegrator
+from lcp.events.options import CASCADE_ROUNDS, EVENT_STATUS_MESSAGES, EventOptions, SmoothIntegrator, cascade_round
 from lcp.events.phases import ClosedFormPhase
 from lcp.events.projection import StateProjector
 from lcp.events.records import Event, Impact, Impulse, Phase, make_record
@@ -119,20 +119,10 @@ class Integrator:
             closed, approaching, separating, ul = self.classify(q, v)
             if approaching:
                 rounds += 1
-                if rounds <= CASCADE_ROUNDS:
-                    at = np.union1d(np.array(closed, dtype=int), np.array(approaching, dtype=int))
-                    why = "gap closed with approach velocity"
-                elif rounds <= CASCADE_ROUNDS + 8:
-                    # the cascade goes on: the rest of it at once, over every contact at the surface
-                    # (the coupled Delassus matrix; after it no contact at the surface approaches)
-                    at = np.array(sorted(closed + approaching + separating), dtype=int)
-                    why = f"impact cascade not ended after {CASCADE_ROUNDS} rounds: finished at once"
-                    if rounds == CASCADE_ROUNDS + 1:
-                        self.notes.append(f"At t = {t:.10g} an impact cascade did not end after {CASCADE_ROUNDS} "
-                                          "rounds; its rest was solved at once over every contact at the surface.")
-                else:
-                    raise Inconsistent(f"at t = {t:.17g}: contacts still approach after an impact cascade of "
-                                       f"{rounds - 1} rounds")
+                at, why = cascade_round(rounds, CASCADE_ROUNDS, t, closed, approaching, separating, self.notes)
+                if at is None:
+                    raise Inconsistent(why)
+                at = np.array(at, dtype=int)
                 out = self.impacts.solve(t, q, v, at, data)
                 if out is None:
                     raise Inconsistent(f"the impact problem at t = {t:.17g} has no solution")

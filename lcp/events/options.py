@@ -10,7 +10,8 @@ import numpy as np
 from lcp.result import STATUS_MESSAGES
 from lcp.contact.solvers import make_solver
 
-__all__ = ["CASCADE_ROUNDS", "EVENT_STATUS_MESSAGES", "EventOptions", "ModeSolver", "SmoothIntegrator", "checked_times", "times_inside"]
+__all__ = ["CASCADE_ROUNDS", "EVENT_STATUS_MESSAGES", "EventOptions", "ModeSolver", "SmoothIntegrator", "cascade_round",
+           "checked_times", "times_inside"]
 
 #: status codes of the event integrator (the package's one table, :data:`lcp.result.STATUS_MESSAGES`)
 EVENT_STATUS_MESSAGES = STATUS_MESSAGES
@@ -19,6 +20,22 @@ EVENT_STATUS_MESSAGES = STATUS_MESSAGES
 #: as Moreau-Jean's steps do in the limit h -> 0) before the rest of the cascade is solved at once
 #: over every contact at the surface: a column of 10 beads (e = 0.5) needs up to 75 rounds
 CASCADE_ROUNDS = 1000
+
+
+def cascade_round(rounds: int, cap: int, t: float, closed, approaching, separating, notes):
+    """The contacts of impact round ``rounds`` of a cascade at t (sorted) and why, or (None, the
+    reason to stop): round by round on the closed and approaching contacts up to ``cap`` rounds,
+    then at once over every contact at the surface (the coupled Delassus matrix; after it no contact
+    at the surface approaches), noted once in ``notes``; past 8 such solves, give up. Shared by the
+    planar and the spatial integrators."""
+    if rounds <= cap:
+        return sorted(closed + approaching), "gap closed with approach velocity"
+    if rounds <= cap + 8:
+        if rounds == cap + 1:
+            notes.append(f"At t = {t:.10g} an impact cascade did not end after {cap} rounds; its rest was "
+                         "solved at once over every contact at the surface.")
+        return sorted(closed + approaching + separating), f"impact cascade not ended after {cap} rounds: finished at once"
+    return None, f"at t = {t:.17g}: contacts still approach after an impact cascade of {rounds - 1} rounds"
 
 
 class SmoothIntegrator(str, Enum):

@@ -56,7 +56,7 @@ from lcp.result import SolverStats
 from lcp.events.accumulation import BounceSequence
 from lcp.events.event_location import approach_gap, first_terminal_event, too_many_events
 from lcp.events.model import EPS, coordinate_rows, mass_projection
-from lcp.events.options import CASCADE_ROUNDS, EVENT_STATUS_MESSAGES
+from lcp.events.options import CASCADE_ROUNDS, EVENT_STATUS_MESSAGES, cascade_round
 from lcp.events.records import Event, EventResult, Impact, Impulse, Phase
 from lcp.events.spatial_accumulation import watch_bounces
 from lcp.events.spatial_closed_form import straight_slide
@@ -392,17 +392,9 @@ class SpatialIntegrator:
             if approaching:
                 # a cascade goes round by round, as in the planar integrator (lcp.events.integrator)
                 rounds += 1
-                if rounds <= CASCADE_ROUNDS:
-                    at, why = sorted(closed + approaching), "gap closed with approach velocity"
-                elif rounds <= CASCADE_ROUNDS + 8:
-                    at = sorted(closed + approaching + separating)
-                    why = f"impact cascade not ended after {CASCADE_ROUNDS} rounds: finished at once"
-                    if rounds == CASCADE_ROUNDS + 1:
-                        self.notes.append(f"At t = {t:.10g} an impact cascade did not end after {CASCADE_ROUNDS} "
-                                          "rounds; its rest was solved at once over every contact at the surface.")
-                else:
-                    raise Inconsistent(f"at t = {t:.17g}: contacts still approach after an impact cascade of "
-                                       f"{rounds - 1} rounds")
+                at, why = cascade_round(rounds, CASCADE_ROUNDS, t, closed, approaching, separating, self.notes)
+                if at is None:
+                    raise Inconsistent(why)
                 out = impact_impulse(model, fr, v, at)
                 self.stats.solver_calls += 1
                 if out is None:
