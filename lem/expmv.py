@@ -25,13 +25,9 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
-try:  # optional: the compiled Taylor loop
-    from numba import njit
-
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover - depends on the environment
-    HAVE_NUMBA = False
-    njit = None
+# Through lcp's jit module, so that numba's cache folder is set (LCP_CACHE_DIR) before numba is
+# first imported: importing numba here directly cached lem's kernels beside the sources.
+from lcp.numerics.jit import HAVE_NUMBA, njit
 
 __all__ = ["HAVE_NUMBA", "THETA", "expmv", "nonnegative_expm", "onenorm", "taylor_parameters"]
 
