@@ -160,7 +160,7 @@ def table_impacts(amplitude: float, omega: float, e: float, height: float, g: fl
     --------
     >>> import math
     >>> t1 = table_impacts(0.0, 6.0, 0.5, 0.3, n_impacts=1)[0, 0]  # a table at rest: sqrt(2 h / g)
-    >>> abs(t1 - math.sqrt(0.6 / 9.81)) < 1e-15
+    >>> bool(abs(t1 - math.sqrt(0.6 / 9.81)) < 1e-15)
     True
     """
     from scipy.optimize import brentq  # only for the reference (keeps `import lcp` cheap)
