@@ -63,8 +63,10 @@ def _cam_errors(event, h, t_end):
 def test_moreau_jean_converges_to_the_event_method_on_the_cam(cam_runs):
     event = cam_runs[0]
     e3, e4 = _cam_errors(event, 1e-3, 0.5), _cam_errors(event, 1e-4, 0.5)
-    # first order: ten times smaller steps, errors at least five times smaller
-    assert e3[0] < 2e-3 and e4[0] < e3[0] / 5, (e3, e4)
+    # Moreau-Jean's impacts fall on its grid: within a step of the event method's (about 0.3 h to
+    # 0.5 h here); the motion away from them at first order: ten times smaller steps, errors at
+    # least five times smaller
+    assert e3[0] < 1e-3 and e4[0] < 1e-4, (e3, e4)
     assert e4[1] < e3[1] / 5, (e3, e4)
 
 
@@ -72,7 +74,8 @@ def test_moreau_jean_converges_to_the_event_method_on_the_cam(cam_runs):
 def test_moreau_jean_converges_to_the_event_method_on_the_cam_1e5(cam_runs):
     event = cam_runs[0]
     e4, e5 = _cam_errors(event, 1e-4, 1.0), _cam_errors(event, 1e-5, 1.0)
-    assert e5[0] < e4[0] / 5 and e5[1] < e4[1] / 5, (e4, e5)
+    assert e4[0] < 1e-4 and e5[0] < 1e-5, (e4, e5)
+    assert e5[1] < e4[1] / 5, (e4, e5)
 
 
 def _table_speed(t):
@@ -239,3 +242,27 @@ def test_unsupported_uses_of_moving_contacts_are_refused_by_name():
     # the closed-form phases need constant kinematics: a moving contact is not
     with pytest.raises(ValueError, match="smooth='closed-form' needs constant mass, kinematics"):
         lcp.simulate(sc, method="event", smooth="closed-form")
+
+
+@pytest.mark.parametrize("V, mu, h0", [(1.0, 0.4, 0.2), (0.3, 0.8, 0.2), (-1.0, 0.3, 0.05)])
+def test_block_dropped_on_the_belt(V, mu, h0):
+    # it lands at t1 = sqrt(2 h0 / g) with P_N = m g t1 (e = 0); the impact's friction drags it by
+    # P_T = min(mu P_N, m |V|) towards the belt (on the relative velocity -V), then it slides with
+    # mu g until it moves with the belt (or sticks at once when the impulse sufficed)
+    g = 9.81
+    sc = conveyor(V=V, mu=mu, g=g)
+    sc.q0[1] = h0
+    t1 = np.sqrt(2 * h0 / g)
+    PN, PT = g * t1, np.sign(V) * min(mu * g * t1, abs(V))
+    ts = t1 + (abs(V) - abs(PT)) / (mu * g)
+    T = ts + 0.3
+    grid = np.linspace(0.0, T, 61)
+    r = lcp.simulate(sc, T, method="event", t_eval=grid)
+    assert r.success and len(r.impacts) == 1
+    imp = r.impacts[0]
+    assert abs(imp.t - t1) < 1e-12
+    np.testing.assert_allclose([imp.p_N, imp.p_T], [PN, PT], rtol=1e-12, atol=0)
+    xdot = np.where(grid < t1, 0.0, np.where(grid < ts, PT + np.sign(V) * mu * g * (grid - t1), V))
+    np.testing.assert_allclose(r.v[:, 0], xdot, rtol=0, atol=1e-12)
+    stops = [ev.t for ev in r.events if ev.kind == "stop"]
+    assert (len(stops) == 1 and abs(stops[0] - ts) < 1e-12) if ts > t1 else not stops

@@ -120,11 +120,11 @@ class SpatialPhase:
         self._names = tuple(MODE_NAMES[int(c)] for c in full)
         self.open_idx = [j for j in range(m) if j not in set(self.idx)]
         H = model.jac(q0, t0)
-        b = model.sys.contact_rates(q0, t0) if model.moving else np.zeros(H.shape[0])
+        b = model.sys.contact_rates(q0, t0) if model.moving else None  # u = H v + b on a moving contact
         s0 = []
         for i in self.slide:
             tr = model.trows[self.idx[i]]
-            U = H[tr] @ v0 + b[tr]
+            U = H[tr] @ v0 if b is None else H[tr] @ v0 + b[tr]
             s0.append(float(U @ self.d0[i]))
         self.s0 = np.array(s0)
         # A slide from rest starts at s = 0 with s' = 0 at a slip (the force on its bound), and
