@@ -66,23 +66,6 @@ def test_compiled_paths_do_not_apply():
     assert r.success  # the Python loop ran it (the compiled step would have used g(q) = g0 + H q)
 
 
-@pytest.mark.parametrize("spatial", [False, True])
-def test_event_method_refuses_moving_contacts(spatial):
-    q, v, t = ca.SX.sym("q", 3), ca.SX.sym("v", 3), ca.SX.sym("t")
-    tangent = ca.vertcat(q[0], q[1]) if spatial else q[0]
-    s = System(q, v, ca.SX.eye(3), ca.vertcat(0, 0, -9.81), t=t,
-               contacts=[Contact(gap=q[2] - 0.1 * ca.sin(t), tangent=tangent, mu=0.2, name="lift")])
-    with pytest.raises(ValueError, match="'lift' has a time-dependent gap: use method='moreau-jean'"):
-        lcp.simulate(s, 1.0, method="event", q0=[0, 0, 1.0], v0=[0, 0, 0])
-    if spatial:  # the spatial integrator's own entry refuses too
-        from lcp.events.options import EventOptions
-        from lcp.events.spatial import spatial_event_driven
-
-        with pytest.raises(ValueError, match="time-dependent gap: use method='moreau-jean'"):
-            spatial_event_driven(s, np.array([0, 0, 1.0]), np.zeros(3), 1.0, EventOptions.from_kwargs(),
-                                 frozenset())
-
-
 def test_second_order_scheme_refuses_moving_contacts():
     with pytest.raises(ValueError, match="'table' has a time-dependent gap"):
         lcp.simulate(moving_table(**TABLE), h=1e-3, scheme="order2")

@@ -39,6 +39,14 @@ closed form or by Aitken's extrapolation; the contacts then persist with zero no
 (exactly zero gap on a flat contact). They are listed in ``EventResult.accumulations``, and every
 resolved impact in ``EventResult.impacts`` (:mod:`~lcp.events.accumulation`).
 
+Moving contacts (a gap or tangent of t: a moving table, a cam, a conveyor belt) have the local
+velocity u = H(t, q) v + b(t, q), b = (dg/dt, ds/dt): the zero tests, Newton's impact law, the
+sliding directions and the projections use it, events are located on g(t, q(t)), and the
+acceleration-level problem is written on du/dt (its drift by CasADi from u(t, q, v),
+:func:`~lcp.events.model.accel_function`). Their phases are never in closed form, and an
+accumulation of impacts on a moving contact is resolved impact by impact (the fixed obstacle's
+geometric series does not hold), which the message says.
+
 At each event the next mode comes from the **acceleration-level contact problem** of the closed
 contacts (:mod:`~lcp.events.modes`): the Coulomb law with forces and accelerations in place of
 impulses and velocities, sliding contacts folded in, so that the law itself stays in

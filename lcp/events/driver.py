@@ -7,13 +7,12 @@ import numpy as np
 
 from lcp.events.integrator import Integrator
 from lcp.events.model import check_state
-from lcp.model.system import moving_contact
 from lcp.model.start import consistent_start
 from lcp.events.options import EventOptions
 from lcp.events.phases import closed_form_output
 from lcp.events.records import EventResult
 
-__all__ = ["event_driven", "refuse_moving_contacts"]
+__all__ = ["event_driven"]
 
 
 def _transposed(rows):
@@ -25,15 +24,6 @@ def _transposed(rows):
     for i in range(k):
         out[:, i] = rows[i]
     return out
-
-
-def refuse_moving_contacts(system) -> None:
-    """ValueError naming a contact whose gap or tangent depends on time: the event method's phases
-    and impact laws are written for u = H(q) v, and would answer wrongly for u = H v + b(t, q)."""
-    name = moving_contact(system)
-    if name is not None:
-        raise ValueError(f"contact {name!r} has a time-dependent gap: use method='moreau-jean' "
-                         "(the event method supports rheonomous bilateral constraints, not moving contacts)")
 
 
 def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventResult:
@@ -100,7 +90,6 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     if not (isinstance(t_end, (int, float, np.floating)) and math.isfinite(t_end) and t_end > 0):
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
     t_end = float(t_end)
-    refuse_moving_contacts(system)
     if getattr(system, "is_spatial", False):  # the Coulomb disk: its own integrator (lcp.events.spatial)
         from lcp.events.spatial import spatial_event_driven
 

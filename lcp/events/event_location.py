@@ -151,7 +151,7 @@ def event_functions(phase, t0, y0, force_tol: float = 0.0):
     for jj, j in enumerate(phase.idx):
         s = phase.slide[jj]
         if s != 0:
-            make(lambda t, y, j=j, s=s: s * float(model.jac(y[:n])[m + j] @ y[n:2 * n]), "stop", j)
+            make(lambda t, y, j=j, s=s: s * float(_local_velocity(model, t, y, n)[m + j]), "stop", j)
         if phase.indeterminate:
             continue
         make(lambda t, y, j=j: float(evaluate(t, y)[1][j]), "lift-off", j, force=True)
@@ -164,19 +164,32 @@ def event_functions(phase, t0, y0, force_tol: float = 0.0):
     if phase.indeterminate:
         make(lambda t, y: phase.margin_at(t, y)[0], "force-limit", -1, force=True)
     for j in phase.open_idx:
-        make(lambda t, y, j=j: approach_gap(model, y, n, j), "impact", j)
+        make(lambda t, y, j=j: approach_gap(model, y, n, j, t), "impact", j)
     return evs, meta
 
 
-def approach_gap(model, y, n, j) -> float:
+def approach_gap(model, y, n, j, t=None) -> float:
     """The gap of contact j while it closes, and a positive value while it opens: a contact that
     leaves the surface starts at gap 0, and a first step too short to change the gap in floating
-    point must not read as an impact. The landing is unchanged (the gap, approached with u_N < 0)."""
+    point must not read as an impact. The landing is unchanged (the gap, approached with u_N < 0).
+    For a moving contact both are taken at time t: g(t, q(t)), u_N = H v + dg/dt."""
     q = y[:n]
-    gap = float(model.gaps(q)[j])
-    if gap > 0 or float(model.jac(q)[j] @ y[n:2 * n]) < 0:
+    if t is None or not model.moving:
+        gap = float(model.gaps(q)[j])
+        if gap > 0 or float(model.jac(q)[j] @ y[n:2 * n]) < 0:
+            return gap
+        return 1.0 + abs(gap)
+    gap = float(model.gaps(q, t)[j])
+    if gap > 0 or float(model.local_velocity(t, q, y[n:2 * n])[j]) < 0:
         return gap
     return 1.0 + abs(gap)
+
+
+def _local_velocity(model, t, y, n):
+    """u = H v (+ b(t, q) for moving contacts) at the ODE state y = (q, v, ...)."""
+    if not model.moving:
+        return model.jac(y[:n]) @ y[n:2 * n]
+    return model.local_velocity(t, y[:n], y[n:2 * n])
 
 
 def first_terminal_event(sol, meta):

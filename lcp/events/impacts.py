@@ -55,6 +55,8 @@ class ImpactLaw:
                 self.model.impact_memo[key] = cached
         Hc, SH, W, b = cached
         u = Hc @ v
+        if self.model.moving:  # the relative velocity on a moving contact: u = H v + (dg/dt, ds/dt)
+            u = u + self.model.sys.contact_rates(q, t)[np.concatenate([idx, m + idx])]
         qv = u.copy()
         # Newton restitution on the approaching contacts, as in the Moreau-Jean step: a separating
         # contact only must not approach (u_N+ >= 0); restitution would pull it back

@@ -71,14 +71,14 @@ class Integrator:
         self.selector.breakpoints = tuple(self.breakpoints)
 
     # --- the acceleration-level problem and the next mode
-    def classify(self, q, v):
+    def classify(self, t, q, v):
         """Contacts at the surface: (closed candidates, approaching ones, separating ones) as tuples
-        of contact indices, and the local velocities H v (a list)."""
+        of contact indices, and the local velocities u = H v + b (a list; b = 0 unless a contact moves)."""
         m = self.m
         if not m:
             return (), (), (), []
-        gap = self.model.gaps(q).tolist()
-        ul = (self.model.jac(q) @ v).tolist()
+        gap = self.model.gaps(q, t).tolist()
+        ul = self.model.local_velocity(t, q, v).tolist()
         gtol, vtol = self.gap_tol, self.vel_tol
         closed, approaching, separating = [], [], []
         for j in range(m):
@@ -116,7 +116,7 @@ class Integrator:
         rounds = tangential = 0
         while True:
             data = self.model.data(t, q, v)
-            closed, approaching, separating, ul = self.classify(q, v)
+            closed, approaching, separating, ul = self.classify(t, q, v)
             if approaching:
                 rounds += 1
                 at, why = cascade_round(rounds, CASCADE_ROUNDS, t, closed, approaching, separating, self.notes)
@@ -270,9 +270,9 @@ class Integrator:
                 stick += (j,)
             gap_rows = closed if kind != "impact" else closed + (j,)
             q, v = self.projector.project(te, q, v, gap_rows, closed, stick)
-            if m and not self.penetrated and min(self.model.gaps(q).tolist()) < -self.gap_tol:
+            if m and not self.penetrated and min(self.model.gaps(q, te).tolist()) < -self.gap_tol:
                 # no silent success: an open contact found penetrated was never landed on
-                gap = self.model.gaps(q)
+                gap = self.model.gaps(q, te)
                 j_p = int(np.argmin(gap))
                 self.penetrated = True
                 self.notes.append(f"At t = {te:.10g} contact {self.sys.contacts[j_p].name!r} penetrates by "
@@ -307,6 +307,16 @@ class Integrator:
             return None
         self.bounces.push(t, at, q, v, (closed, sol.modes if sol is not None else ()))
         if not self.bounces.geometric():
+            return None
+        if self.model.moving:
+            # The jump to the limit is the geometric series of a fixed obstacle (constant relative
+            # acceleration between bounces); under a moving one (a table's acceleration varies
+            # between bounces) it is not exact: the bounces are resolved one by one, down to the
+            # velocity tolerance where the zero tests close the contact.
+            if not any("moving contact" in note for note in self.notes):
+                names = ", ".join(repr(self.sys.contacts[j].name) for j in at)
+                self.notes.append(f"From t = {t:.10g} the impacts on the moving contact(s) {names} accumulate: "
+                                  "resolved impact by impact (no extrapolation to their limit).")
             return None
         return sum_up(self, t, q, v, P, at, closed, sol, flight)
 

@@ -54,7 +54,9 @@ def accel_function(system) -> ca.Function:
     """CasADi Function (t, q, v) -> (A, F, G, zeta, H, Hdot v, gap), built once per system.
 
     zeta is the velocity-dependent part of the bilateral constraints' second time derivative:
-    d2/dt2 phi(t, q) = G qdd + zeta.
+    d2/dt2 phi(t, q) = G qdd + zeta. Likewise Hdot v is the part of the contacts' local acceleration
+    du/dt = H qdd + Hdot v that does not hold qdd: (d/dt H) v, plus, for a moving contact
+    (u = H(t, q) v + b(t, q), b = (dg/dt, ds/dt)), the derivative of b along the motion.
     """
     fn = ACCEL_FUNCTIONS.get(system)
     if fn is None:
@@ -65,7 +67,13 @@ def accel_function(system) -> ca.Function:
         Gv = ca.mtimes(G, v)
         zeta = (ca.jtimes(Gv, q, v) + ca.jacobian(Gv, t) + ca.jtimes(phi_t, q, v) + ca.jacobian(phi_t, t))
         H = system.H_expr
-        Hdv = ca.jtimes(ca.mtimes(H, v), q, v)
+        if system.contacts_depend_on_t:
+            # a moving contact: u = H(t, q) v + b(t, q), and du/dt = H qdd + Hdv with everything else
+            # (d/dt H) v + db/dt, by AD on u as an expression of (t, q, v) with qdot = v
+            u = ca.mtimes(H, v) + system.contact_rate_expr
+            Hdv = ca.jtimes(u, q, v) + ca.jacobian(u, t)
+        else:
+            Hdv = ca.jtimes(ca.mtimes(H, v), q, v)
         fn = ca.Function("event_accel_data", [t, q, v],
                          [system.mass_expr, system.force_expr, G, zeta, H, Hdv, system.gap_expr])
         ACCEL_FUNCTIONS[system] = fn
@@ -110,16 +118,31 @@ class ContactKinematics:
     model is ``constant``, else evaluated by its System ``sys`` (shared by the planar and spatial
     event models)."""
 
-    def gaps(self, q) -> np.ndarray:
+    def gaps(self, q, t=None) -> np.ndarray:
+        """g(t, q) (t is needed where a contact moves, ignored otherwise)."""
         if self.constant:
             return self.gap0 + self.HN @ q
-        return self.sys.gaps(q)
+        return self.sys.gaps(q, t)
 
-    def jac(self, q) -> np.ndarray:
-        """H(q): the normal rows, then the tangent rows."""
+    def jac(self, q, t=None) -> np.ndarray:
+        """H(t, q): the normal rows, then the tangent rows."""
         if self.constant:
             return self.H
-        return self.sys.contact_jacobian(q)
+        return self.sys.contact_jacobian(q, t)
+
+    @property
+    def moving(self) -> bool:
+        """Whether a contact moves with time (a gap or tangent of t: a moving table, a cam, a belt)."""
+        return bool(getattr(self.sys, "contacts_depend_on_t", False))
+
+    def local_velocity(self, t, q, v) -> np.ndarray:
+        """u = H(t, q) v + b(t, q): normal, then tangential local velocities; b = (dg/dt, ds/dt) is
+        zero for fixed contacts (u = H v)."""
+        if self.constant:
+            return self.H @ v
+        if not self.moving:
+            return self.sys.contact_jacobian(q) @ v
+        return self.sys.contact_jacobian(q, t) @ v + self.sys.contact_rates(q, t)
 
 
 class SystemModel(ContactKinematics):

@@ -40,8 +40,8 @@ class StateProjector:
                     rows.append(G.reshape(nb, n))
                     res.append(phi.ravel())
                 if gap_rows.size:
-                    rows.append(self.model.jac(q)[gap_rows])
-                    res.append(self.model.gaps(q)[gap_rows])
+                    rows.append(self.model.jac(q, t)[gap_rows])
+                    res.append(self.model.gaps(q, t)[gap_rows])
                 J, r = np.vstack(rows), np.concatenate(res)
                 if not np.any(r):
                     break
@@ -54,9 +54,9 @@ class StateProjector:
             res.append(G @ v + phi_t.ravel())
         vr = np.array(normal_rows + tuple(m + j for j in tangent_rows), dtype=int)
         if vr.size:
-            H = self.model.jac(q)
+            H = self.model.jac(q, t)
             rows.append(H[vr])
-            res.append(H[vr] @ v)
+            res.append(H[vr] @ v if not self.model.moving else (H @ v + self.sys.contact_rates(q, t))[vr])
         if rows:
             J, r = np.vstack(rows), np.concatenate(res)
             if np.any(r):

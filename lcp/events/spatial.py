@@ -119,10 +119,12 @@ class SpatialPhase:
         self.full_modes = full
         self._names = tuple(MODE_NAMES[int(c)] for c in full)
         self.open_idx = [j for j in range(m) if j not in set(self.idx)]
-        H = model.jac(q0)
+        H = model.jac(q0, t0)
+        b = model.sys.contact_rates(q0, t0) if model.moving else None  # u = H v + b on a moving contact
         s0 = []
         for i in self.slide:
-            U = H[model.trows[self.idx[i]]] @ v0
+            tr = model.trows[self.idx[i]]
+            U = H[tr] @ v0 if b is None else H[tr] @ v0 + b[tr]
             s0.append(float(U @ self.d0[i]))
         self.s0 = np.array(s0)
         # A slide from rest starts at s = 0 with s' = 0 at a slip (the force on its bound), and
@@ -154,7 +156,7 @@ class SpatialPhase:
         fr = model.frame(min(t, self.t_left), q, v)
         dirs = list(self.d0)
         for k_, i in enumerate([] if self.frozen else self.slide):
-            U = fr.H[model.trows[self.idx[i]]] @ v
+            U = fr.velocity(v, model.trows[self.idx[i]])
             nU = math.hypot(*U.tolist())
             if nU != 0.0:
                 # U/|U| with the sign of s: continuous through the stop (U and s change sign
@@ -213,7 +215,7 @@ class SpatialPhase:
         for k_, i in enumerate(self.slide):
             make(lambda t, y, i=i: self.normal_mass(t, y, i) - PAINLEVE_MARGIN, "painleve", self.idx[i])
         for j in self.open_idx:
-            make(lambda t, y, j=j: approach_gap(model, y, n, j), "impact", j)
+            make(lambda t, y, j=j: approach_gap(model, y, n, j, t), "impact", j)
         return evs, meta
 
     def normal_mass(self, t, y, i):
@@ -224,7 +226,7 @@ class SpatialPhase:
         fr = model.frame(min(t, self.t_left), q, v)
         j = self.idx[i]
         tr = model.trows[j]
-        U = fr.H[tr] @ v
+        U = fr.velocity(v, tr)
         nU = math.hypot(*U.tolist())
         d = self.d0[i] if nU == 0.0 else U / nU
         a = float(fr.H[j] @ fr.SH[:, j])
@@ -303,9 +305,9 @@ class SpatialPhase:
             return 0.0
         model, n = self.model, self.model.n
         y = self.y1
-        H = model.jac(y[:n])
+        u = model.local_velocity(self.t1, y[:n], y[n:2 * n])
         s = y[y.size - len(self.slide):]
-        return max(abs(abs(float(s[k_])) - float(np.linalg.norm(H[model.trows[self.idx[i]]] @ y[n:2 * n])))
+        return max(abs(abs(float(s[k_])) - float(np.linalg.norm(u[model.trows[self.idx[i]]])))
                    for k_, i in enumerate(self.slide))
 
     def end_state(self):
@@ -378,7 +380,7 @@ class SpatialIntegrator:
         rounds = tangential = 0
         while True:
             fr = model.frame(t, q, v)
-            ul = fr.H @ v
+            ul = fr.velocity(v)
             gtol, vtol = self.gap_tol, self.vel_tol
             closed, approaching, separating = [], [], []
             for j in range(m):
@@ -475,8 +477,8 @@ class SpatialIntegrator:
                 rows.append(G.reshape(nb, n))
                 res.append(phi.ravel())
             if gap_rows:
-                rows.append(model.jac(q)[gap_rows])
-                res.append(model.gaps(q)[gap_rows])
+                rows.append(model.jac(q, t)[gap_rows])
+                res.append(model.gaps(q, t)[gap_rows])
             if not rows:
                 break
             J, r = np.vstack(rows), np.concatenate(res)
@@ -494,9 +496,9 @@ class SpatialIntegrator:
             res.append(G @ v + phi_t.ravel())
         vr = list(normal_rows) + [r for j in tangent_contacts for r in model.trows[j].tolist()]
         if vr:
-            H = model.jac(q)[vr]
+            H = model.jac(q, t)[vr]
             rows.append(H)
-            res.append(H @ v)
+            res.append(H @ v if not model.moving else model.local_velocity(t, q, v)[vr])
         if rows:
             J, r = np.vstack(rows), np.concatenate(res)
             if np.any(r):
@@ -571,7 +573,7 @@ class SpatialIntegrator:
                 stick.append(j)
             gap_rows = list(idx) + ([j] if kind == "impact" else [])
             q, v = self.project(te, q, v, gap_rows, list(idx), stick)
-            gap = self.model.gaps(q)
+            gap = self.model.gaps(q, te)
             if self.m and not self.penetrated and min(gap.tolist()) < -self.gap_tol:
                 self.penetrated = True  # no silent success: an open contact penetrated unseen
                 self.notes.append(f"At t = {te:.10g} contact {self.sys.contacts[int(np.argmin(gap))].name!r} penetrates "
@@ -612,10 +614,6 @@ def spatial_event_driven(system, q0, v0, t_end, opts, given, scene=None) -> Even
     >>> res.success, res.mode_sequence, abs(res.t_events[0] - 0.4) < 1e-15
     (True, [('slide',), ('stick',)], True)
     """
-    if getattr(system, "contacts_depend_on_t", False):  # time-dependent gaps: refused (lcp.events.driver)
-        from lcp.model.system import moving_contact
-
-        raise ValueError(f"contact {moving_contact(system)!r} has a time-dependent gap: use method='moreau-jean'")
     for name, default in (("smooth", "auto"), ("mode_solver", "auto"), ("impact_solver", "auto"),
                           ("max_branches", 4096)):
         val = getattr(opts, name)

@@ -46,6 +46,14 @@ def watch_bounces(integ, t, q, v, P, idx, modes, flight):
     seq.push(t, at, q, v, (tuple(idx), tuple(modes)))
     if not seq.geometric():
         return None
+    if integ.model.moving:
+        # no jump on a moving obstacle (the series is a fixed obstacle's): resolved one by one, as
+        # the planar integrator does (lcp.events.integrator.Integrator.watch_bounces)
+        if not any("moving contact" in note for note in integ.notes):
+            names = ", ".join(repr(integ.sys.contacts[j].name) for j in at)
+            integ.notes.append(f"From t = {t:.10g} the impacts on the moving contact(s) {names} accumulate: "
+                               "resolved impact by impact (no extrapolation to their limit).")
+        return None
     return _sum_up(integ, t, q, v, P, at, idx, modes, flight)
 
 

@@ -37,12 +37,21 @@ __all__ = ["AccelDisk", "DiskSolution", "Frame", "SpatialModel", "impact_impulse
 
 class Frame:
     """What the contact equations need at one state: H (all rows), Hdot v, gaps, qdd_free and
-    SH = S H' (accelerations produced by unit forces along each row of H)."""
+    SH = S H' (accelerations produced by unit forces along each row of H); for moving contacts
+    ``b`` = (dg/dt, ds/dt), the local velocities being u = H v + b (None: fixed contacts, b = 0)."""
 
-    __slots__ = ("A", "H", "Hdv", "SH", "gap", "qdd_free")
+    __slots__ = ("A", "H", "Hdv", "SH", "b", "gap", "qdd_free")
 
-    def __init__(self, H, Hdv, gap, qdd_free, SH, A):
+    def __init__(self, H, Hdv, gap, qdd_free, SH, A, b=None):
         self.H, self.Hdv, self.gap, self.qdd_free, self.SH, self.A = H, Hdv, gap, qdd_free, SH, A
+        self.b = b
+
+    def velocity(self, v, rows=None):
+        """Local velocities u = H v + b of the rows ``rows`` of H (all rows for None)."""
+        if rows is None:
+            return self.H @ v if self.b is None else self.H @ v + self.b
+        u = self.H[rows] @ v
+        return u if self.b is None else u + self.b[rows]
 
 
 class SpatialModel(ContactKinematics):
@@ -125,7 +134,8 @@ class SpatialModel(ContactKinematics):
         if self.nb:
             rhs[n:, -1] = -zeta
         X = np.linalg.solve(K, rhs)[:n]
-        return Frame(H, Hdv, gap, X[:, -1], X[:, :-1], A)
+        b = self.sys.contact_rates(q, t) if self.moving else None
+        return Frame(H, Hdv, gap, X[:, -1], X[:, :-1], A, b)
 
     # ------------------------------------------------------------------ smooth phases
     def columns(self, fr: Frame, idx, stick, dirs):
@@ -402,7 +412,7 @@ def impact_impulse(model: SpatialModel, fr: Frame, v, contacts, restitution: boo
     Hc = fr.H[rows]
     SH = fr.SH[:, rows]
     W = Hc @ SH
-    u = Hc @ v
+    u = fr.velocity(v, rows)
     qv = u.copy()
     if restitution:
         # on the approaching contacts only (as in the planar impact law): a closed or separating

@@ -474,8 +474,8 @@ class _NeedsTime:
 
     def __call__(self, *args):
         raise ValueError(f"{self.what}: contact {moving_contact(self.system)!r} has a time-dependent gap or "
-                         "tangent, which this computation does not support (Moreau-Jean does: "
-                         "method='moreau-jean')")
+                         "tangent, which this computation does not support (Moreau-Jean and the event "
+                         "method do: lcp.simulate)")
 
 
 def _kinematics(system, fn_q, fn_tq, q, t, what: str) -> np.ndarray:

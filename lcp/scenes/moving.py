@@ -1,9 +1,10 @@
-"""Scenes with moving contacts: time-dependent gaps and tangents (Moreau-Jean only).
+"""Scenes with moving contacts: time-dependent gaps and tangents (both methods).
 
 Holds :func:`moving_table` (a ball bouncing on a table that moves up and down, with its reference
 written with the table as a coordinate pinned by a rheonomous bilateral constraint, which the event
 method integrates) and :func:`conveyor` (a block put on a moving belt, with its closed form,
-:class:`ConveyorExact`). Imports the model and :mod:`lcp.scenes.scene` only; never the simulation,
+:class:`ConveyorExact`), :func:`cam_follower` (a spring-loaded follower on a moving cam surface, with
+its pinned form) and :func:`table_impacts` (the moving table's impacts, semi-analytic). Imports the model and :mod:`lcp.scenes.scene` only; never the simulation,
 the time stepping or the event method.
 
 A moving contact's local velocity is u = H(t, q) v + b(t, q), b = (dg/dt, ds/dt)
@@ -18,7 +19,7 @@ import numpy as np
 from lcp.model.system import Contact, System
 from lcp.scenes.scene import Scene, check_params
 
-__all__ = ["moving_table", "conveyor", "ConveyorExact"]
+__all__ = ["moving_table", "conveyor", "ConveyorExact", "cam_follower", "table_impacts"]
 
 
 def moving_table(amplitude: float = 0.05, omega: float = 6.0, e: float = 0.7, height: float = 0.3,
@@ -102,3 +103,90 @@ def conveyor(V: float = 1.0, mu: float = 0.4, g: float = 9.81, m: float = 1.0, v
         t_end = 2 * sol.t_stick if sol.t_stick > 0 else 1.0
     return Scene(system, np.zeros(2), np.array([float(v0), 0.0]), float(t_end), "conveyor",
                  dict(V=V, mu=mu, g=g, m=m, v0=v0), sol)
+
+
+def cam_follower(k: float = 50.0, rest: float = 1.5, radius: float = 1.0, amplitude: float = 0.1,
+                 omega: float = 10.0, e: float = 0.8, height: float = 1.3, m: float = 1.0, g: float = 9.81,
+                 t_end: float = 1.0, pinned: bool = False) -> Scene:
+    """A follower (q = (x, y), mass ``m``) held by a spring of stiffness ``k`` towards the height
+    ``rest`` and by gravity above a cam whose surface moves as c(t) = radius + amplitude sin(omega t):
+    the gap y - c(t) depends on time, frictionless, Newton restitution ``e``; released at rest at
+    ``height``.
+
+    With ``pinned`` the same physics with the cam surface a coordinate z (mass 1) pinned by the
+    rheonomous bilateral constraint z - c(t) = 0 and the gap y - z of q only: the form both
+    methods integrated before the event method took time-dependent gaps, its reference.
+
+    Examples
+    --------
+    >>> from lcp.scenes.moving import cam_follower
+    >>> sc = cam_follower()
+    >>> sc.system.contacts_depend_on_t, cam_follower(pinned=True).system.n_bilateral
+    (True, 1)
+    """
+    check_params(k=k, rest=rest, radius=radius, amplitude=amplitude, omega=omega, height=height, m=m, g=g,
+                 t_end=t_end)
+    if not 0 <= e <= 1:
+        raise ValueError(f"e must lie in [0, 1], got {e!r}")
+    t = ca.SX.sym("t")
+    c = radius + amplitude * ca.sin(omega * t)
+    params = dict(k=k, rest=rest, radius=radius, amplitude=amplitude, omega=omega, e=e, height=height, m=m, g=g,
+                  pinned=pinned)
+    if not pinned:
+        q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
+        system = System(q, v, m * ca.SX.eye(2), ca.vertcat(0, -k * (q[1] - rest) - m * g), t=t, names=("x", "y"),
+                        contacts=[Contact(gap=q[1] - c, tangent=q[0], mu=0.0, e=e, name="cam")])
+        return Scene(system, np.array([0.0, height]), np.zeros(2), float(t_end), "cam_follower", params,
+                     no_exact_reason="the reference is cam_follower(pinned=True)")
+    q, v = ca.SX.sym("q", 3), ca.SX.sym("v", 3)
+    system = System(q, v, ca.diag(ca.vertcat(m, m, 1.0)), ca.vertcat(0, -k * (q[1] - rest) - m * g, 0), t=t,
+                    names=("x", "y", "z"), constraints=[q[2] - c],
+                    contacts=[Contact(gap=q[1] - q[2], tangent=q[0], mu=0.0, e=e, name="cam")])
+    return Scene(system, np.array([0.0, height, radius]), np.array([0.0, 0.0, amplitude * omega]), float(t_end),
+                 "cam_follower_pinned", params, no_exact_reason="no closed form (the reference itself)")
+
+
+def table_impacts(amplitude: float, omega: float, e: float, height: float, g: float = 9.81, n_impacts: int = 3,
+                  t0: float = 0.0, y0: float | None = None, ydot0: float = 0.0) -> np.ndarray:
+    """Semi-analytic impacts of the ball of :func:`moving_table`: rows (t_i, u_i-, u_i+) of the first
+    ``n_impacts`` impacts, u the relative normal velocity ydot - s'(t) before and after (u+ = -e u-).
+
+    Each free flight is the parabola y(t) = y_k + ydot_k (t - t_k) - g (t - t_k)^2 / 2; its landing
+    is the first zero of y(t) - amplitude sin(omega t) after t_k, bracketed by sampling at 1/400 of
+    the table's period and refined by Brent's method to the last bits of t (a landing that only
+    grazes the table between two samples is not seen: the reference is for clear bounces).
+
+    Examples
+    --------
+    >>> import math
+    >>> t1 = table_impacts(0.0, 6.0, 0.5, 0.3, n_impacts=1)[0, 0]  # a table at rest: sqrt(2 h / g)
+    >>> bool(abs(t1 - math.sqrt(0.6 / 9.81)) < 1e-15)
+    True
+    """
+    from scipy.optimize import brentq  # only for the reference (keeps `import lcp` cheap)
+
+    a, w = float(amplitude), float(omega)
+    tk, yk = float(t0), float(height if y0 is None else y0)
+    vk = float(ydot0)
+    dt = 2 * np.pi / w / 400
+
+    def gap(t):
+        s = t - tk
+        return yk + vk * s - 0.5 * g * s * s - a * np.sin(w * t)
+
+    out = []
+    for _ in range(n_impacts):
+        lo = tk
+        hi = tk + dt
+        while gap(hi) > 0.0:
+            lo, hi = hi, hi + dt
+            if hi - tk > 1e3 * dt * 400:
+                raise ValueError("no landing found within 1000 table periods")
+        ti = brentq(gap, lo, hi, xtol=1e-16, rtol=4 * np.finfo(float).eps, maxiter=200)
+        ydot = vk - g * (ti - tk)
+        sdot = a * w * np.cos(w * ti)
+        u_minus = ydot - sdot
+        u_plus = -e * u_minus
+        out.append((ti, u_minus, u_plus))
+        tk, yk, vk = ti, a * np.sin(w * ti), sdot + u_plus
+    return np.array(out)
