@@ -85,7 +85,7 @@ def run_second_order(system, asm, q0, v0, h: float, th: float, n_steps: int, eve
     # contacts held closed: j -> (sliding direction, sticks), tried as constraints of the next step
     # where Moreau-Jean's own step is of order one (a q-dependent mass matrix or contact rows)
     holds = bool(m) and not system.is_spatial and not (system.mass_is_constant and system.kinematics_is_constant)
-    held = {}
+    held, trend = {}, {}  # trend: contact -> its mean force over the previous (held) step
     closed_rattle = ClosedRattle(system, tol) if holds else None
     if proj is not None:
         from lcp.model.start import system_length
@@ -100,15 +100,16 @@ def run_second_order(system, asm, q0, v0, h: float, th: float, n_steps: int, eve
         data = None  # Moreau-Jean's step data, once computed
         forced = None  # contacts RATTLE's end point closed, or held ones whose step was refused
         taken = False  # the step taken by a closed-contact RATTLE step
+        means, trend = trend, {}
         if held and not _loaded_elsewhere(activation.loaded, held):
-            took = _held_step(system, closed_rattle, rattle, held, tk, q, v, h, g0)
+            took = _held_step(system, closed_rattle, rattle, held, means, tk, q, v, h, g0)
             stats.projection_iterations += took.iterations
             if took.ok:
                 taken = True
                 worst = max(worst, took.violation)
                 q, v = took.q1, took.v1
                 cq, cv = np.zeros(n), np.zeros(n)
-                held = took.held
+                held, trend = took.held, took.means
                 if took.pn:
                     stats.closed_steps += 1
                     idx = np.array(sorted(took.pn))
@@ -308,23 +309,28 @@ class _Taken:
     iterations: int = 0
     violation: float = 0.0
     closing: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    means: dict = field(default_factory=dict)
 
 
-def _held_step(system, closed_rattle, rattle, held, tk, q, v, h, g0) -> _Taken:
+def _held_step(system, closed_rattle, rattle, held, trend, tk, q, v, h, g0) -> _Taken:
     """One step with the ``held`` contacts as constraints (module docstring).
 
-    Where the only objection is lift-off (a held normal multiplier < 0 at the step's end, >= 0 at
-    its start), the step is split where the multiplier, linear in time between the two kicks,
-    crosses zero: held up to there, released after, each part a RATTLE step. Where it is < 0 at
-    the start already, the step is taken again without that contact. Both keep order two through
-    the lift-off (the contact's force vanishes at the switch), where Moreau-Jean's step, imposing
-    H_N(q_k) v+ >= 0 with the normal of the step's start, misses the curvature's h |v|^2 / R in the
-    normal velocity and is of order one after it; and no contact ever pulls (no multiplier < 0 is
-    applied). Any other objection (a stick leaving the cone, a slide stopping, another contact
-    closing, SHAKE stuck): ``ok`` False, and the step is Moreau-Jean's.
+    Lift-off: RATTLE's two multipliers both approximate the force at the step's midpoint (to O(h);
+    their mean to O(h^2)), so the force at the step's ends is taken from the mean of this step and
+    of the previous one where that held the contact too (``trend``: contact -> mean force), else
+    from the two multipliers. Where the end force is < 0 and the start force >= 0, the step is
+    split where the force, linear in time, crosses zero: held up to there, released after, each
+    part a RATTLE step. Where the start force is < 0 already, the step is taken again without that
+    contact. Both keep order two through the lift-off (the force vanishes at the switch), where
+    Moreau-Jean's step, imposing H_N(q_k) v+ >= 0 with the normal of the step's start, misses the
+    curvature's h |v|^2 / R in the normal velocity and is of order one after it; and no step's net
+    normal impulse pulls. Any other objection (a stick leaving the cone, a slide stopping, another
+    contact closing, SHAKE stuck, a second lift-off in the part after a split): ``ok`` False, and
+    the step is Moreau-Jean's.
     """
     taken = _Taken(False)
     t, qk, vk, left, attempt = tk, q, v, h, dict(held)
+    nb = system.n_bilateral
     for _ in range(3):  # at most: the whole step, the part up to lift-off, the rest
         key = tuple((j,) + attempt[j] for j in sorted(attempt))
         out = closed_rattle(key, t, qk, vk, left) if key else _free_as_closed(rattle, t, qk, vk, left)
@@ -335,31 +341,43 @@ def _held_step(system, closed_rattle, rattle, held, tk, q, v, h, g0) -> _Taken:
         if closing.size or bad:
             taken.closing = closing
             return taken
-        nb, K = system.n_bilateral, len(key)
+        K = len(key)
         lam, mu_ = out.lam[nb:nb + K], out.mu[nb:nb + K]
+        mean = 0.5 * (lam + mu_)
         split = None
-        if lifting:
-            c = [i for i, (j, _, _) in enumerate(key) if j in lifting]
-            if left == h and np.all(lam[c] >= 0):  # lift-off inside the step: the crossing
-                tau = float(np.min(lam[c] / (lam[c] - mu_[c])))
-                if 1e-3 < tau < 1 - 1e-3:
-                    split = tau
-            if split is None:
-                # lift-off at the start (or at the split point): the step without those contacts
-                attempt = {j: attempt[j] for j in attempt if j not in lifting}
-                continue
-            out = closed_rattle(key, t, qk, vk, split * h)
-            taken.iterations += out.iterations
-            if not out.ok:
-                return taken
-            closing, _, bad = _verdict(system, key, out, g0)
-            if closing.size or bad:
-                taken.closing = closing
-                return taken
+        if left == h:
+            start, end = lam.copy(), mu_.copy()
+            for c, (j, _, _) in enumerate(key):
+                if j in trend:  # the force at the ends from the means' trend (O(h^2))
+                    half = 0.5 * (mean[c] - trend[j])
+                    start[c], end[c] = mean[c] - half, mean[c] + half
+            lifting = [key[c][0] for c in np.flatnonzero((start < 0) | (end < 0)).tolist()]
+            if lifting:
+                c = [i for i, (j, _, _) in enumerate(key) if j in lifting]
+                if np.all(start[c] >= 0):  # lift-off inside the step: the crossing
+                    tau = float(np.min(start[c] / (start[c] - end[c])))
+                    if 1e-3 < tau < 1 - 1e-3:
+                        split = tau
+                if split is None:
+                    # lift-off at the start (or at the end): the step without those contacts
+                    attempt = {j: attempt[j] for j in attempt if j not in lifting}
+                    continue
+                out = closed_rattle(key, t, qk, vk, split * h)
+                taken.iterations += out.iterations
+                if not out.ok:
+                    return taken
+                closing, _, bad = _verdict(system, key, out, g0)
+                if closing.size or bad:
+                    taken.closing = closing
+                    return taken
+        elif lifting:  # a second lift-off in the rest of a split step
+            return taken
         _add_impulses(system, key, out, split * h if split else left, taken)
         taken.violation = max(taken.violation, out.violation)
         if split is None:
             taken.ok, taken.q1, taken.v1, taken.held = True, out.q1, out.v1, attempt
+            if left == h:
+                taken.means = {j: float(mean[c]) for c, (j, _, _) in enumerate(key)}
             return taken
         t, qk, vk, left = t + split * h, out.q1, out.v1, (1 - split) * h
         attempt = {j: attempt[j] for j in attempt if j not in lifting}
