@@ -1,28 +1,39 @@
-"""The order-two scheme (``scheme="order2"``): RATTLE where no contact acts, Moreau-Jean where one does.
+"""The order-two scheme (``scheme="order2"``): RATTLE where the motion is smooth, Moreau-Jean elsewhere.
 
-Holds :func:`run_second_order`, a Python loop that takes each step by one of two one-step methods:
+Holds :func:`run_second_order`, a Python loop that takes each step by one of three one-step methods:
 
-- **smooth steps** (no contact closes in the step, none carried a load in the previous one): a
+- **free steps** (no contact closes in the step, none carried a load in the previous one): a
   RATTLE step (:class:`~lcp.timestepping.rattle.RattleStep`: velocity Verlet with the bilateral
   constraints at the position level by SHAKE and at the velocity level by RATTLE), of order two
   for q-dependent mass matrices, velocity-dependent forces and nonlinear or rheonomic
   constraints, and symplectic for conservative systems with a constant mass matrix (no secular
   energy drift, the period of a pendulum to O(h^2));
-- **contact steps** (a contact closes, or stays loaded by the activation rule): exactly the
-  Moreau-Jean step of :mod:`lcp.timestepping.python_loop` (free velocity, activation, the one-step
-  contact problem, impulses at the velocity level, restitution, Kahan sums, position projection).
+- **closed steps** (every contact loaded in the previous step is closed and persistent: loaded
+  with p_N > 0 and no impact or bounce in that step): a RATTLE step with those contacts held as
+  constraints (:class:`~lcp.timestepping.closed_rattle.ClosedRattle`): a frictionless or sliding
+  contact by its gap (the sliding friction -mu lambda_N sign(u_T) coupled to the normal
+  multiplier), a sticking one (|p_T| < mu p_N strictly) by its gap and its tangent. After the
+  step: every held normal force >= 0 (else lift-off: the step split where the force crosses zero,
+  or taken without that contact, see :func:`_held_step`), every stick strictly inside the cone at
+  both ends, every slide still sliding its way, no other contact closing; where any of these
+  fails, the step is taken again by Moreau-Jean. Only where Moreau-Jean's own step is of order one
+  (a q-dependent mass matrix or contact rows): on a constant system Moreau-Jean at theta = 1/2 is
+  already of order two (exact under constant forces) and keeps its steps; spatial contacts too;
+- **contact steps** (otherwise: a contact closes, an impact, a stick-slip transition, a stop):
+  exactly the Moreau-Jean step of :mod:`lcp.timestepping.python_loop` (free velocity, activation,
+  the one-step contact problem, impulses at the velocity level, restitution, Kahan sums, position
+  projection). Its answer names the contacts to hold in the next step.
 
-The choice: a step first tries RATTLE unless a contact carried a load in the previous step; where
-a contact's gap at RATTLE's end point closes (g_j(q1) <= CLOSE_ULPS eps s_j, the activation rule's
-tolerance), the step is discarded and taken by Moreau-Jean from the same state, with those
-contacts active besides the ones Moreau-Jean's own rule activates. A step after a loaded one asks
-Moreau-Jean's rule first (its hysteresis keeps a resting contact active); where it activates
-nothing, the step is a RATTLE step again. So impacts, sticking, sliding and restitution are
-Moreau-Jean's, and a run whose contacts stay closed (Jean-Pratt, a sliding block) is Moreau-Jean's
-run to the last bit; the scheme is of order two only on the stretches without active contacts (a
-ball rolling on a curved floor stays of order one). Imports the step modules of
-:mod:`lcp.timestepping` (as :mod:`~lcp.timestepping.python_loop` does), :mod:`lcp.contact` and
-:mod:`lcp.result`; never the path choice or anything above :mod:`lcp.timestepping`.
+The choice: a step with held contacts tries the closed step first; a step after a loaded one
+that holds nothing asks Moreau-Jean's rule (its hysteresis keeps a resting contact active), and
+where it activates nothing, the step is a free RATTLE step again; a free step whose end point
+closes a gap (g_j(q1) <= CLOSE_ULPS eps s_j, the activation rule's tolerance) is discarded and
+taken by Moreau-Jean from the same state, with those contacts active besides the ones Moreau-Jean's
+own rule activates. So impacts, stick-slip transitions, stops and restitution are Moreau-Jean's,
+and a constant system's run (Jean-Pratt, a block on an incline) is Moreau-Jean's run to the last
+bit. Imports the step modules of :mod:`lcp.timestepping` (as
+:mod:`~lcp.timestepping.python_loop` does), :mod:`lcp.contact` and :mod:`lcp.result`; never the
+path choice or anything above :mod:`lcp.timestepping`.
 """
 from __future__ import annotations
 
