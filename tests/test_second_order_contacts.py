@@ -115,6 +115,32 @@ def test_rocking_block_sticking_pivot_order_two():
     assert abs(mj.q[-1, 2] - ref) > 100 * err[2]
 
 
+def test_disk_rolling_in_circular_track_order_two():
+    # a uniform disk (radius r) rolling without slip inside a circle of radius R: its centre is a
+    # pendulum of length R - r under 2 g / 3 (exact by elliptic functions); the contact sticks
+    # (friction/normal at most tan(60 deg)/3 < mu), its tangent row (the contact point's velocity,
+    # with the spin) held by the midpoint rule
+    R, r, th0, t_end = 1.0, 0.25, math.pi / 3, 1.0
+    q, v = ca.SX.sym("q", 3), ca.SX.sym("v", 3)
+    n = q[:2] / ca.norm_2(q[:2])
+    rim = Contact(gap=R - r - ca.norm_2(q[:2]), tangent_jacobian=ca.horzcat(-n[1], n[0], r), mu=1.0, name="rim")
+    s = System(q, v, ca.diag(ca.vertcat(1.0, 1.0, r * r / 2)), ca.vertcat(0, -G, 0), contacts=[rim])
+    L = R - r
+    ref = PendulumExact(L, th0, 2 * G / 3)(t_end)["q"][0]
+    q0 = [L * math.sin(th0), -L * math.cos(th0), 0.0]
+    err, slip = [], []
+    for h in STEPS:
+        res = lcp.simulate(s, t_end, h=h, q0=q0, v0=[0.0, 0.0, 0.0], scheme="order2")
+        assert res.success, res.message
+        assert res.stats.closed_steps == res.stats.steps - 1 and res.stats.mode_counts["stick"] == res.stats.steps
+        err.append(np.max(np.abs(res.q[-1, :2] - ref)))
+        # rolling: the spin follows the centre, theta = -(L / r) (phi - phi0), to O(h^2)
+        phi = math.atan2(res.q[-1, 0], -res.q[-1, 1])
+        slip.append(abs(res.q[-1, 2] + L / r * (phi - th0)))
+    assert np.all(_orders(err) >= 1.9) and np.all(_orders(slip) >= 1.9)
+    assert err[2] < 1e-6  # h = 1e-3: 5.1e-7 (Moreau-Jean: 5.7e-4)
+
+
 def _sphere_reference(th0, R=1.0):
     """The lift-off time and state of a mass released at rest at th0 from the top of a sphere, and
     the exact motion: DOP853 (rtol 1e-13) on theta'' = g/R sin(theta) up to N = 0, then a parabola."""
