@@ -126,7 +126,7 @@ def run_second_order(system, asm, q0, v0, h: float, th: float, n_steps: int, eve
                     idx = np.array(sorted(took.pn))
                     pn = np.array([took.pn[j] for j in idx.tolist()])
                     md = np.array([took.modes[j] for j in idx.tolist()], dtype=np.int8)
-                    activation.carried(idx[idx_in(idx, held)], pn[idx_in(idx, held)])
+                    activation.carried(idx[_held_mask(idx, held)], pn[_held_mask(idx, held)])
                     if not held:
                         activation.release()
                     if row >= 0:
@@ -299,7 +299,7 @@ def _verdict(system, key, out, g0):
     return np.flatnonzero(closing), lifting, bad
 
 
-def idx_in(idx, held):
+def _held_mask(idx, held):
     """Mask of the contacts of ``idx`` that are held."""
     return np.array([j in held for j in idx.tolist()], dtype=bool)
 
