@@ -70,6 +70,18 @@ def test_frictionless_bowl_is_a_pendulum_of_order_two():
     assert 0.9 <= _orders(mj)[0] <= 1.1  # Moreau-Jean: order one
 
 
+@settings(max_examples=10, deadline=None)
+@given(th0=st.floats(0.2, 1.4))
+def test_bowl_error_quarters_with_h(th0):
+    # any release angle below 90 degrees: the contact stays loaded (tension >= m g cos(theta0))
+    s = _bowl()
+    ref = PendulumExact(1.0, th0, G)(0.5)["q"][0]
+    q0 = [math.sin(th0), -math.cos(th0)]
+    e = [np.max(np.abs(lcp.simulate(s, 0.5, h=h, q0=q0, v0=[0.0, 0.0], scheme="order2").q[-1] - ref))
+         for h in (2e-3, 1e-3)]
+    assert 3.6 <= e[0] / e[1] <= 4.4
+
+
 def test_sliding_friction_in_bowl_order_two():
     # Coulomb sliding coupled to the normal multiplier: m L theta'' = -m g sin(theta) - mu N sign(theta'),
     # N = m (g cos(theta) + L theta'^2); released at 60 degrees, it slides down without stopping up to 0.4 s
