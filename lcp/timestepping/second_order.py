@@ -355,7 +355,7 @@ def _held_step(system, closed_rattle, rattle, held, trend, tk, q, v, h, g0) -> _
         K = len(key)
         lam, mu_ = out.lam[nb:nb + K], out.mu[nb:nb + K]
         mean = 0.5 * (lam + mu_)
-        split = None
+        split, release = None, ()
         if left == h:
             start, end = lam.copy(), mu_.copy()
             for c, (j, _, _) in enumerate(key):
@@ -367,12 +367,17 @@ def _held_step(system, closed_rattle, rattle, held, trend, tk, q, v, h, g0) -> _
                 c = [i for i, (j, _, _) in enumerate(key) if j in lifting]
                 if np.all(start[c] >= 0):  # lift-off inside the step: the crossing
                     tau = float(np.min(start[c] / (start[c] - end[c])))
-                    if 1e-3 < tau < 1 - 1e-3:
+                    if tau >= 1 - 1e-3:  # at the step's end: held over it, released after
+                        split, release = 1.0, lifting
+                    elif tau > 1e-3:
                         split = tau
                 if split is None:
-                    # lift-off at the start (or at the end): the step without those contacts
+                    # lift-off at the start: the step without those contacts
                     attempt = {j: attempt[j] for j in attempt if j not in lifting}
                     continue
+                if split == 1.0:
+                    split = None
+            if split is not None:
                 out = closed_rattle(key, t, qk, vk, split * h)
                 taken.iterations += out.iterations
                 if not out.ok:
@@ -386,7 +391,8 @@ def _held_step(system, closed_rattle, rattle, held, trend, tk, q, v, h, g0) -> _
         _add_impulses(system, key, out, split * h if split else left, taken)
         taken.violation = max(taken.violation, out.violation)
         if split is None:
-            taken.ok, taken.q1, taken.v1, taken.held = True, out.q1, out.v1, attempt
+            taken.ok, taken.q1, taken.v1 = True, out.q1, out.v1
+            taken.held = {j: attempt[j] for j in attempt if j not in release}
             if left == h:
                 taken.means = {j: float(mean[c]) for c, (j, _, _) in enumerate(key)}
             return taken
