@@ -51,6 +51,9 @@ class SolverStats:
         projection, :mod:`lcp.timestepping.projection`).
     projection_iterations : int
         Newton iterations of those projections in total.
+    closed_steps : int
+        Steps of the order-two scheme (``scheme="order2"``) that held closed contacts as
+        constraints of a RATTLE step (:mod:`lcp.timestepping.closed_rattle`).
     """
 
     steps: int = 0
@@ -65,6 +68,7 @@ class SolverStats:
     fallbacks: int = 0
     projections: int = 0
     projection_iterations: int = 0
+    closed_steps: int = 0
 
 
 class StepImpulses:
@@ -129,6 +133,10 @@ class SimulationResult(StepImpulses):
         ``status >= 0``.
     stats : SolverStats
     method, solver : str
+    scheme : str
+        The time-stepping scheme of a ``"moreau-jean"`` run: ``"moreau-jean"`` (the theta-method
+        throughout) or ``"order2"`` (``lcp.simulate(..., scheme="order2")``, RATTLE where the motion
+        is smooth: :mod:`lcp.timestepping.second_order`); ``"event"`` for the event method.
     h, theta : float
     t_events : list
         Event times (empty for time stepping).
@@ -160,6 +168,7 @@ class SimulationResult(StepImpulses):
     impacts: list | None = field(default_factory=list)
     #: the worst violation, or a callable computing it on first access (see max_constraint_violation)
     violation: object = field(default=float("nan"), repr=False, compare=False)
+    scheme: str = "moreau-jean"
 
     @property
     def max_constraint_violation(self) -> float:
@@ -186,7 +195,8 @@ class SimulationResult(StepImpulses):
         return plot_result(self, system, **kwargs)
 
     def __repr__(self) -> str:
-        return (f"SimulationResult(method={self.method!r}, solver={self.solver!r}, h={self.h:g}, "
+        scheme = f", scheme={self.scheme!r}" if self.scheme != self.method else ""
+        return (f"SimulationResult(method={self.method!r}{scheme}, solver={self.solver!r}, h={self.h:g}, "
                 f"steps={self.stats.steps}, status={self.status}, message={self.message!r})")
 
 

@@ -75,9 +75,11 @@ def simulate(scene: Scene | System, t_end: float | None = None, h: float = 1e-3,
         of order one on smooth motion with nonlinear constraints or a q-dependent mass matrix.
         ``"order2"`` takes the steps in which no contact acts by RATTLE (velocity Verlet with
         SHAKE/RATTLE constraints: order two, no secular energy drift on conservative systems with a
-        constant mass matrix) and the others by the same Moreau-Jean step, so impacts, sticking
-        and sliding keep their velocity-level impulses (docs/numerical_methods.md, "The order-two
-        scheme"). Runs in the Python loop; forces are explicit there (stable for h omega < 2).
+        constant mass matrix), the steps in which contacts stay closed (sliding or sticking) by
+        RATTLE with those contacts as constraints, checked after the step (lift-off, slip onset),
+        and the others (impacts, stick-slip transitions, stops) by the same Moreau-Jean step
+        (docs/numerical_methods.md, "The order-two scheme"); ``result.scheme`` says "order2".
+        Runs in the Python loop; forces are explicit there (stable for h omega < 2).
     allow_large_step : bool
         Moreau-Jean only: accept a step h larger than the horizon (one step then overshoots
         ``t_end``). Without it such an h is taken for a mistake and raises.

@@ -13,7 +13,7 @@ from scipy.integrate import solve_ivp
 import lcp
 from lcp.model.system import System
 from lcp.scenes import jean_pratt
-from lcp.scenes.classical import bouncing_ball, incline, pendulum, rocking_block, slider_crank
+from lcp.scenes.classical import bouncing_ball, incline, pendulum, slider_crank
 from lcp.timestepping.moreau_jean import MoreauJeanOptions
 
 from .conftest import X_ROUNDING, Y_TOL
@@ -180,15 +180,6 @@ def test_jean_pratt_exactness_kept(R, v0, h):
     err = jean_pratt_errors(sc, o2)
     assert err["x"] <= err["bound"] + X_ROUNDING
     assert err["y"] <= Y_TOL
-
-
-def test_loaded_pivot_is_moreau_jean_step_for_step():
-    # a rocking block always pivots on a loaded corner: Moreau-Jean's steps (order one there)
-    sc = rocking_block(t_end=0.4)
-    o2 = lcp.simulate(sc, h=1e-3, scheme="order2")
-    mj = lcp.simulate(sc, h=1e-3, fast=False)
-    assert o2.success and o2.stats.free_steps == 0
-    assert np.array_equal(o2.q, mj.q) and np.array_equal(o2.p_N, mj.p_N)
 
 
 def test_scheme_option_validated():

@@ -135,6 +135,7 @@ class EventResult(SimulationResult):
     impacts: list = field(default_factory=list)
     accumulations: list = field(default_factory=list)
     nonunique_forces: int = 0
+    scheme: str = "event"
 
     @property
     def mode_sequence(self) -> list:

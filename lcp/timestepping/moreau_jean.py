@@ -82,8 +82,11 @@ class MoreauJeanOptions:
         Relative tolerance of the projection, in [1e-15, 1) (see :mod:`lcp.timestepping.projection`).
     scheme : {"moreau-jean", "order2"}
         ``"moreau-jean"`` (the default): every step by the theta-method. ``"order2"``: the steps
-        without an active contact by RATTLE, of order two on smooth constrained motion, the others
-        by the same Moreau-Jean step (:mod:`lcp.timestepping.second_order`); Python loop only.
+        without an active contact by RATTLE, of order two on smooth constrained motion, and the
+        steps whose contacts stay closed by RATTLE with those contacts as constraints (where the
+        system's mass matrix or contact rows depend on q); impacts, stick-slip transitions and
+        closing contacts by the same Moreau-Jean step (:mod:`lcp.timestepping.second_order`);
+        Python loop only. The result says which: ``result.scheme``.
     """
 
     h: float

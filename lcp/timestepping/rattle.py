@@ -36,12 +36,12 @@ import weakref
 import casadi as ca
 import numpy as np
 
-__all__ = ["RattleStep", "SHAKE_PER_EVAL"]
+__all__ = ["Buffered", "RattleStep", "SHAKE_PER_EVAL", "SX_MAX_SIZE"]
 
 #: Newton iterations of SHAKE unrolled in one evaluation (two bring an O(h^2) violation to rounding)
 SHAKE_PER_EVAL = 2
 #: beyond this many coordinates plus constraint rows the step is an MX graph (SX solves grow like n^3)
-_SX_MAX_SIZE = 30
+SX_MAX_SIZE = 30
 
 
 def _newton(system, t1, q, P, iterations):
@@ -83,7 +83,7 @@ def rattle_functions(system):
     (SHAKE_PER_EVAL more iterations); ``kick(t0, q0, q1, h) -> (v1, gap, gsize)``.
     """
     n, nb = system.n, system.n_bilateral
-    sym = ca.SX if n + nb <= _SX_MAX_SIZE else ca.MX
+    sym = ca.SX if n + nb <= SX_MAX_SIZE else ca.MX
     t0, h = sym.sym("t0"), sym.sym("h")
     q0, v0 = sym.sym("q0", n), sym.sym("v0", n)
     t1 = t0 + h
@@ -109,7 +109,7 @@ def rattle_functions(system):
     return step, newton, kick
 
 
-class _Buffered:
+class Buffered:
     """A Function evaluated through preallocated NumPy buffers (a plain call costs ~100 us in
     argument conversions; this, a few)."""
 
@@ -163,7 +163,7 @@ class RattleStep:
         fns = _FUNCTIONS.get(system)
         if fns is None:
             fns = _FUNCTIONS[system] = rattle_functions(system)
-        self.step, self.newton, self.kick = (_Buffered(f) for f in fns)
+        self.step, self.newton, self.kick = (Buffered(f) for f in fns)
         self.nb, self.n, self.m = system.n_bilateral, system.n, system.n_contacts
         self.tol, self.max_evals = float(tol), int(max_evals)
 
