@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lcp.model.conditioning import MOREAU_JEAN_LIMIT, mass_condition, reduced_condition, resolvable
+from lcp.model.kinematics import refuse_kinematics
 from lcp.model.start import consistent_start
 from lcp.timestepping import compiled_step as compiled
 from lcp.timestepping.activation import CLOSE_ULPS, OPEN_ULPS
@@ -150,6 +151,12 @@ def _projector(system, options):
     """The position projection of this run, or None (see MoreauJeanOptions.projection)."""
     if options.projection is False or system.n_bilateral + system.n_contacts == 0:
         return None
+    if getattr(system, "has_kinematics", False):
+        # the projection moves q along A^-1 J' in q-space; with qdot = T(q) v its corrections are
+        # not written yet: "auto" runs without it (velocity-level contacts, O(h^2) per closed step)
+        if options.projection is True:
+            refuse_kinematics(system, "projection=True")
+        return None
     # constant kinematics: every constraint and gap is affine in q, which is exactly when
     # needs_projection says no (decided here without its symbolic Jacobians)
     if options.projection == "auto" and (system.kinematics_is_constant or not needs_projection(system)):
@@ -188,6 +195,7 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
         raise ValueError(str(exc)) from exc
     proj = _projector(system, options)
     if options.scheme == "order2":
+        refuse_kinematics(system, "scheme='order2'")
         if system.contacts_depend_on_t:
             from lcp.model.system import moving_contact
 
