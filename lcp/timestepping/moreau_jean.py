@@ -151,12 +151,6 @@ def _projector(system, options):
     """The position projection of this run, or None (see MoreauJeanOptions.projection)."""
     if options.projection is False or system.n_bilateral + system.n_contacts == 0:
         return None
-    if getattr(system, "has_kinematics", False):
-        # the projection moves q along A^-1 J' in q-space; with qdot = T(q) v its corrections are
-        # not written yet: "auto" runs without it (velocity-level contacts, O(h^2) per closed step)
-        if options.projection is True:
-            refuse_kinematics(system, "projection=True")
-        return None
     # constant kinematics: every constraint and gap is affine in q, which is exactly when
     # needs_projection says no (decided here without its symbolic Jacobians)
     if options.projection == "auto" and (system.kinematics_is_constant or not needs_projection(system)):

@@ -157,7 +157,8 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
                 np.logical_and(loaded, ~opening, out=closed)
             else:
                 opening = None
-            q_proj, ok, iters, viol = proj.project(tk + h, q, closed, opening, ell + h * np.abs(v))
+            reach = ell + h * np.abs(v) if advance is None else ell + h * float(np.max(np.abs(v)))  # n_q != n_v
+            q_proj, ok, iters, viol = proj.project(tk + h, q, closed, opening, reach)
             stats.projections += 1
             stats.projection_iterations += iters
             if not ok or not math.isfinite(viol):

@@ -1,0 +1,122 @@
+"""The event method for systems with Newton-Euler kinematics (qdot = T(q) v) and no contacts.
+
+Holds :func:`kinematic_event_driven`, which :func:`lcp.events.driver.event_driven` calls for a
+System with ``kinematics`` (:mod:`lcp.model.kinematics`): a free rigid body, several of them, any
+system whose velocities are not the rates of its coordinates. Without contacts or bilateral
+constraints there is no event: the motion is one smooth phase,
+
+    qdot = T(t, q^) v,    A(t, q) vdot = F(t, q, v),
+
+with q^ the coordinates with their unit quaternions normalised, integrated by SciPy's explicit
+Runge-Kutta stepper (``ode_method``, DOP853 by default; ``rtol``, ``atol`` of the options) step by
+step: after every accepted step the unit quaternions are projected back onto the sphere (divided by
+their norm) and the stepper continues from there; the output times are interpolated by the step's
+dense output and projected the same way. Systems with kinematics and contacts or bilateral
+constraints are refused by name (Moreau-Jean's Python loop handles them).
+
+Imports :mod:`lcp.events.options`, :mod:`lcp.events.records`, :mod:`lcp.model` and
+:mod:`lcp.result`; never the contact phases of the event method, time stepping, scenes or sweeps.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from lcp.events.options import EVENT_STATUS_MESSAGES
+from lcp.events.records import Phase, new_event_result
+from lcp.model.kinematics import normalize_quaternions
+from lcp.model.start import consistent_start
+from lcp.result import SolverStats
+
+__all__ = ["kinematic_event_driven"]
+
+
+def _refuse(system) -> None:
+    if system.n_contacts or system.n_bilateral:
+        what = "contacts" if system.n_contacts else "bilateral constraints"
+        raise ValueError(f"the event method handles systems with Newton-Euler kinematics (System(..., "
+                         f"kinematics=T)) without contacts or bilateral constraints only; this one has {what}: "
+                         "use method='moreau-jean'")
+
+
+def _rhs(system):
+    """y = (q, v) -> ydot, the quaternions of q normalised for T (not for A and F, which a body's
+    quaternion enters only through R(p), whose formula holds for unit quaternions)."""
+    n, nq = system.n, system.n_q
+    qdot_fn, mass_fn, force_fn = system.qdot_fn, system.mass_fn, system.force_fn
+
+    def f(t, y):
+        q, v = y[:nq], y[nq:]
+        qn = normalize_quaternions(system, q.copy())
+        A = np.array(mass_fn(t, qn), dtype=float).reshape(n, n)
+        F = np.array(force_fn(t, qn, v), dtype=float).ravel()
+        return np.concatenate([np.array(qdot_fn(t, qn, v), dtype=float).ravel(), np.linalg.solve(A, F)])
+
+    return f
+
+
+def kinematic_event_driven(system, q0, v0, t_end: float, opts, scene=None):
+    """The event method on a system with kinematics and no contacts (module docstring).
+
+    Returns
+    -------
+    EventResult
+        One phase (``integrators == [opts.ode_method]``), no contact data (m = 0 columns).
+    """
+    _refuse(system)
+    from scipy.integrate import RK23, RK45, DOP853
+
+    steppers = {"DOP853": DOP853, "RK45": RK45, "RK23": RK23}
+    if opts.ode_method not in steppers:
+        raise ValueError(f"ode_method {opts.ode_method!r} is not available for systems with kinematics: "
+                         f"use one of {sorted(steppers)}")
+    q0, v0 = system.check_state(q0, v0)
+    q0, v0, note = consistent_start(system, q0, v0)
+    nq = system.n_q
+    t_out = opts.output_times(t_end)
+    y0 = np.concatenate([q0, v0])
+    scale = np.concatenate([np.full(nq, max(1.0, float(np.max(np.abs(q0))))),
+                            np.full(system.n, max(1.0, float(np.max(np.abs(v0)))) if system.n else 1.0)])
+    rhs = _rhs(system)
+    stepper = steppers[opts.ode_method](rhs, 0.0, y0, t_end, rtol=opts.rtol, atol=opts.atol * scale)
+    Y = np.empty((t_out.size, y0.size))
+    k = 0
+    while k < t_out.size and t_out[k] <= 0.0:
+        Y[k] = y0
+        k += 1
+    status, message, steps = 0, EVENT_STATUS_MESSAGES[0], 0
+    while stepper.status == "running":
+        msg = stepper.step()
+        if stepper.status == "failed":
+            status = -2
+            message = f"{EVENT_STATUS_MESSAGES[-2]} {opts.ode_method} failed at t = {stepper.t:.10g}: {msg}."
+            break
+        steps += 1
+        t1 = stepper.t
+        if k < t_out.size and t_out[k] <= t1:
+            dense = stepper.dense_output()
+            while k < t_out.size and t_out[k] <= t1:
+                Y[k] = stepper.y if t_out[k] == t1 else dense(t_out[k])
+                normalize_quaternions(system, Y[k, :nq])
+                k += 1
+        # the accepted state projected back onto the sphere; the stepper's derivative follows it
+        normalize_quaternions(system, stepper.y[:nq])
+        stepper.f = rhs(t1, stepper.y)
+        if not np.all(np.isfinite(stepper.y)):
+            status = -2
+            message = f"{EVENT_STATUS_MESSAGES[-2]} The state is not finite at t = {t1:.10g}."
+            break
+    t_out, Y = t_out[:k], Y[:k]
+    if note is not None:
+        message = f"{message} {note}"
+    if status < 0 and scene is not None:
+        message = f"{message} (scene '{scene.name}')"
+    stats = SolverStats()
+    stats.steps = steps
+    N = t_out.size
+    empty = np.zeros((max(N - 1, 0), 0))
+    return new_event_result(t=t_out, q=np.ascontiguousarray(Y[:, :nq]), v=np.ascontiguousarray(Y[:, nq:]),
+                            p_N=empty, p_T=empty.copy(), modes=np.zeros((max(N - 1, 0), 0), dtype=np.int8),
+                            status=status, message=message, stats=stats, method="event", solver="none",
+                            t_events=[], force_N=np.zeros((N, 0)), force_T=np.zeros((N, 0)), events=[], impulses=[],
+                            phases=[Phase(0.0, float(t_out[-1]) if N else 0.0, (), opts.ode_method, stepper.nfev)],
+                            impacts=[], accumulations=[], nonunique_forces=0)
