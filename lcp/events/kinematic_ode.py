@@ -19,11 +19,12 @@ Imports :mod:`lcp.events.options`, :mod:`lcp.events.records`, :mod:`lcp.model` a
 """
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 
 from lcp.events.options import EVENT_STATUS_MESSAGES
 from lcp.events.records import Phase, new_event_result
-from lcp.model.kinematics import normalize_quaternions
+from lcp.model.kinematics import normalize_quaternions, normalized_expr
 from lcp.model.start import consistent_start
 from lcp.result import SolverStats
 
@@ -39,19 +40,28 @@ def _refuse(system) -> None:
 
 
 def _rhs(system):
-    """y = (q, v) -> ydot, the quaternions of q normalised for T (not for A and F, which a body's
-    quaternion enters only through R(p), whose formula holds for unit quaternions)."""
-    n, nq = system.n, system.n_q
-    qdot_fn, mass_fn, force_fn = system.qdot_fn, system.mass_fn, system.force_fn
+    """y = (q, v) -> ydot, one CasADi Function with the quaternions of q normalised inside it (for T,
+    A and F alike: a body's quaternion enters them through R(p), whose formula holds for unit
+    quaternions only); A vdot = F solved symbolically (a few velocities) or by CasADi's LU."""
+    t, q, v = system.t_sym, system.q_sym, system.v_sym
+    qn = normalized_expr(system, q)
+    A, F, qdot = (ca.substitute(x, q, qn) for x in (system.mass_expr, system.force_expr,
+                                                    ca.mtimes(system.kinematics_expr, v)))
+    n = system.n
+    if n <= 30:  # a symbolic solve grows like n^3: a few bodies only
+        fn = ca.Function("kinematic_rhs", [t, ca.vertcat(q, v)], [ca.vertcat(qdot, ca.solve(A, F))])
 
-    def f(t, y):
-        q, v = y[:nq], y[nq:]
-        qn = normalize_quaternions(system, q.copy())
-        A = np.array(mass_fn(t, qn), dtype=float).reshape(n, n)
-        F = np.array(force_fn(t, qn, v), dtype=float).ravel()
-        return np.concatenate([np.array(qdot_fn(t, qn, v), dtype=float).ravel(), np.linalg.solve(A, F)])
+        def f(tt, y):
+            return np.array(fn(tt, y), dtype=float).ravel()
 
-    return f
+        return f
+    parts = ca.Function("kinematic_rhs_parts", [t, ca.vertcat(q, v)], [qdot, A, F])
+
+    def f_large(tt, y):
+        qd, Am, Fm = (np.array(x, dtype=float) for x in parts(tt, y))
+        return np.concatenate([qd.ravel(), np.linalg.solve(Am.reshape(n, n), Fm.ravel())])
+
+    return f_large
 
 
 def kinematic_event_driven(system, q0, v0, t_end: float, opts, scene=None):

@@ -34,7 +34,7 @@ import casadi as ca
 import numpy as np
 
 __all__ = ["QUATERNION_ROUND", "advance_positions", "attach_kinematics", "check_kinematics_at", "kinematics_functions",
-           "kinematics_options", "kinematics_matrix", "normalize_quaternions", "refuse_kinematics",
+           "kinematics_options", "normalized_expr", "kinematics_matrix", "normalize_quaternions", "refuse_kinematics",
            "quat_exp", "quat_mul", "quaternion_start", "quaternion_starts"]
 
 _EPS = float(np.finfo(float).eps)
@@ -168,6 +168,15 @@ def normalize_quaternions(system, q: np.ndarray) -> np.ndarray:
         p = q[i:i + 4]
         p /= math.sqrt(float(p @ p))
     return q
+
+
+def normalized_expr(system, q):
+    """q (an SX or MX column) with every declared unit quaternion divided by its norm, symbolically."""
+    parts, at = [], 0
+    for i in system.unit_quaternions:
+        parts += [q[at:i], q[i:i + 4] / ca.norm_2(q[i:i + 4])]
+        at = i + 4
+    return ca.vertcat(*parts, q[at:])
 
 
 def quat_mul(a, b) -> np.ndarray:

@@ -98,7 +98,7 @@ def dzhanibekov(moments=(1.0, 2.0, 3.0), spin: float = 6.0, perturbation: float 
 
 
 def tumbling_box(side: float = 1.0, mass: float = 1.0, mu: float = 0.3, e: float = 0.0, height: float = 1.5,
-                 tilt=(1.0, 2.0, 0.5), angle: float = 0.6, v0=(0.0, 0.0, 0.0), omega0=(0.0, 0.0, 0.0),
+                 tilt=(1.0, 2.0, 0.5), angle: float = 0.6, v0=(0.5, 0.0, 0.0), omega0=(1.0, -2.0, 0.5),
                  g: float = 9.81, t_end: float = 3.0) -> Scene:
     """A cube dropped tilted onto the plane z = 0: eight spatial corner contacts.
 

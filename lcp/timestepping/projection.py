@@ -58,6 +58,8 @@ import weakref
 import casadi as ca
 import numpy as np
 
+from lcp.model.kinematics import normalized_expr
+
 __all__ = ["NEWTON_PER_EVAL", "PositionProjection", "needs_projection"]
 
 #: Newton iterations unrolled in one evaluation (two bring an O(h^2) step drift to rounding)
@@ -125,22 +127,13 @@ def _update_function(system, iterations: int) -> ca.Function:
         S = S + 1e-14 * ca.mmax(ca.fabs(ca.diag(S))) * sym.eye(nb + m)
         mu = -ca.solve(S, mask * r)
         d = ca.diag(S)
-        qk = qk + AiJt @ mu if not kin else _renormalised(system, qk + T[0] @ (AiJt @ mu))
+        qk = qk + AiJt @ mu if not kin else normalized_expr(system, qk + T[0] @ (AiJt @ mu))
     _, r, J, *T = data(t, qk)
     _, r0, *_ = data(t, sym.zeros(nq))  # the rows' own constants (a floor's height, a rod's length squared)
     reach = ca.fabs(qk) + L if not kin else ca.mtimes(ca.fabs(T[0]).T, ca.fabs(qk) + L)  # as lcp.model.start
     s = ca.mtimes(ca.fabs(J), reach) + ca.fabs(r0)
     return ca.Function("position_projection", [t, q, w, L], [qk, r, s, mu * d], ["t", "q", "w", "L"],
                        ["q_new", "r", "s", "pull"])
-
-
-def _renormalised(system, q):
-    """q with its unit quaternions divided by their norms (symbolically)."""
-    parts, at = [], 0
-    for i in system.unit_quaternions:
-        parts += [q[at:i], q[i:i + 4] / ca.norm_2(q[i:i + 4])]
-        at = i + 4
-    return ca.vertcat(*parts, q[at:])
 
 
 class PositionProjection:
