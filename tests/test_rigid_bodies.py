@@ -319,3 +319,20 @@ def test_box_without_friction_keeps_horizontal_momentum_exactly():
     r = lcp.simulate(sc, 1.0, h=1e-3)
     assert r.success and r.p_N.sum() > 0  # it did hit the floor
     assert np.all(r.v[:, 0] == 0.7) and np.all(r.v[:, 1] == -0.4)
+
+
+def test_sweep_and_plot_take_fewer_velocities_than_coordinates():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    tab = lcp.sweep(lambda spin: dzhanibekov(spin=spin, t_end=0.1), {"spin": [5.0, 6.0]}, h=0.01)
+    assert tab["success"].all()
+    assert np.allclose(tab["v_v4"], [5.0, 6.0], rtol=1e-3)  # the intermediate axis, still spinning
+    sc = dzhanibekov(t_end=0.1)
+    r = lcp.simulate(sc, h=0.01)
+    fig = r.plot(sc.system)
+    labels = [ln.get_label() for ln in fig.axes[1].get_lines()]
+    assert labels == list(sc.system.velocity_names)
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)

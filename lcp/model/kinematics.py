@@ -4,8 +4,7 @@ A system whose velocities are not the rates of its coordinates (a free rigid bod
 unit quaternion, 7 numbers; v = linear velocity and body angular velocity, 6) is written
 ``System(q, v, ..., kinematics=T, unit_quaternions=(3,))`` with T an n_q x n_v CasADi expression
 of t and q. The mass matrix, the forces and the contact reactions then live in v-space, and every
-Jacobian the integrators use maps v: H = (dg/dq) T (physics.md, section 3, "Newton-Euler
-kinematics").
+Jacobian the integrators use maps v: H = (dg/dq) T (docs/rigid_bodies.md).
 
 Holds the checks of T (:func:`kinematics_matrix` when the System is built, :func:`check_kinematics_at`
 at a start), of the declared quaternions (:func:`quaternion_starts`, :func:`quaternion_start`), the
