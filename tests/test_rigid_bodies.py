@@ -336,3 +336,18 @@ def test_sweep_and_plot_take_fewer_velocities_than_coordinates():
     import matplotlib.pyplot as plt
 
     plt.close(fig)
+
+
+def test_kinematics_not_finite_at_the_start_named():
+    q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
+    s = System(q, v, mass=ca.SX.eye(2), force=ca.SX.zeros(2), kinematics=ca.diag(ca.vertcat(1, 1 / q[0])))
+    with pytest.raises(ValueError, match="kinematics T.*not finite"):
+        lcp.simulate(s, 0.1, h=0.01, q0=[0.0, 0.0], v0=[0.0, 0.0])
+    with pytest.raises(ValueError, match="v must be a column.*kinematics"):
+        System(q, ca.SX.sym("v", 2, 2), mass=ca.SX.eye(2), force=ca.SX.zeros(2), kinematics=ca.SX.eye(2))
+    # a kinematics of a system (here the identity written out): the same motion as without it
+    r1 = lcp.simulate(System(q, v, mass=ca.SX.eye(2), force=ca.vertcat(1.0, -q[1]), kinematics=ca.SX.eye(2)),
+                      1.0, h=0.01, q0=[0.0, 1.0], v0=[0.5, 0.0])
+    r0 = lcp.simulate(System(q, v, mass=ca.SX.eye(2), force=ca.vertcat(1.0, -q[1])), 1.0, h=0.01, q0=[0.0, 1.0],
+                      v0=[0.5, 0.0])
+    assert np.allclose(r1.q, r0.q, rtol=0, atol=1e-14) and np.allclose(r1.v, r0.v, rtol=0, atol=1e-14)

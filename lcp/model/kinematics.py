@@ -73,7 +73,8 @@ def attach_kinematics(system, T, unit_quaternions, velocity_names, names) -> tup
     ``unit_quaternions``, ``names`` and ``velocity_names``; return (T checked or None, n)."""
     q, v = system.q_sym, system.v_sym
     if T is not None and (not isinstance(v, ca.SX) or not v.is_symbolic() or v.shape[1] != 1):
-        raise ValueError("v must be a column of CasADi SX symbols (casadi.SX.sym('v', n_v))")
+        raise ValueError("v must be a column of CasADi SX symbols (casadi.SX.sym('v', n_v)) for a system with "
+                         "kinematics")
     system.n, system.n_q = n, nq = v.shape[0], q.shape[0]
     T = kinematics_matrix(T, q, v, system.t_sym)
     system.has_kinematics = T is not None
