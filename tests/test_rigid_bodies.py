@@ -351,3 +351,18 @@ def test_kinematics_not_finite_at_the_start_named():
     r0 = lcp.simulate(System(q, v, mass=ca.SX.eye(2), force=ca.vertcat(1.0, -q[1])), 1.0, h=0.01, q0=[0.0, 1.0],
                       v0=[0.5, 0.0])
     assert np.allclose(r1.q, r0.q, rtol=0, atol=1e-14) and np.allclose(r1.v, r0.v, rtol=0, atol=1e-14)
+
+
+def test_start_penetrating_within_tolerance_is_projected_in_v_space():
+    kw = dict(angle=0.3, tilt=(1.0, 0.0, 0.0), v0=(0.0, 0.0, 0.0), omega0=(0.0, 0.0, 0.0))
+    probe = tumbling_box(height=1.0, **kw)
+    H = 1.0 - float(min(probe.gap(probe.q0))) - 1e-5  # the lowest corners 1e-5 below the floor
+    sc = tumbling_box(height=H, **kw)
+    assert min(sc.gap(sc.q0)) == pytest.approx(-1e-5, abs=1e-12)
+    r = lcp.simulate(sc, 0.002, h=1e-3)
+    assert r.success and "projected" in r.message and "corner" in r.message
+    assert min(sc.gap(r.q[0])) >= -1e-15
+    assert abs(np.linalg.norm(r.q[0, 3:]) - 1) <= 2 * EPS
+    assert np.max(np.abs(r.q[0] - sc.q0)) < 1e-4
+    with pytest.raises(ValueError, match="penetrates contact 'corner"):
+        lcp.simulate(tumbling_box(height=0.3, **kw), 0.01, h=1e-3)
