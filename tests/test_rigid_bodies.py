@@ -269,7 +269,7 @@ def _rotation(p):
 @pytest.fixture(scope="module")
 def box_run():
     sc = tumbling_box()
-    return sc, lcp.simulate(sc, 3.0, h=1e-3)
+    return sc, lcp.simulate(sc, 2.0, h=1e-3)
 
 
 def test_box_free_fall_is_exact(box_run):
