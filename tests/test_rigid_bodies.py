@@ -366,3 +366,36 @@ def test_start_penetrating_within_tolerance_is_projected_in_v_space():
     assert np.max(np.abs(r.q[0] - sc.q0)) < 1e-4
     with pytest.raises(ValueError, match="penetrates contact 'corner"):
         lcp.simulate(tumbling_box(height=0.3, **kw), 0.01, h=1e-3)
+
+
+def test_quaternion_rows_of_another_form_fall_back_to_projection():
+    # p0' = (1/2 p (x) (0, omega))_0 + 0.1 x vx: rows of T w that are not linear in p, so no
+    # exponential map; the update is then p + h (T w)_p, projected onto the sphere
+    b = free_body(1.0, np.eye(3), name="o")
+    T = b.kinematics
+    T[3, 0] = T[3, 0] + 0.1 * b.q[0]  # adds 0.1 x vx to p0' (any T of full rank is allowed)
+    s = System(b.q, b.v, b.mass_matrix, b.gyroscopic, kinematics=T, unit_quaternions=(3,))
+    q = np.r_[1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
+    w = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 2.0])
+    q1, _ = advance_positions(s, 0.0, q, w, 0.01)
+    p = q[3:] + 0.01 * np.r_[0.1, 0.0, 0.0, 0.0] + 0.01 * 0.5 * quat_mul(q[3:], np.r_[0.0, w[3:]])
+    assert np.allclose(q1[3:], p / np.linalg.norm(p), rtol=0, atol=1e-15)
+    # the standard rows: the exponential map, exactly
+    s0 = bodies_system([b])
+    q2, _ = advance_positions(s0, 0.0, q, w, 0.01)
+    assert np.allclose(q2[3:], quat_exp([0.0, 0.0, 0.01]), rtol=0, atol=1e-16)
+
+
+def test_event_method_ends_phases_at_the_force_breakpoints():
+    from lcp.model.control import ControlSchedule
+
+    b = free_body(1.0, np.eye(3), name="c")
+    u = ca.SX.sym("u", 1)
+    s = System(b.q, b.v, b.mass_matrix, b.gyroscopic + ca.vertcat(2 * u, 0, 0, 0, 0, 0), control=u,
+               kinematics=b.kinematics, unit_quaternions=(3,))
+    c = s.with_control(ControlSchedule([0.0, 0.5, 1.0], [2.0, -2.0]))  # a = 4 then -4
+    r = lcp.simulate(c, 1.0, method="event", q0=[0, 0, 0, 1.0, 0, 0, 0], v0=[0, 0, 0, 0, 0, 1.0], t_eval=[0, 0.5, 1.0])
+    assert r.success and [(ph.t0, ph.t1) for ph in r.phases] == [(0.0, 0.5), (0.5, 1.0)]
+    assert np.allclose(r.q[:, 0], [0.0, 0.5, 1.0], rtol=0, atol=1e-13)
+    assert np.allclose(r.v[:, 0], [0.0, 2.0, 0.0], rtol=0, atol=1e-13)
+    assert np.allclose(r.q[-1, 3:], quat_exp([0, 0, 0.5]), rtol=0, atol=1e-13)  # spin 1 rad/s about z for 1 s

@@ -8,8 +8,9 @@ constraints there is no event: the motion is one smooth phase,
     qdot = T(t, q^) v,    A(t, q) vdot = F(t, q, v),
 
 with q^ the coordinates with their unit quaternions normalised, integrated by SciPy's explicit
-Runge-Kutta stepper (``ode_method``, DOP853 by default; ``rtol``, ``atol`` of the options) step by
-step: after every accepted step the unit quaternions are projected back onto the sphere (divided by
+Runge-Kutta stepper (``ode_method``, DOP853 by default; ``rtol``, ``atol`` of the options), a phase
+between consecutive force breakpoints (``System.breakpoints``, seen from the left at a phase's end),
+step by step: after every accepted step the unit quaternions are projected back onto the sphere (divided by
 their norm) and the stepper continues from there; the output times are interpolated by the step's
 dense output and projected the same way. Systems with kinematics and contacts or bilateral
 constraints are refused by name (Moreau-Jean's Python loop handles them).
@@ -64,13 +65,51 @@ def _rhs(system):
     return f_large
 
 
+class _Segment:
+    """One smooth phase [ta, tb] by a SciPy stepper, the quaternions normalised after every step."""
+
+    def __init__(self, system, rhs, stepper_cls, ta, y0, tb, t_left, rtol, atol):
+        self.system, self.nq = system, system.n_q
+        self.rhs = (lambda t, y: rhs(min(t, t_left), y)) if t_left < np.inf else rhs
+        self.stepper = stepper_cls(self.rhs, ta, y0, tb, rtol=rtol, atol=atol)
+        self.steps, self.t, self.y = 0, ta, y0
+
+    @property
+    def nfev(self) -> int:
+        return self.stepper.nfev
+
+    def run(self, t_out, Y, k, method):
+        """Step to tb, writing the output times it passes into Y from row k: (k, status, message)."""
+        stepper, nq, system = self.stepper, self.nq, self.system
+        while stepper.status == "running":
+            msg = stepper.step()
+            if stepper.status == "failed":
+                return k, -2, f"{EVENT_STATUS_MESSAGES[-2]} {method} failed at t = {stepper.t:.10g}: {msg}."
+            self.steps += 1
+            t1 = stepper.t
+            if k < t_out.size and t_out[k] <= t1:
+                dense = stepper.dense_output()
+                while k < t_out.size and t_out[k] <= t1:
+                    Y[k] = stepper.y if t_out[k] == t1 else dense(t_out[k])
+                    normalize_quaternions(system, Y[k, :nq])
+                    k += 1
+            # the accepted state projected back onto the sphere; the stepper's derivative follows it
+            normalize_quaternions(system, stepper.y[:nq])
+            stepper.f = self.rhs(t1, stepper.y)
+            self.t, self.y = t1, stepper.y.copy()
+            if not np.all(np.isfinite(stepper.y)):
+                return k, -2, f"{EVENT_STATUS_MESSAGES[-2]} The state is not finite at t = {t1:.10g}."
+        return k, 0, EVENT_STATUS_MESSAGES[0]
+
+
 def kinematic_event_driven(system, q0, v0, t_end: float, opts, scene=None):
     """The event method on a system with kinematics and no contacts (module docstring).
 
     Returns
     -------
     EventResult
-        One phase (``integrators == [opts.ode_method]``), no contact data (m = 0 columns).
+        One phase per interval between the force's breakpoints (each integrated by
+        ``opts.ode_method``), no contact data (m = 0 columns).
     """
     _refuse(system)
     from scipy.integrate import RK23, RK45, DOP853
@@ -87,34 +126,25 @@ def kinematic_event_driven(system, q0, v0, t_end: float, opts, scene=None):
     scale = np.concatenate([np.full(nq, max(1.0, float(np.max(np.abs(q0))))),
                             np.full(system.n, max(1.0, float(np.max(np.abs(v0)))) if system.n else 1.0)])
     rhs = _rhs(system)
-    stepper = steppers[opts.ode_method](rhs, 0.0, y0, t_end, rtol=opts.rtol, atol=opts.atol * scale)
     Y = np.empty((t_out.size, y0.size))
     k = 0
     while k < t_out.size and t_out[k] <= 0.0:
         Y[k] = y0
         k += 1
-    status, message, steps = 0, EVENT_STATUS_MESSAGES[0], 0
-    while stepper.status == "running":
-        msg = stepper.step()
-        if stepper.status == "failed":
-            status = -2
-            message = f"{EVENT_STATUS_MESSAGES[-2]} {opts.ode_method} failed at t = {stepper.t:.10g}: {msg}."
+    status, message, steps, phases = 0, EVENT_STATUS_MESSAGES[0], 0, []
+    # phases end at the forces' breakpoints (System.breakpoints: a control schedule's switches),
+    # each seeing the forces' left limit at its end, as the event method's other phases do
+    bps = [float(b) for b in system.breakpoints if 0.0 < b < t_end]
+    ta, y = 0.0, y0
+    for tb in bps + [t_end]:
+        t_left = float(np.nextafter(tb, -np.inf)) if tb < t_end else np.inf
+        seg = _Segment(system, rhs, steppers[opts.ode_method], ta, y, tb, t_left, opts.rtol, opts.atol * scale)
+        k, status, message = seg.run(t_out, Y, k, opts.ode_method)
+        steps += seg.steps
+        phases.append(Phase(ta, seg.t, (), opts.ode_method, seg.nfev))
+        if status < 0:
             break
-        steps += 1
-        t1 = stepper.t
-        if k < t_out.size and t_out[k] <= t1:
-            dense = stepper.dense_output()
-            while k < t_out.size and t_out[k] <= t1:
-                Y[k] = stepper.y if t_out[k] == t1 else dense(t_out[k])
-                normalize_quaternions(system, Y[k, :nq])
-                k += 1
-        # the accepted state projected back onto the sphere; the stepper's derivative follows it
-        normalize_quaternions(system, stepper.y[:nq])
-        stepper.f = rhs(t1, stepper.y)
-        if not np.all(np.isfinite(stepper.y)):
-            status = -2
-            message = f"{EVENT_STATUS_MESSAGES[-2]} The state is not finite at t = {t1:.10g}."
-            break
+        ta, y = tb, seg.y
     t_out, Y = t_out[:k], Y[:k]
     if note is not None:
         message = f"{message} {note}"
@@ -128,5 +158,5 @@ def kinematic_event_driven(system, q0, v0, t_end: float, opts, scene=None):
                             p_N=empty, p_T=empty.copy(), modes=np.zeros((max(N - 1, 0), 0), dtype=np.int8),
                             status=status, message=message, stats=stats, method="event", solver="none",
                             t_events=[], force_N=np.zeros((N, 0)), force_T=np.zeros((N, 0)), events=[], impulses=[],
-                            phases=[Phase(0.0, float(t_out[-1]) if N else 0.0, (), opts.ode_method, stepper.nfev)],
+                            phases=phases,
                             impacts=[], accumulations=[], nonunique_forces=0)

@@ -22,8 +22,8 @@ exponential map ``p+ = expm(h B) p = cos(h beta) p + sin(h beta)/beta B p``, i.e
 p+ = p (x) exp(h omega / 2): the rotation of a body spinning at the constant omega, exactly, and on
 the sphere to rounding; then p+ is divided by its norm, so that rounding does not accumulate over
 millions of steps. A quaternion block of any other form (a kinematics the user wrote differently)
-is advanced by ``p + h (T w)_p`` and projected onto the sphere (first order, like the rest of the
-step).
+(not skew, or with rows of T w that are not B p) is advanced by ``p + h (T w)_p`` and projected
+onto the sphere (first order, like the rest of the step).
 """
 from __future__ import annotations
 
@@ -240,7 +240,11 @@ def advance_positions(system, t: float, q: np.ndarray, w: np.ndarray, h: float,
         comp_new = (q_new - q) - y
     for i, B in zip(system.unit_quaternions, outs[1:]):
         p = q[i:i + 4]
-        p_new = _exp_block(np.array(B, dtype=float), p, h)
+        B = np.array(B, dtype=float)
+        rate = inc[i:i + 4] / h if h else inc[i:i + 4]
+        # the exponential map needs rows of T w that are B p (linear in p, nothing else in them)
+        linear = np.max(np.abs(B @ p - rate)) <= 64 * _EPS * (float(np.max(np.abs(B))) * 2 + float(np.max(np.abs(rate))))
+        p_new = _exp_block(B, p, h) if linear else None
         if p_new is None:
             p_new = q_new[i:i + 4]
         q_new[i:i + 4] = p_new / math.sqrt(float(p_new @ p_new))
