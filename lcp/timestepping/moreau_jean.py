@@ -16,7 +16,9 @@ with the iteration matrix W_h = A + h theta C + h^2 theta^2 K (K = -dF/dq, C = -
 that depend on the state are treated implicitly), and p the contact impulses of the active
 contacts, which solve the discrete Coulomb problem :class:`~lcp.contact.problem.ContactProblem`.
 Which contacts take part in a step: :mod:`lcp.timestepping.activation`; what counts as an impact:
-:mod:`lcp.timestepping.outcome`.
+:mod:`lcp.timestepping.outcome`. A system with Newton-Euler kinematics (qdot = T(q) v) moves its
+positions by q+ = q- + h T(q-) v_theta, unit quaternions by the exact exponential map
+(:func:`lcp.model.kinematics.advance_positions`), in the Python loop only (it is never constant).
 
 Position projection
 -------------------

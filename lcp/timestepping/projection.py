@@ -41,6 +41,10 @@ change costs one evaluation and a few NumPy operations on (n_bilateral + m)-vect
 are not projected (as in Siconos's direct projection): the next step's velocity constraint is
 imposed at the projected positions.
 
+With Newton-Euler kinematics (qdot = T(q) v) J is in v-space (the System's G and H), the
+correction moves q by T(q) A^-1 J' mu and the unit quaternions are renormalised after it; the
+scale's |q| + L is mapped to v-space by |T|' (as in :mod:`lcp.model.start`).
+
 A system needs the projection (:func:`needs_projection`) when a constraint Jacobian depends on q or
 t (curved or rheonomic constraints) or a contact's normal depends on q; systems whose constraints
 are all affine and time-independent (every constant system) never pay for it.
