@@ -399,3 +399,33 @@ def test_event_method_ends_phases_at_the_force_breakpoints():
     assert np.allclose(r.q[:, 0], [0.0, 0.5, 1.0], rtol=0, atol=1e-13)
     assert np.allclose(r.v[:, 0], [0.0, 2.0, 0.0], rtol=0, atol=1e-13)
     assert np.allclose(r.q[-1, 3:], quat_exp([0, 0, 0.5]), rtol=0, atol=1e-13)  # spin 1 rad/s about z for 1 s
+
+
+def test_position_update_function_matches_the_python_update():
+    from lcp.model.kinematics import position_update_function
+
+    bodies = [free_body(1.0, [1.0, 2.0, 2.5], name=f"u{i}") for i in range(2)]
+    s = bodies_system(bodies)
+    f = position_update_function(s)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        q = np.concatenate([np.r_[rng.uniform(-1, 1, 3), quat_exp(rng.uniform(-1, 1, 3))] for _ in range(2)])
+        w = rng.uniform(-3, 3, 12)
+        h = 10 ** rng.uniform(-4, -1)
+        ref, _ = advance_positions(s, 0.0, q, w, h)
+        assert np.allclose(np.array(f(0.0, q, w, h)).ravel(), ref, rtol=0, atol=4 * EPS)
+    # world-frame angular velocity, p' = 1/2 (0, omega) (x) p: also of the exponential map's form
+    b = bodies[0]
+    p = b.quaternion
+    left = ca.vertcat(ca.horzcat(-p[1], -p[2], -p[3]), ca.horzcat(p[0], p[3], -p[2]),
+                      ca.horzcat(-p[3], p[0], p[1]), ca.horzcat(p[2], -p[1], p[0]))
+    sw = System(b.q, b.v, b.mass_matrix, ca.SX.zeros(6), kinematics=ca.diagcat(ca.SX.eye(3), 0.5 * left),
+                unit_quaternions=(3,))
+    q0 = np.r_[0.0, 0.0, 0.0, quat_exp([0.3, 0.1, -0.2])]
+    q1 = np.array(position_update_function(sw)(0.0, q0, np.r_[0, 0, 0, 0.4, -0.2, 1.0], 0.1)).ravel()
+    assert np.allclose(q1[3:], quat_mul(quat_exp(0.05 * np.r_[0.4, -0.2, 1.0]), q0[3:]), rtol=0, atol=1e-15)
+    # rows of another form: refused by name
+    T = b.kinematics
+    T[3, 0] = T[3, 0] + 0.1 * b.q[0]
+    with pytest.raises(ValueError, match="kinematics: the rows of the unit quaternion at q\\[3:7\\]"):
+        position_update_function(System(b.q, b.v, b.mass_matrix, ca.SX.zeros(6), kinematics=T, unit_quaternions=(3,)))

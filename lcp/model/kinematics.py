@@ -33,7 +33,7 @@ import casadi as ca
 import numpy as np
 
 __all__ = ["QUATERNION_ROUND", "advance_positions", "attach_kinematics", "check_kinematics_at", "kinematics_functions",
-           "kinematics_options", "normalized_expr", "kinematics_matrix", "normalize_quaternions", "refuse_kinematics",
+           "kinematics_options", "normalized_expr", "position_update_function", "kinematics_matrix", "normalize_quaternions", "refuse_kinematics",
            "quat_exp", "quat_mul", "quaternion_start", "quaternion_starts"]
 
 _EPS = float(np.finfo(float).eps)
@@ -204,6 +204,71 @@ def increment_function(system) -> ca.Function:
         blocks = [ca.jacobian(rate[i:i + 4], q[i:i + 4]) for i in system.unit_quaternions]
         fn = system._increment_fn = ca.Function("position_increment", [t, q, v], [rate] + blocks)
     return fn
+
+
+def position_update_function(system) -> ca.Function:
+    """(t, q, w, h) -> q+: :func:`advance_positions` (without the compensated sum) as one CasADi
+    Function, for an engine that evaluates the step itself (a compiled loop).
+
+    Every unit quaternion is advanced by the exponential map cos(h beta) p + sin(h beta)/beta B p,
+    beta^2 = -tr(B^2)/4, then normalised. The map is exact only where the quaternion's rows of
+    T w are B p with B skew and B^2 = -beta^2 I (the form p' = 1/2 p (x) (0, omega) of
+    :mod:`lcp.model.rigid_body`, or p' = 1/2 (0, omega) (x) p): that is checked here at a few
+    random states, and a ValueError naming ``kinematics`` says where it fails (the Python loop's
+    :func:`advance_positions` then falls back by itself, state by state).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lcp.model.rigid_body import free_body, bodies_system
+    >>> s = bodies_system([free_body(1.0, [1.0, 2.0, 3.0])])
+    >>> f = position_update_function(s)
+    >>> q = np.array(f(0.0, [0, 0, 0, 1.0, 0, 0, 0], [1.0, 0, 0, 0, 0, 2.0], 0.5)).ravel()
+    >>> np.allclose(q, [0.5, 0, 0, np.cos(0.5), 0, 0, np.sin(0.5)], rtol=0, atol=1e-16)
+    True
+    """
+    _check_quaternion_rows(system)
+    t, q, w, h = ca.SX.sym("t"), ca.SX.sym("q", system.n_q), ca.SX.sym("w", system.n), ca.SX.sym("h")
+    outs = increment_function(system)(t, q, w)
+    outs = outs if isinstance(outs, (list, tuple)) else [outs]
+    q_new = q + h * outs[0]
+    parts, at = [], 0
+    for i, B in zip(system.unit_quaternions, outs[1:]):
+        p = q[i:i + 4]
+        beta = ca.sqrt(ca.fmax(-ca.trace(ca.mtimes(B, B)) / 4, 0))
+        x = h * beta
+        sinc = ca.if_else(x > 1e-8, ca.sin(x) / ca.fmax(x, 1e-300), 1 - x * x / 6)
+        p_new = ca.cos(x) * p + h * sinc * ca.mtimes(B, p)
+        parts += [q_new[at:i], p_new / ca.norm_2(p_new)]
+        at = i + 4
+    return ca.Function("position_update", [t, q, w, h], [ca.vertcat(*parts, q_new[at:])], ["t", "q", "w", "h"],
+                       ["q_next"])
+
+
+def _check_quaternion_rows(system, samples: int = 3) -> None:
+    """ValueError naming ``kinematics`` where a quaternion's rows of T w are not B p with B skew and
+    B^2 = -beta^2 I, at a few random states (unit quaternions, other coordinates and w in [-1, 1])."""
+    if not system.unit_quaternions:
+        return
+    rng = np.random.default_rng(0)
+    fn = increment_function(system)
+    for _ in range(samples):
+        q = rng.uniform(-1, 1, system.n_q)
+        normalize_quaternions(system, q)
+        w = rng.uniform(-1, 1, system.n)
+        outs = fn(rng.uniform(0, 1), q, w)
+        rate = np.array(outs[0], dtype=float).ravel()
+        for i, B in zip(system.unit_quaternions, outs[1:]):
+            B = np.array(B, dtype=float)
+            p = q[i:i + 4]
+            scale = float(np.max(np.abs(B))) + 1e-300
+            tol = 1e3 * _EPS * scale
+            beta2 = -float(np.trace(B @ B)) / 4
+            if (np.max(np.abs(B @ p - rate[i:i + 4])) > tol or np.max(np.abs(B + B.T)) > tol
+                    or np.max(np.abs(B @ B + beta2 * np.eye(4))) > tol * scale):
+                raise ValueError(f"kinematics: the rows of the unit quaternion at q[{i}:{i + 4}] are not of the form "
+                                 "B(w) p with B skew and B^2 = -beta^2 I (p' = 1/2 p (x) (0, omega)): the exponential "
+                                 "map does not apply")
 
 
 def _exp_block(B: np.ndarray, p: np.ndarray, h: float):
