@@ -34,6 +34,7 @@ _EXPORTS = {
     "make_cone_solver": ("lcp.contact.spatial_solvers", "make_cone_solver"),
     "ControlSchedule": ("lcp.model.control", "ControlSchedule"),
     "forces": ("lcp.model.forces", None),
+    "rigid_body": ("lcp.model.rigid_body", None),
     "events": ("lcp.events", None),
     "ocp": ("lcp.ocp", None),
     "fclib": ("lcp.fclib", None),

@@ -85,9 +85,13 @@ def plot_result(result, system=None, *, names: Sequence[str] | None = None, exac
         fig = plt.figure(figsize=(7.5, 8.0), layout="constrained")
     ax_q, ax_v, ax_f, ax_m = fig.subplots(4, 1, sharex=True)
 
+    # a system with Newton-Euler kinematics has fewer velocities than coordinates (their own names)
+    vlabels = labels if v.shape[1] == n else list(getattr(system, "velocity_names", None)
+                                                   or [f"v{i}" for i in range(v.shape[1])])
     for i in range(n):
         ax_q.plot(t, q[:, i], label=labels[i])
-        ax_v.plot(t, v[:, i], label=labels[i])
+    for i in range(v.shape[1]):
+        ax_v.plot(t, v[:, i], label=vlabels[i])
     if exact is not None:
         te = np.asarray(exact["t"], dtype=float)
         for i, name in enumerate(labels):

@@ -92,7 +92,9 @@ Modules
 - :mod:`~lcp.events.impacts`: the velocity-level impact law;
 - :mod:`~lcp.events.accumulation`: accumulations of impacts and their limit;
 - :mod:`~lcp.events.projection`: the projection onto the active constraints at events;
-- :mod:`~lcp.events.integrator`, :mod:`~lcp.events.driver`: the event loop and :func:`event_driven`.
+- :mod:`~lcp.events.integrator`, :mod:`~lcp.events.driver`: the event loop and :func:`event_driven`;
+- :mod:`~lcp.events.kinematic_ode`: systems with Newton-Euler kinematics (qdot = T(q) v, unit
+  quaternions) and no contacts.
 """
 from lcp.events.driver import event_driven
 from lcp.events.options import EVENT_STATUS_MESSAGES, EventOptions, ModeSolver, SmoothIntegrator

@@ -90,6 +90,10 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     if not (isinstance(t_end, (int, float, np.floating)) and math.isfinite(t_end) and t_end > 0):
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
     t_end = float(t_end)
+    if getattr(system, "has_kinematics", False):  # qdot = T(q) v: lcp.events.kinematic_ode
+        from lcp.events.kinematic_ode import kinematic_event_driven
+
+        return kinematic_event_driven(system, q0, v0, t_end, opts, scene)
     if getattr(system, "is_spatial", False):  # the Coulomb disk: its own integrator (lcp.events.spatial)
         from lcp.events.spatial import spatial_event_driven
 

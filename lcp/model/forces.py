@@ -5,6 +5,11 @@ J = dr/dq, so its generalized force is J(q)' F. A torque tau about an angle coor
 theta(q) gives (d theta/dq)' tau. F and tau may depend on time, positions and velocities (a
 follower load, a damper); the Jacobians are CasADi's, so nothing is derived by hand.
 
+For a system with Newton-Euler kinematics (qdot = T(q) v, ``System(..., kinematics=T)``, a free
+rigid body of :mod:`lcp.model.rigid_body`), forces and velocities live in v-space: pass
+``kinematics=T`` and the generalized force is T' J' F (the virtual power F' J T v), the point's
+velocity J T v.
+
 Time-dependent forces need the System's time symbol: build them from a symbol ``t`` and pass the
 same one as ``System(..., t=t)``; without it CasADi refuses to build the System's functions
 ("variables [t] are free"). The Moreau-Jean step weights such a force as
@@ -49,7 +54,17 @@ def _coordinates(q) -> ca.SX:
     return q
 
 
-def point_force(q, r, F) -> ca.SX:
+def _v_space(J, q, kinematics) -> ca.SX:
+    """J T for a system with kinematics (T: n_q x n_v), J itself without."""
+    if kinematics is None:
+        return J
+    T = kinematics if isinstance(kinematics, ca.SX) else ca.SX(kinematics)
+    if T.shape[0] != q.shape[0]:
+        raise ValueError(f"kinematics must have n_q = {q.shape[0]} rows, got shape {T.shape}")
+    return ca.mtimes(J, T)
+
+
+def point_force(q, r, F, kinematics=None) -> ca.SX:
     """Generalized force of a force ``F`` applied at the material point ``r(q)``.
 
     Parameters
@@ -60,11 +75,13 @@ def point_force(q, r, F) -> ca.SX:
         Position of the point (d x 1, d = 2 or 3), an expression of q (and possibly t).
     F : casadi.SX or list
         Force (d x 1), an expression of t, q and v.
+    kinematics : casadi.SX, optional
+        T(q) of a system with Newton-Euler kinematics (n_q x n_v): the force is then in v-space.
 
     Returns
     -------
     casadi.SX
-        J(q)' F, n x 1, with J = dr/dq.
+        J(q)' F, n x 1, with J = dr/dq (with kinematics: (J T)' F, n_v x 1).
 
     Examples
     --------
@@ -80,30 +97,34 @@ def point_force(q, r, F) -> ca.SX:
     r, F = _column(r, "r"), _column(F, "F")
     if r.shape != F.shape:
         raise ValueError(f"r and F must have the same shape, got {r.shape} and {F.shape}")
-    return ca.mtimes(ca.jacobian(r, q).T, F)
+    return ca.mtimes(_v_space(ca.jacobian(r, q), q, kinematics).T, F)
 
 
-def point_velocity(q, v, r) -> ca.SX:
+def point_velocity(q, v, r, kinematics=None) -> ca.SX:
     """Velocity J(q) v of the material point ``r(q)`` (time-independent r), e.g. for a damper
-    ``F = -c * point_velocity(q, v, r)``."""
+    ``F = -c * point_velocity(q, v, r)``; J T v with ``kinematics=T`` (v then has n_v entries)."""
     q = _coordinates(q)
     r = _column(r, "r")
-    if not isinstance(v, ca.SX) or v.shape != q.shape:
+    if not isinstance(v, ca.SX) or (v.shape != q.shape and kinematics is None):
         raise ValueError("v must be the column of velocity symbols, shaped like q")
-    return ca.mtimes(ca.jacobian(r, q), v)
+    J = _v_space(ca.jacobian(r, q), q, kinematics)
+    if J.shape[1] != v.shape[0]:
+        raise ValueError(f"v must have n_v = {J.shape[1]} entries, got {v.shape[0]}")
+    return ca.mtimes(J, v)
 
 
-def torque(q, angle, tau) -> ca.SX:
+def torque(q, angle, tau, kinematics=None) -> ca.SX:
     """Generalized force of a torque ``tau`` about the planar angle ``angle(q)``: (d angle/dq)' tau."""
     q = _coordinates(q)
     angle, tau = _column(angle, "angle"), _column(tau, "tau")
     if angle.numel() != 1 or tau.numel() != 1:
         raise ValueError("angle and tau must be scalar expressions")
-    return ca.jacobian(angle, q).T * tau
+    return _v_space(ca.jacobian(angle, q), q, kinematics).T * tau
 
 
-def applied_forces(q, loads) -> ca.SX:
-    """Sum of the generalized forces of ``loads``, a sequence of (r, F) pairs (see :func:`point_force`).
+def applied_forces(q, loads, kinematics=None) -> ca.SX:
+    """Sum of the generalized forces of ``loads``, a sequence of (r, F) pairs (see :func:`point_force`;
+    in v-space with ``kinematics=T``).
 
     Examples
     --------
@@ -113,7 +134,7 @@ def applied_forces(q, loads) -> ca.SX:
     DM([[2, -9.81]])
     """
     q = _coordinates(q)
-    total = ca.SX.zeros(q.shape[0], 1)
+    total = ca.SX.zeros(q.shape[0] if kinematics is None else ca.SX(kinematics).shape[1], 1)
     for r, F in loads:
-        total = total + point_force(q, r, F)
+        total = total + point_force(q, r, F, kinematics)
     return total

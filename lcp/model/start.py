@@ -28,6 +28,12 @@ Then:
   contacts (held at g_j = 0; others enter when the correction pushes them in), then velocities onto
   the constraints' tangent space. The result's message says so (``note``);
 - a larger violation raises a ValueError naming the contact or constraint and its violation.
+
+A system with Newton-Euler kinematics (``System(..., kinematics=T)``: n_q coordinates, n_v
+velocities) is checked the same way, its Jacobians in v-space (J = dr/dq T, corrections
+dx = T A^-1 J' (...)); its declared unit quaternions first
+(:func:`lcp.model.kinematics.quaternion_start`): normalised silently within rounding, with a note
+within START_TOL of norm 1, a ValueError naming the coordinate beyond.
 """
 from __future__ import annotations
 
@@ -75,7 +81,7 @@ def _rows(system, q, t):
         # evaluation of each costs more than the whole check)
         known = _AFFINE.get(system)
         if known is None:
-            known = _AFFINE[system] = _general_rows(system, np.zeros(system.n), t)[1:]
+            known = _AFFINE[system] = _general_rows(system, np.zeros(_n_q(system)), t)[1:]
         names, J, c = known
         return c + J @ q, names, J, c
     return _general_rows(system, q, t)
@@ -88,15 +94,29 @@ def _general_rows(system, q, t):
         phi, G, _ = system.constraints_fn(t, q)
         r.append(np.array(phi, dtype=float).ravel())
         J.append(np.array(G, dtype=float).reshape(nb, n))
-        c.append(np.array(system.constraints_fn(t, np.zeros(n))[0], dtype=float).ravel())
+        c.append(np.array(system.constraints_fn(t, np.zeros(_n_q(system)))[0], dtype=float).ravel())
     if m:
         r.append(system.gaps(q, t))
         J.append(system.contact_jacobian(q, t)[:m])
-        c.append(system.gaps(np.zeros(n), t))
+        c.append(system.gaps(np.zeros(_n_q(system)), t))
     names = [f"bilateral constraint {i}" for i in range(nb)] + [f"contact {ct.name!r}" for ct in system.contacts]
     if not r:
         return np.zeros(0), names, np.zeros((0, n)), np.zeros(0)
     return np.concatenate(r), names, np.vstack(J), np.concatenate(c)
+
+
+def _n_q(system) -> int:
+    """The number of coordinates (n_q; the number of velocities n where the System has no kinematics)."""
+    return getattr(system, "n_q", system.n)
+
+
+def _reach(system, q, ell, t):
+    """|q| + l, the coordinates' reach in the row scales; with kinematics (J in v-space) mapped to
+    v-space by |T(t, q)|', so that |J| times it has the size of |dg/dq| (|q| + l)."""
+    x = np.abs(q) + ell
+    if getattr(system, "has_kinematics", False):
+        return np.abs(np.array(system.kinematics_fn(t, q), dtype=float)).T @ x
+    return x
 
 
 def _violations(r, nb):
@@ -137,12 +157,17 @@ def consistent_start(system, q0, v0, t0: float = 0.0):
         A constraint violated or a contact penetrated beyond :data:`START_TOL` of its size.
     """
     nb, m = system.n_bilateral, system.n_contacts
+    qnote = None
+    if getattr(system, "unit_quaternions", ()):
+        from lcp.model.kinematics import quaternion_start
+
+        q0, qnote = quaternion_start(system, q0, START_TOL)
     if nb + m == 0:
-        return q0, v0, None
+        return q0, v0, qnote
     t0 = float(t0)
     r, names, J, c = _rows(system, q0, t0)
     ell = _length(J, c)
-    lim = np.abs(J) @ (np.abs(q0) + ell) + np.abs(c)
+    lim = np.abs(J) @ _reach(system, q0, ell, t0) + np.abs(c)
     viol = _violations(r, nb)
     moved = []
     q, v = q0, v0
@@ -162,7 +187,7 @@ def consistent_start(system, q0, v0, t0: float = 0.0):
             v = v0 - _mass_correction(system.mass(q, t0), G, rv)
             vnote = float(np.max(np.abs(rv)))
     if not moved and vnote is None:
-        return q0, v0, None
+        return q0, v0, qnote
     parts = []
     if moved:
         parts.append(f"q0 moved by {float(np.max(np.abs(q - q0))):.3g} ("
@@ -172,7 +197,7 @@ def consistent_start(system, q0, v0, t0: float = 0.0):
         parts.append(f"v0 moved by {float(np.max(np.abs(v - v0))):.3g} (velocity constraints off by {vnote:.3g})")
     note = (f"The start was projected onto the constraints (within {START_TOL:g} of their size, "
             f"lcp.model.start): {'; '.join(parts)}.")
-    return q, v, note
+    return q, v, note if qnote is None else f"{qnote} {note}"
 
 
 def _project_positions(system, q0, t0, r, J, c, ell, nb):
@@ -183,14 +208,20 @@ def _project_positions(system, q0, t0, r, J, c, ell, nb):
     held[nb:] = r[nb:] < 0
     q = q0.copy()
     for _ in range(30):
-        lim = np.abs(J) @ (np.abs(q) + ell) + np.abs(c)
+        lim = np.abs(J) @ _reach(system, q, ell, t0) + np.abs(c)
         viol = _violations(r, nb)
         held[nb:] |= r[nb:] < 0
         res = np.where(held, r, 0.0)
         if not np.any(np.where(held, np.abs(r), viol) > ROUND_ULPS * _EPS * lim):
             return q
         rows = np.flatnonzero(held)
-        q = q - _mass_correction(A, J[rows], res[rows])
+        dx = _mass_correction(A, J[rows], res[rows])
+        if getattr(system, "has_kinematics", False):  # dx is in v-space: q moves by T(q) dx
+            from lcp.model.kinematics import normalize_quaternions
+
+            q = normalize_quaternions(system, q - np.array(system.kinematics_fn(t0, q), dtype=float) @ dx)
+        else:
+            q = q - dx
         r, _, J, _ = _rows(system, q, t0)
         A = system.mass(q, t0)
     raise ValueError(f"q0 could not be projected onto the constraints: residual {float(np.max(np.abs(r))):.3g} "

@@ -12,8 +12,33 @@ import numpy as np
 
 from lcp.numerics.casadi_eval import evaluate_into
 
-__all__ = ["check_contact_rows", "check_free_symbols", "contact_rows_degenerate", "check_dense_mass", "check_sparse_mass", "check_definite", "dense_mass", "mass_ccs_values",
+__all__ = ["check_state", "check_contact_rows", "check_free_symbols", "contact_rows_degenerate", "check_dense_mass", "check_sparse_mass", "check_definite", "dense_mass", "mass_ccs_values",
            "null_space", "sparse_mass"]
+
+
+def check_state(system, q0, v0, t0):
+    """The body of :meth:`System.check_state <lcp.model.system.System.check_state>` on float arrays."""
+    for name, x, size in (("q0", q0, getattr(system, "n_q", system.n)), ("v0", v0, system.n)):
+        if x.shape != (size,):
+            raise ValueError(f"{name} must have shape ({size},), got {x.shape}")
+        if not np.all(np.isfinite(x)):
+            raise ValueError(f"{name} must be finite, got {x}")
+    if system.__dict__.get("_mass_checked_constant"):
+        return q0, v0
+    if getattr(system, "has_kinematics", False):
+        from lcp.model.kinematics import check_kinematics_at
+
+        check_kinematics_at(system, q0, t0)
+    if system.n_contacts and not system.contact_rows_checked:
+        check_contact_rows(system, q0, t0)  # a constant mass matrix (and constraints) passed the check below once
+    if not system.n_bilateral and system.n > 32 and system.mass_expr.nnz() <= system.n * system.n // 8:
+        check_sparse_mass(system, q0, t0)
+    else:
+        check_dense_mass(system, q0, t0)
+    # the check does not depend on the state when nothing in it does: done once (it costs a
+    # dense factorization or eigenvalue decomposition)
+    system._mass_checked_constant = system.mass_is_constant and system.kinematics_is_constant
+    return q0, v0
 
 
 def check_dense_mass(system, q0, t0) -> None:

@@ -27,6 +27,7 @@ from numpy.typing import ArrayLike
 
 from lcp.model import state_checks
 from lcp.model.control import check_schedule, split_control
+from lcp.model.kinematics import attach_kinematics, kinematics_functions, kinematics_options
 
 __all__ = ["Contact", "System", "moving_contact"]
 
@@ -63,7 +64,8 @@ class Contact:
         for a planar contact, two rows (2 x n) for a spatial one. Give exactly one of ``tangent``
         and ``tangent_jacobian``. The tangent rows must be independent of each other and of the
         normal row (checked where the system is built, or at the initial state when they depend
-        on q).
+        on q). For a system with Newton-Euler ``kinematics`` its columns are those of v (n_v):
+        the tangent velocities per unit of v, as every Jacobian of such a system.
     mu : float
         Coulomb friction coefficient (the paper's R), >= 0.
     e : float
@@ -147,6 +149,10 @@ class System:
         the step functions are those of the drift F0 (u = 0); ``control_matrix_expr`` is B.
     control_bounds : (array_like, array_like), optional
         Lower and upper bounds of u (broadcast to (nu,); +-inf allowed; -inf..inf by default).
+    kinematics, unit_quaternions, velocity_names : optional
+        Newton-Euler kinematics qdot = T(t, q) v (T: n_q x n_v SX; v of its own length n = n_v;
+        A, F and every Jacobian in v-space), the start indices in q of unit quaternions, the
+        velocities' names: :mod:`lcp.model.kinematics`. Default: T = I, the system without it.
 
     Notes
     -----
@@ -170,18 +176,23 @@ class System:
     def __init__(self, q: ca.SX, v: ca.SX, mass: ca.SX | ArrayLike, force: ca.SX | ArrayLike,
                  contacts: Sequence[Contact] = (), constraints: ca.SX | None = None,
                  t: ca.SX | None = None, names: Sequence[str] | None = None, breakpoints: ArrayLike | None = None,
-                 control: ca.SX | None = None, control_bounds: ArrayLike | None = None) -> None:
+                 control: ca.SX | None = None, control_bounds: ArrayLike | None = None,
+                 kinematics: ca.SX | None = None, unit_quaternions: Sequence[int] = (),
+                 velocity_names: Sequence[str] | None = None) -> None:
         self.breakpoints = _breakpoints(breakpoints)
         self.control_schedule = None  # set by with_control
         if not isinstance(q, ca.SX) or not q.is_symbolic() or q.shape[1] != 1:
             raise ValueError("q must be a column of CasADi SX symbols (casadi.SX.sym('q', n))")
-        if not isinstance(v, ca.SX) or not v.is_symbolic() or v.shape != q.shape:
+        if kinematics is None and (not isinstance(v, ca.SX) or not v.is_symbolic() or v.shape != q.shape):
             raise ValueError("v must be a column of CasADi SX symbols with the shape of q")
-        self.n = n = q.shape[0]
         self.t_sym = t if t is not None else ca.SX.sym("t")
         if not isinstance(self.t_sym, ca.SX) or not self.t_sym.is_symbolic() or self.t_sym.numel() != 1:
             raise ValueError("t must be a scalar CasADi SX symbol")
         self.q_sym, self.v_sym = q, v
+        # n velocities (the size of A, F and H's columns), n_q coordinates, qdot = T(t, q) v
+        # (lcp.model.kinematics; T None for the identity: then nothing below changes)
+        self._T, n = attach_kinematics(self, kinematics, unit_quaternions, velocity_names, names)
+        vs = (lambda J: J) if self._T is None else (lambda J: ca.mtimes(J, self._T))  # d/dq to v-space
         self.mass_expr = _sx(mass, "mass", (n, n))
         self.force_expr = _sx(force, "force", (n, 1))
         self._init_control(control, control_bounds, q, v, t)
@@ -191,9 +202,6 @@ class System:
         for c in self.contacts:
             if not isinstance(c, Contact):
                 raise ValueError(f"contacts must be Contact objects, got {type(c).__name__}")
-        self.names = tuple(names) if names is not None else tuple(f"q{i}" for i in range(n))
-        if len(self.names) != n:
-            raise ValueError(f"names must have {n} entries, got {len(self.names)}")
         tq = ca.vertcat(self.t_sym, q)
         if ca.depends_on(self.mass_expr, v):
             raise ValueError("mass may depend on t and q only, not on v")
@@ -208,13 +216,13 @@ class System:
             if ca.depends_on(self.constraints_expr, v):
                 raise ValueError("constraints must depend on t and q only")
         self.n_bilateral = self.constraints_expr.shape[0]
-        G = ca.jacobian(self.constraints_expr, q)
+        G = vs(ca.jacobian(self.constraints_expr, q))
         phi_t = ca.jacobian(self.constraints_expr, self.t_sym)
 
         # contact kinematics: normal and tangent Jacobian rows
         m = len(self.contacts)
         self.n_contacts = m
-        gap, HN, HT, rate = _contact_kinematics(self.contacts, q, v, self.t_sym, n)
+        gap, HN, HT, rate = _contact_kinematics(self.contacts, q, v, self.t_sym, n, vs)
         self.mu = np.array([c.mu for c in self.contacts], dtype=float)
         self.e = np.array([c.e for c in self.contacts], dtype=float)
         #: tangent dimension of each contact: 1 (planar) or 2 (spatial, the Coulomb disk)
@@ -235,7 +243,7 @@ class System:
         self.mass_blocks = None
 
         # -dF/dq and -dF/dv: the implicit (theta) step linearizes the forces with them
-        K = -ca.jacobian(self.force_expr, q)
+        K = -vs(ca.jacobian(self.force_expr, q))  # dF/dq T: the rate of F per unit of v
         C = -ca.jacobian(self.force_expr, v)
         self.force_is_affine = not ca.depends_on(ca.vertcat(ca.vec(K), ca.vec(C)), ca.vertcat(self.t_sym, q, v))
         self.force_depends_on_t = ca.depends_on(self.force_expr, self.t_sym)
@@ -244,7 +252,8 @@ class System:
         # constancy: decides whether a stepper may assemble once and skip CasADi in its loop
         self.mass_is_constant = not ca.depends_on(self.mass_expr, tq)
         self.kinematics_is_constant = (not ca.depends_on(ca.vertcat(ca.vec(H), ca.vec(G), ca.vec(phi_t)), tq)
-                                       and not self.contacts_depend_on_t)
+                                       and not self.contacts_depend_on_t
+                                       and self._T is None)  # with T: g(q) is not g(0) + H q
         self.gap_is_affine = self.kinematics_is_constant
         self.is_constant = (self.mass_is_constant and self.kinematics_is_constant
                             and self.force_is_affine and not self.force_depends_on_t)
@@ -261,13 +270,14 @@ class System:
             state_checks.check_free_symbols(self, t is None, gap, H, phi_t)  # names a symbol the System lacks
             raise
         if m and not ca.depends_on(ca.vec(H), q):
-            state_checks.check_contact_rows(self, np.zeros(n))  # constant kinematics: checked once, here
+            state_checks.check_contact_rows(self, np.zeros(self.n_q))  # constant kinematics: checked once, here
         # everything one Moreau-Jean step needs at (t, q, v), in one call
         self.step_data_fn = ca.Function(
             "step_data", [self.t_sym, q, v],
             [self.mass_expr, self.force_expr, K, C, G, phi_t, gap, H])
         # energy bookkeeping needs a potential only when the user gives one; kinetic energy is general
         self.kinetic_fn = ca.Function("kinetic", [self.t_sym, q, v], [0.5 * ca.mtimes([v.T, self.mass_expr, v])])
+        kinematics_functions(self)  # kinematics_expr, kinematics_fn, qdot_fn (for compiled engines too)
 
     def _init_control(self, control, control_bounds, q, v, t):
         """Split F = F0 + B u for a control u (:func:`lcp.model.control.split_control`)."""
@@ -316,7 +326,7 @@ class System:
         force = self.force_expr + ca.mtimes(self.control_matrix_expr, schedule.expression(t))
         out = System(self.q_sym, self.v_sym, self.mass_expr, force, contacts=self.contacts,
                      constraints=self.constraints_expr if self.n_bilateral else None, t=t, names=self.names,
-                     breakpoints=np.concatenate([self.breakpoints, schedule.breakpoints]))
+                     breakpoints=np.concatenate([self.breakpoints, schedule.breakpoints]), **kinematics_options(self))
         out.control_schedule = schedule
         out.control_matrix_fn = self.control_matrix_fn
         out.control_force_fn = ca.Function("control_force", [t, self.q_sym],
@@ -384,24 +394,7 @@ class System:
 
     def check_state(self, q0, v0, t0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """Validate an initial state: finite, right shape, mass matrix positive definite there."""
-        q0, v0 = _float_array("q0", q0), _float_array("v0", v0)
-        for name, x in (("q0", q0), ("v0", v0)):
-            if x.shape != (self.n,):
-                raise ValueError(f"{name} must have shape ({self.n},), got {x.shape}")
-            if not np.all(np.isfinite(x)):
-                raise ValueError(f"{name} must be finite, got {x}")
-        if self.__dict__.get("_mass_checked_constant"):
-            return q0, v0
-        if self.n_contacts and not self.contact_rows_checked:
-            state_checks.check_contact_rows(self, q0, t0)  # a constant mass matrix (and constraints) passed the check below once
-        if not self.n_bilateral and self.n > 32 and self.mass_expr.nnz() <= self.n * self.n // 8:
-            state_checks.check_sparse_mass(self, q0, t0)
-        else:
-            state_checks.check_dense_mass(self, q0, t0)
-        # the check does not depend on the state when nothing in it does: done once (it costs a
-        # dense factorization or eigenvalue decomposition)
-        self._mass_checked_constant = self.mass_is_constant and self.kinematics_is_constant
-        return q0, v0
+        return state_checks.check_state(self, _float_array("q0", q0), _float_array("v0", v0), t0)
 
     def sparse_mass(self, q, t: float = 0.0):
         """The mass matrix A(t, q) as a SciPy CSC matrix of its structural nonzeros (never dense).
@@ -416,9 +409,10 @@ class System:
         return state_checks.sparse_mass(self, q, t)
 
 
-def _tangent_rows(c: Contact, q, v, t, n: int) -> tuple[ca.SX, ca.SX]:
-    """The tangent Jacobian rows of contact c: one (planar) or two (spatial), n columns each, and
-    the tangent's time derivative ds/dt (zero for a given ``tangent_jacobian``)."""
+def _tangent_rows(c: Contact, q, v, t, n: int, v_space) -> tuple[ca.SX, ca.SX]:
+    """The tangent Jacobian rows of contact c: one (planar) or two (spatial), n columns each (n
+    velocities: ds/dq T for a ``tangent``, a ``tangent_jacobian`` as given), and the tangent's time
+    derivative ds/dt (zero for a given ``tangent_jacobian``)."""
     if c.tangent is not None:
         s = _sx_any(c.tangent, f"tangent of {c.name}")
         if s.numel() not in (1, 2):
@@ -427,7 +421,7 @@ def _tangent_rows(c: Contact, q, v, t, n: int) -> tuple[ca.SX, ca.SX]:
         s = ca.reshape(s, s.numel(), 1)
         if ca.depends_on(s, v):
             raise ValueError(f"tangent of {c.name} must depend on t and q only")
-        return ca.jacobian(s, q), ca.jacobian(s, t)
+        return v_space(ca.jacobian(s, q)), ca.jacobian(s, t)
     J = _sx_any(c.tangent_jacobian, f"tangent_jacobian of {c.name}")
     if J.numel() == n:  # a row or a column: one tangent
         return _sx(J, f"tangent_jacobian of {c.name}", (1, n)), ca.SX.zeros(1, 1)
@@ -437,7 +431,7 @@ def _tangent_rows(c: Contact, q, v, t, n: int) -> tuple[ca.SX, ca.SX]:
                      f"got {J.shape}")
 
 
-def _contact_kinematics(contacts, q, v, t, n: int) -> tuple:
+def _contact_kinematics(contacts, q, v, t, n: int, v_space) -> tuple:
     """(gaps g(t, q), normal rows H_N, tangent rows H_T, b = (dg/dt, ds/dt)) of the contacts."""
     gaps, HN, HT, gap_rates, tangent_rates = [], [], [], [], []
     for c in contacts:
@@ -445,8 +439,8 @@ def _contact_kinematics(contacts, q, v, t, n: int) -> tuple:
         if ca.depends_on(g, v):
             raise ValueError(f"gap of {c.name} must depend on t and q only")
         gaps.append(g)
-        HN.append(ca.jacobian(g, q))
-        rows, rate = _tangent_rows(c, q, v, t, n)
+        HN.append(v_space(ca.jacobian(g, q)))
+        rows, rate = _tangent_rows(c, q, v, t, n, v_space)
         HT.append(rows)
         gap_rates.append(ca.jacobian(g, t))
         tangent_rates.append(rate)

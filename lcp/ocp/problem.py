@@ -7,6 +7,7 @@ from collections.abc import Callable
 import numpy as np
 
 from lcp.model.control import HOLDS, ControlSchedule
+from lcp.model.kinematics import refuse_kinematics
 from lcp.model.system import System, moving_contact
 from lcp.ocp.guess import multistart, simulate_guess
 from lcp.ocp.model import add_control
@@ -132,6 +133,7 @@ class OptimalControlProblem:
         if not isinstance(system, System):
             raise ValueError(f"system must be a System or a Scene, got {type(system).__name__}")
         system.require_planar("the optimal-control transcription")
+        refuse_kinematics(system, "the optimal-control transcription")
         _refuse_moving_contacts(system)
         if control_matrix is not None:
             system = add_control(system, control_matrix,

@@ -9,6 +9,8 @@
   (:mod:`~lcp.scenes.spatial_systems`, exact solutions in :mod:`~lcp.scenes.spatial_exact`),
   loaded on first use.
 - the classical systems with their references: :mod:`~lcp.scenes.classical` (also :mod:`lcp.classical`).
+- free rigid bodies in 3D (Newton-Euler kinematics, unit quaternions): :func:`dzhanibekov`,
+  :func:`tumbling_box` (:mod:`~lcp.scenes.rigid_bodies`), loaded on first use.
 
 Scenes import the model and the constant-model numbers of the time stepping; never the simulation,
 sweeps or optimal control.
@@ -18,7 +20,7 @@ from lcp.scenes.jean_pratt_system import jean_pratt
 from lcp.scenes.scene import Scene
 
 __all__ = ["Scene", "jean_pratt", "block_chain", "plane_slide", "incline_slide", "lateral_force_slide",
-           "jean_pratt_spatial"]
+           "jean_pratt_spatial", "dzhanibekov", "tumbling_box"]
 
 _SPATIAL = ("plane_slide", "incline_slide", "lateral_force_slide", "jean_pratt_spatial")
 
@@ -29,4 +31,8 @@ def __getattr__(name):
         from lcp.scenes import spatial_systems
 
         return getattr(spatial_systems, name)
+    if name in ("dzhanibekov", "tumbling_box"):
+        from lcp.scenes import rigid_bodies
+
+        return getattr(rigid_bodies, name)
     raise AttributeError(f"module 'lcp.scenes' has no attribute {name!r}")

@@ -29,6 +29,7 @@ from lcp.timestepping import compiled_step as compiled
 from lcp.contact.problem import NUMPY_OPS, planar_enum, planar_refine
 from lcp.model.start import consistent_start
 from lcp.scenes.scene import Scene
+from lcp.model.kinematics import refuse_kinematics
 from lcp.timestepping.assembly import StepAssembly, kahan_add
 from lcp.timestepping.moreau_jean import MoreauJeanOptions
 
@@ -260,6 +261,7 @@ def _pack_scenes(scenes, h, theta):
         if not isinstance(sc, Scene):
             raise ValueError(f"scenes must be Scene objects, got {type(sc).__name__}")
         s = sc.system
+        refuse_kinematics(s, f"lcp.batch (scene '{sc.name}')")
         if not compiled.applicable(s):
             raise ValueError(f"scene '{sc.name}' is not a constant single-contact system")
         asm = StepAssembly(s, h, theta)

@@ -126,7 +126,9 @@ def default_summary(result) -> dict:
     row = {}
     for i, name in enumerate(names):
         row[f"q_{name}"] = float(q[-1, i]) if q.shape[0] else math.nan
-    for i, name in enumerate(names):
+    # a system with kinematics (qdot = T(q) v) has fewer velocities than coordinates: numbered
+    vnames = names if v.ndim == 2 and v.shape[1] == n else [f"v{i}" for i in range(v.shape[1] if v.ndim == 2 else 0)]
+    for i, name in enumerate(vnames):
         row[f"v_{name}"] = float(v[-1, i]) if v.shape[0] else math.nan
     return row
 

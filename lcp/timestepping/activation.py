@@ -70,8 +70,10 @@ class Activation:
         b = (h * th) * uN_free
         if self.absHN is not None:
             size = self.absHN @ np.abs(q) + self.absg0
-        else:
+        elif H.shape[1] == q.size:
             size = np.abs(H[: self.m]) @ np.abs(q)
+        else:  # Newton-Euler kinematics (H in v-space, n_v != n_q): the rows' sizes times q's largest entry
+            size = np.abs(H[: self.m]).sum(axis=1) * float(np.max(np.abs(q)))
         size = size + np.abs(gap) + np.abs(a) + np.abs(b)
         closing = pred <= (CLOSE_ULPS * EPS) * size
         if self.loaded.any():

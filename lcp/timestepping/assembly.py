@@ -482,7 +482,7 @@ def one_step_function(system) -> ca.Function:
     """
     n, nb = system.n, system.n_bilateral
     t, h, th = ca.MX.sym("t"), ca.MX.sym("h"), ca.MX.sym("theta")
-    q, v = ca.MX.sym("q", n), ca.MX.sym("v", n)
+    q, v = ca.MX.sym("q", getattr(system, "n_q", n)), ca.MX.sym("v", n)  # n_q != n with kinematics
     A, F, K, C, G, _, gap, H = system.step_data_fn(t, q, v)
     F1 = system.force_fn(t + h, q, v)
     _, _, phi_t1 = system.constraints_fn(t + h, q)

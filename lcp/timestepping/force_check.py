@@ -40,7 +40,10 @@ class ForceStepCheck:
             return
         _, q0, v0, F0, K0, C0 = prev
         F = np.array(sys_.force_fn(t, q, v), dtype=float).ravel()
-        dFq, dFv = K0 @ (q - q0), C0 @ (v - v0)
+        dq = q - q0
+        if getattr(sys_, "has_kinematics", False):  # K is per unit of v: dq in v-space, T dx = dq
+            dq = np.linalg.lstsq(np.array(sys_.kinematics_fn(t - h, q0), dtype=float), dq, rcond=None)[0]
+        dFq, dFv = K0 @ dq, C0 @ (v - v0)
         F_lin = F0 - dFq - dFv
         miss = np.abs(F - F_lin)
         # coordinate by coordinate, against the sizes that the linearisation itself moved through;
@@ -49,7 +52,7 @@ class ForceStepCheck:
         size = np.maximum(size, 1e-8 * float(np.max(size, initial=0.0)) + 1e-300)
         worst = int(np.argmax(miss / size))
         if miss[worst] > 0.5 * size[worst] or not np.all(np.isfinite(miss)):
-            raise StepRejected(f"the force on {sys_.names[worst]} changed faster than the step resolves between "
+            raise StepRejected(f"the force on {_names(sys_)[worst]} changed faster than the step resolves between "
                                f"t = {t - h:.10g} and t = {t:.10g}: {F[worst]:.4g} against {F_lin[worst]:.4g} "
                                "from its linearisation at the step's start (a singularity of the force crossed "
                                "within the step?); reduce h")
@@ -62,8 +65,13 @@ def nonfinite_cause(system, h, t, q, v, S) -> str:
     for tt in (t, t + h):
         F = np.array(sys_.force_fn(tt, q, v), dtype=float).ravel()
         if not np.all(np.isfinite(F)):
-            bad = [sys_.names[i] for i in np.flatnonzero(~np.isfinite(F))]
+            bad = [_names(sys_)[i] for i in np.flatnonzero(~np.isfinite(F))]
             return f"the force F(t, q, v) is not finite at t = {tt:.10g} (coordinates {bad})"
     if np.all(np.isfinite(S)):
         return "the force's Jacobians dF/dq, dF/dv or the constraints' time derivative are not finite"
     return "singular iteration matrix: the mass matrix is singular on the constraint manifold"
+
+
+def _names(system) -> tuple:
+    """The names of the forces' components: the velocities' (the coordinates' without kinematics)."""
+    return getattr(system, "velocity_names", system.names)

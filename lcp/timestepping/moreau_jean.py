@@ -16,7 +16,9 @@ with the iteration matrix W_h = A + h theta C + h^2 theta^2 K (K = -dF/dq, C = -
 that depend on the state are treated implicitly), and p the contact impulses of the active
 contacts, which solve the discrete Coulomb problem :class:`~lcp.contact.problem.ContactProblem`.
 Which contacts take part in a step: :mod:`lcp.timestepping.activation`; what counts as an impact:
-:mod:`lcp.timestepping.outcome`.
+:mod:`lcp.timestepping.outcome`. A system with Newton-Euler kinematics (qdot = T(q) v) moves its
+positions by q+ = q- + h T(q-) v_theta, unit quaternions by the exact exponential map
+(:func:`lcp.model.kinematics.advance_positions`), in the Python loop only (it is never constant).
 
 Position projection
 -------------------
@@ -34,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lcp.model.conditioning import MOREAU_JEAN_LIMIT, mass_condition, reduced_condition, resolvable
+from lcp.model.kinematics import refuse_kinematics
 from lcp.model.start import consistent_start
 from lcp.timestepping import compiled_step as compiled
 from lcp.timestepping.activation import CLOSE_ULPS, OPEN_ULPS
@@ -191,6 +194,7 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
         raise ValueError(str(exc)) from exc
     proj = _projector(system, options)
     if options.scheme == "order2":
+        refuse_kinematics(system, "scheme='order2'")
         if system.contacts_depend_on_t:
             from lcp.model.system import moving_contact
 

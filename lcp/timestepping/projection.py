@@ -41,6 +41,10 @@ change costs one evaluation and a few NumPy operations on (n_bilateral + m)-vect
 are not projected (as in Siconos's direct projection): the next step's velocity constraint is
 imposed at the projected positions.
 
+With Newton-Euler kinematics (qdot = T(q) v) J is in v-space (the System's G and H), the
+correction moves q by T(q) A^-1 J' mu and the unit quaternions are renormalised after it; the
+scale's |q| + L is mapped to v-space by |T|' (as in :mod:`lcp.model.start`).
+
 A system needs the projection (:func:`needs_projection`) when a constraint Jacobian depends on q or
 t (curved or rheonomic constraints) or a contact's normal depends on q; systems whose constraints
 are all affine and time-independent (every constant system) never pay for it.
@@ -57,6 +61,8 @@ import weakref
 
 import casadi as ca
 import numpy as np
+
+from lcp.model.kinematics import normalized_expr
 
 __all__ = ["NEWTON_PER_EVAL", "PositionProjection", "needs_projection"]
 
@@ -103,16 +109,21 @@ def _update_function(system, iterations: int) -> ca.Function:
     n, nb, m = system.n, system.n_bilateral, system.n_contacts
     sym = ca.SX if n + nb + m <= _SX_MAX_SIZE else ca.MX
     qs, ts = system.q_sym, system.t_sym
-    J_expr = ca.vertcat(ca.jacobian(system.constraints_expr, qs), system.H_expr[:m, :])
-    data = ca.Function("projection_data", [ts, qs],
-                       [system.mass_expr, ca.vertcat(system.constraints_expr, system.gap_expr), J_expr])
-    t, q, w, L = sym.sym("t"), sym.sym("q", n), sym.sym("w", m), sym.sym("L", n)
+    kin = getattr(system, "has_kinematics", False)
+    nq = system.n_q if kin else n
+    # with Newton-Euler kinematics (qdot = T v) the rows' Jacobians are in v-space (the System's G
+    # and H), a correction dx moves q by T(q) dx, and unit quaternions are renormalised after it
+    G = ca.jacobian(system.constraints_expr, qs)
+    J_expr = ca.vertcat(ca.mtimes(G, system.kinematics_expr) if kin else G, system.H_expr[:m, :])
+    outs = [system.mass_expr, ca.vertcat(system.constraints_expr, system.gap_expr), J_expr]
+    data = ca.Function("projection_data", [ts, qs], outs + ([system.kinematics_expr] if kin else []))
+    t, q, w, L = sym.sym("t"), sym.sym("q", nq), sym.sym("w", m), sym.sym("L", nq)
     mask = ca.vertcat(sym.ones(nb), w)
     free = ca.diag(1 - mask)  # rows outside W: mu = 0 there
     mu, d = sym.zeros(nb + m), sym.zeros(nb + m)
     qk = q
     for _ in range(iterations):
-        A, r, J = data(t, qk)
+        A, r, J, *T = data(t, qk)
         Jm = ca.diag(mask) @ J
         AiJt = ca.solve(A, Jm.T)
         S = Jm @ AiJt + free
@@ -120,10 +131,11 @@ def _update_function(system, iterations: int) -> ca.Function:
         S = S + 1e-14 * ca.mmax(ca.fabs(ca.diag(S))) * sym.eye(nb + m)
         mu = -ca.solve(S, mask * r)
         d = ca.diag(S)
-        qk = qk + AiJt @ mu
-    _, r, J = data(t, qk)
-    _, r0, _ = data(t, sym.zeros(n))  # the rows' own constants (a floor's height, a rod's length squared)
-    s = ca.mtimes(ca.fabs(J), ca.fabs(qk) + L) + ca.fabs(r0)
+        qk = qk + AiJt @ mu if not kin else normalized_expr(system, qk + T[0] @ (AiJt @ mu))
+    _, r, J, *T = data(t, qk)
+    _, r0, *_ = data(t, sym.zeros(nq))  # the rows' own constants (a floor's height, a rod's length squared)
+    reach = ca.fabs(qk) + L if not kin else ca.mtimes(ca.fabs(T[0]).T, ca.fabs(qk) + L)  # as lcp.model.start
+    s = ca.mtimes(ca.fabs(J), reach) + ca.fabs(r0)
     return ca.Function("position_projection", [t, q, w, L], [qk, r, s, mu * d], ["t", "q", "w", "L"],
                        ["q_new", "r", "s", "pull"])
 
@@ -164,10 +176,11 @@ class PositionProjection:
         self._buf, self._run = fn.buffer()
         k = self.nb + self.m
         self._t = np.zeros(1)
-        self._q = np.zeros(self.n)
+        nq = getattr(system, "n_q", self.n)
+        self._q = np.zeros(nq)
         self._w = np.zeros(self.m)
-        self._L = np.zeros(self.n)
-        self._qo, self._r, self._s, self._mu = np.zeros(self.n), np.zeros(k), np.zeros(k), np.zeros(k)
+        self._L = np.zeros(nq)
+        self._qo, self._r, self._s, self._mu = np.zeros(nq), np.zeros(k), np.zeros(k), np.zeros(k)
         for i, a in enumerate((self._t, self._q, self._w, self._L)):
             self._buf.set_arg(i, memoryview(a))
         for i, a in enumerate((self._qo, self._r, self._s, self._mu)):

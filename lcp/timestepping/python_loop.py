@@ -51,12 +51,18 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
     if n_steps // every > 50_000_000:
         raise ValueError(f"{n_steps // every} saved states would not fit in memory: raise save_every")
     m, n = system.n_contacts, system.n
+    nq = getattr(system, "n_q", n)
+    # Newton-Euler kinematics: q+ = q + h T(q) v_theta, unit quaternions by the exponential map
+    # (lcp.model.kinematics.advance_positions)
+    advance = None
+    if getattr(system, "has_kinematics", False):
+        from lcp.model.kinematics import advance_positions as advance
     e = system.e
     names = [c.name for c in system.contacts]
     dims = system.tangent_dims if system.is_spatial else None
 
     n_saved = n_steps // every
-    Q = np.empty((n_saved + 1, n))
+    Q = np.empty((n_saved + 1, nq))
     V = np.empty((n_saved + 1, n))
     PN = np.zeros((n_saved, m))
     PT = np.zeros((n_saved, system.n_tangent))  # tangent components, contact by contact
@@ -66,7 +72,7 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
     stats, impacts = notes.stats, notes.impacts
     status, message = 0, STATUS_MESSAGES[0]
     q, v = q0.copy(), v0.copy()
-    cq, cv = np.zeros(n), np.zeros(n)
+    cq, cv = np.zeros(nq), np.zeros(n)
     step = ContactStep(system, asm, solver, fallback, notes)
     activation = Activation(asm, m)
     closed = np.zeros(m, dtype=bool)  # contacts closed in the step, held at g = 0 by the projection
@@ -131,7 +137,10 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
                 stats.mode_counts[MODE_NAMES[int(code)]] += 1
         # compensated (Kahan) sums: over 1e6 steps plain sums would drift by rounding
         v_new, cv = kahan_add(v, dv, cv)
-        q, cq = kahan_add(q, h * ((1 - th) * v + th * v_new), cq)
+        if advance is None:
+            q, cq = kahan_add(q, h * ((1 - th) * v + th * v_new), cq)
+        else:
+            q, cq = advance(system, tk, q, (1 - th) * v + th * v_new, h, cq)
         v = v_new
         if not math.isfinite(float(q.sum()) + float(v.sum())):  # one test for both (NaN/inf propagate)
             status = -2
@@ -148,13 +157,14 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
                 np.logical_and(loaded, ~opening, out=closed)
             else:
                 opening = None
-            q_proj, ok, iters, viol = proj.project(tk + h, q, closed, opening, ell + h * np.abs(v))
+            reach = ell + h * np.abs(v) if advance is None else ell + h * float(np.max(np.abs(v)))  # n_q != n_v
+            q_proj, ok, iters, viol = proj.project(tk + h, q, closed, opening, reach)
             stats.projections += 1
             stats.projection_iterations += iters
             if not ok or not math.isfinite(viol):
                 status, message = -5, projection_failure(k, tk + h, viol, iters, proj.tol)
                 break
-            q, cq = q_proj, np.zeros(n)  # the projection is accurate to its tolerance: no compensation left
+            q, cq = q_proj, np.zeros(nq)  # the projection is accurate to its tolerance: no compensation left
             worst = max(worst, viol)
         if row >= 0:
             Q[row + 1], V[row + 1] = q, v
