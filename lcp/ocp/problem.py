@@ -11,6 +11,7 @@ from lcp.model.system import System, moving_contact
 from lcp.ocp.guess import multistart, simulate_guess
 from lcp.ocp.model import add_control
 from lcp.ocp.options import HomotopyOptions, positive
+from lcp.ocp.pairs import check_pairs
 from lcp.ocp.results import OCPGuess, OCPResult, Step
 from lcp.ocp.solve import solve_problem
 from lcp.model.schedule import AffineSchedule
@@ -98,6 +99,11 @@ class OptimalControlProblem:
         every step (every contact stays closed: exact for a block that never leaves the floor, wrong
         for anything that flies). ``"auto"`` (default): the gap law when a contact starts open
         (g(q0) > 0), else the velocity law. :mod:`lcp.ocp.transcription` says more.
+    complementarity : list of (callable(Step), callable(Step)), optional
+        User complementarity path constraints 0 <= a(step) perp b(step) >= 0 at every step (each a
+        vector of one length at every step; e.g. a no-slip foot ``(lambda s: s.q1[1], lambda s:
+        s.v1[0] ** 2)``), relaxed with the contacts' homotopy and checked on the replay
+        (:mod:`lcp.ocp.pairs`).
 
     Examples
     --------
@@ -122,7 +128,7 @@ class OptimalControlProblem:
                  stage_cost: Callable | None = None, terminal_cost: Callable | None = None,
                  terminal_constraints: Callable | None = None, path_constraints: Callable | None = None,
                  path_equalities: Callable | None = None, max_cost: Callable | None = None, control_rate_weight: float = 0.0,
-                 replay_tol: float | None = 1e-6, contact_law: str = "auto"):
+                 replay_tol: float | None = 1e-6, contact_law: str = "auto", complementarity=None):
         from lcp.scenes.scene import Scene
 
         if isinstance(system, Scene):
@@ -174,6 +180,8 @@ class OptimalControlProblem:
         self.terminal_constraints, self.path_constraints = terminal_constraints, path_constraints
         self.path_equalities = path_equalities
         self.max_cost = max_cost
+        #: the user's complementarity pairs [(a, b), ...] of Step callables (lcp.ocp.pairs)
+        self.complementarity = check_pairs(complementarity)
         self.control_rate_weight = positive("control_rate_weight", control_rate_weight, allow_zero=True)
         self.replay_tol = None if replay_tol is None else positive("replay_tol", replay_tol)
         self.transcription = None  # the NLP (lcp.ocp.transcription), built on the first solve, then reused
