@@ -100,10 +100,7 @@ class OptimalControlProblem:
         for anything that flies). ``"auto"`` (default): the gap law when a contact starts open
         (g(q0) > 0), else the velocity law. :mod:`lcp.ocp.transcription` says more.
     complementarity : list of (callable(Step), callable(Step)), optional
-        User complementarity path constraints 0 <= a(step) perp b(step) >= 0 at every step (each a
-        vector of one length at every step; e.g. a no-slip foot ``(lambda s: s.q1[1], lambda s:
-        s.v1[0] ** 2)``), relaxed with the contacts' homotopy and checked on the replay
-        (:mod:`lcp.ocp.pairs`).
+        Path pairs 0 <= a(step) perp b(step) >= 0 at every step, relaxed with the contacts (:mod:`lcp.ocp.pairs`).
 
     Examples
     --------
@@ -179,9 +176,7 @@ class OptimalControlProblem:
         self.stage_cost, self.terminal_cost = stage_cost, terminal_cost
         self.terminal_constraints, self.path_constraints = terminal_constraints, path_constraints
         self.path_equalities = path_equalities
-        self.max_cost = max_cost
-        #: the user's complementarity pairs [(a, b), ...] of Step callables (lcp.ocp.pairs)
-        self.complementarity = check_pairs(complementarity)
+        self.max_cost, self.complementarity = max_cost, check_pairs(complementarity)
         self.control_rate_weight = positive("control_rate_weight", control_rate_weight, allow_zero=True)
         self.replay_tol = None if replay_tol is None else positive("replay_tol", replay_tol)
         self.transcription = None  # the NLP (lcp.ocp.transcription), built on the first solve, then reused
