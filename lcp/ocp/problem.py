@@ -14,6 +14,7 @@ from lcp.ocp.options import HomotopyOptions, positive
 from lcp.ocp.pairs import check_pairs
 from lcp.ocp.results import OCPGuess, OCPResult, Step
 from lcp.ocp.solve import solve_problem
+from lcp.ocp.spatial import check_spatial
 from lcp.model.schedule import AffineSchedule
 
 __all__ = ["OCP_HOLDS", "OptimalControlProblem"]
@@ -134,7 +135,6 @@ class OptimalControlProblem:
             system = system.system
         if not isinstance(system, System):
             raise ValueError(f"system must be a System or a Scene, got {type(system).__name__}")
-        system.require_planar("the optimal-control transcription")
         _refuse_moving_contacts(system)
         if control_matrix is not None:
             system = add_control(system, control_matrix,
@@ -166,6 +166,7 @@ class OptimalControlProblem:
         if self.free_time and not self.T_bounds[0] <= self.T <= self.T_bounds[1]:
             raise ValueError(f"T (the initial guess) must lie within T_bounds {T_bounds!r}, got {T!r}")
         self.hold, self.steps, self.step_bounds = _grid(system, self.theta, hold, steps, step_bounds)
+        check_spatial(system, self.contact_law, self.hold, self.steps)  # what lcp.ocp.spatial models
         self.node_times = self._check_node_times(node_times)
         for name, fn in (("stage_cost", stage_cost), ("terminal_cost", terminal_cost),
                          ("terminal_constraints", terminal_constraints),

@@ -54,8 +54,8 @@ def _closed_form_system(result: OCPResult, options: dict):
     ``n_eval`` is asked for; else None."""
     from lcp.events.model import system_model
 
-    if set(options) - {"n_eval"} or result.control is None:
-        return None
+    if set(options) - {"n_eval"} or result.control is None or result.problem.system.is_spatial:
+        return None  # (spatial contacts: the spatial event integrator, restarted at the nodes)
     sysw = result.problem.system.with_control(result.control)
     model = system_model(sysw)
     T = float(result.t[-1])
