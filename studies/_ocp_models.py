@@ -10,8 +10,8 @@ coordinate of unit mass pressed by F / mu, so that mu N = F exactly.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import casadi as ca
 import numpy as np

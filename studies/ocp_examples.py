@@ -40,7 +40,7 @@ REPLAY_TOL = 1e-6
 #: Moreau-Jean steps per control interval of the replay that scores J_replay
 SCORE_REFINE = 200
 
-__all__ = ["run", "main", "replay_control", "score"]
+__all__ = ["main", "replay_control", "run", "score"]
 
 
 def replay_control(ex, schedule):

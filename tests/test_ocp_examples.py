@@ -9,7 +9,7 @@ from studies._ocp_models import EXAMPLES
 
 def test_point_on_plane_example_is_a_success_at_the_discrete_closed_form():
     ex = EXAMPLES["point_on_plane"]()
-    row, res = study._ours(ex, 20)
+    row, _ = study._ours(ex, 20)
     assert row["ours_success"] and row["ours_method"] == "event" and row["ours_miss"] <= 1e-9
     d, T = np.hypot(1.0, 0.5), ex.T
     discrete = 12 * d ** 2 * 400 / (T ** 3 * 399) + (0.3 * 9.81) ** 2 * T

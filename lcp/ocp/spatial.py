@@ -17,8 +17,14 @@ slide (f = 0 forces U = 0), so the velocity law must keep every contact loaded, 
 on a plane under gravity does.
 
 :class:`SpatialTranscription` builds the NLP for the velocity law (every contact closed at every
-step), uniform steps, the constant or linear hold, fixed or free final time; the gap law, free
-steps and the affine hold are refused by name (:func:`check_spatial`). Its ``diagnose_law`` is the
+step), uniform or free steps, the constant or linear hold, fixed or free final time; the gap law
+and the affine hold are refused by name (:func:`check_spatial`). With free steps, the cross
+complementarity of FESD (as in :mod:`lcp.ocp.transcription`) puts every switch on a node:
+0 <= beta_{k-1} perp D_k = mu^2 N_k N_{k-1} - f_k . f_{k-1} >= 0 (D_k >= 0 by Cauchy-Schwarz within
+the disks, zero only with both frictions on their rims and parallel), so a contact sliding at node k
+keeps its friction on the rim, in the same direction, over step k (it can stop only at a node), and
+N_k perp w_N,{k-1}. Not yet: a start that slides (v0 with U != 0) is not tied to step 0's friction
+direction. Its ``diagnose_law`` is the
 disk law's residual (:meth:`lcp.contact.spatial_problem.ConeContactProblem.residual`) on each step's
 velocity-level problem, recomputed in NumPy. Imports the planar transcription (its bookkeeping and
 step function) and the contact layer; it must not import the solve, the problem or the studies.
@@ -50,9 +56,8 @@ def check_spatial(system, contact_law: str, hold: str, steps: str) -> None:
                          "contact_law='velocity' (a contact that starts open needs the gap law, planar only)")
     if hold not in ("constant", "linear"):
         raise ValueError(f"contact {name!r} is spatial: hold must be 'constant' or 'linear', got {hold!r}")
-    if steps != "uniform":
-        raise ValueError(f"contact {name!r} is spatial: steps must be 'uniform' (no cross complementarity "
-                         f"for the disk law yet), got {steps!r}")
+    if steps not in ("uniform", "free"):
+        raise ValueError(f"contact {name!r} is spatial: steps must be 'uniform' or 'free', got {steps!r}")
 
 
 class SpatialTranscription(Transcription):
@@ -71,7 +76,9 @@ class SpatialTranscription(Transcription):
         self.kin = ca.Function("kin", [sys.t_sym, sys.q_sym], [sys.mass_expr, sys.H_expr,
                                                                ca.jacobian(sys.constraints_expr, sys.q_sym)])
         self.gap_scale = pb.theta * pb.T / pb.N
-        self.gap_law = self.restitution = self.cross = False
+        self.gap_law = self.restitution = False
+        #: the cross complementarity of free steps (module docstring)
+        self.cross = pb.steps == "free"
         self._x, self._lbx, self._ubx, self._nx = [], [], [], 0
         self._g, self._lbg, self._ubg = [], [], []
         self.ix = {}
@@ -89,15 +96,27 @@ class SpatialTranscription(Transcription):
         sigma, q0p, v0p = ca.SX.sym("sigma"), ca.SX.sym("q0", n), ca.SX.sym("v0", n)
         Tv = self._var("T", 1, *pb.T_bounds, key="T") if pb.free_time else ca.SX(pb.T)
         z = self._var("z", 1, -np.inf, np.inf, key="z") if pb.max_cost is not None else None
-        h = Tv / N
+        if pb.steps == "free":  # step lengths as unknowns, as in the planar transcription
+            lo, hi = pb.step_bounds
+            hmin = lo * (pb.T_bounds[0] if pb.free_time else pb.T) / N
+            hmax = hi * (pb.T_bounds[1] if pb.free_time else pb.T) / N
+            hs = [self._var(f"h{k}", 1, hmin, hmax, key="h") for k in range(N)]
+            self._constrain(ca.sum1(ca.vertcat(*hs)) - Tv, 0.0, 0.0)
+        else:
+            hs = [Tv / N] * N
+        tk = [ca.SX(0)]
+        for k in range(N):
+            tk.append(tk[-1] + hs[k])
+        for k, tval in pb.node_times.items():
+            self._constrain(tk[k] - tval, 0.0, 0.0)
         us = [self._var(f"u{k}", nu, pb.u_min, pb.u_max, key="u") for k in range(pb.control_rows)]
         qs, vs = [q0p], [v0p]
         for k in range(1, N + 1):
             qs.append(self._var(f"q{k}", n, -np.inf, np.inf, key="q"))
             vs.append(self._var(f"v{k}", n, -np.inf, np.inf, key="v"))
-        J, sizes = ca.SX(0), {}
+        J, sizes, prev = ca.SX(0), {}, None
         for k in range(N):
-            t0 = k * h
+            t0, h = tk[k], hs[k]
             ua, ub = self.control_pair(us, k)
             qa, qb, va, vb = qs[k], qs[k + 1], vs[k], vs[k + 1]
             blk = {nm: self._var(f"{nm}{k}", m, 0.0, np.inf, key=nm) for a_w in SPATIAL_PAIRS for nm in a_w}
@@ -120,7 +139,11 @@ class SpatialTranscription(Transcription):
                 self._constrain(blk["s"][j] - (mu[j] ** 2 * blk["pN"][j] ** 2 - ca.sumsqr(fj)), 0.0, 0.0)
             a = ca.vertcat(*[blk[x] for x, _ in SPATIAL_PAIRS])
             w = ca.vertcat(*[blk[y] for _, y in SPATIAL_PAIRS])
+            if self.cross and prev is not None:
+                a, w = ca.vertcat(a, self._cross(k, blk, f, prev, mu, off)), ca.vertcat(w, prev["beta"])
+                a, w = ca.vertcat(a, blk["pN"]), ca.vertcat(w, prev["wN"])
             self._constrain(a * w - sigma, -np.inf, 0.0)  # Scholtes
+            prev = {**blk, "f": f}
             st = pb.make_step(k, t0, h, qa, qb, va, vb, ua, ub, pN, pT)
             if pb.stage_cost is not None:
                 J = J + h * ca.SX(pb.stage_cost(st))
@@ -146,13 +169,25 @@ class SpatialTranscription(Transcription):
         self.lbg, self.ubg = np.concatenate(self._lbg), np.concatenate(self._ubg)
         del self._x, self._g, self._lbx, self._ubx, self._lbg, self._ubg, self._nx
 
+    def _cross(self, k, blk, f, prev, mu, off):
+        """The slack D_k = mu^2 N_k N_{k-1} - f_k . f_{k-1} >= 0 per contact (a variable ``D``), whose
+        pair with beta_{k-1} keeps a contact sliding at node k on the rim in step k, its friction in
+        the direction of step k - 1's."""
+        m = self.pb.system.n_contacts
+        D = self._var(f"D{k}", m, 0.0, np.inf, key="D")
+        for j in range(m):
+            rows = slice(int(off[j]), int(off[j + 1]))
+            self._constrain(D[j] - (mu[j] ** 2 * blk["pN"][j] * prev["pN"][j] - ca.dot(f[rows], prev["f"][rows])),
+                            0.0, 0.0)
+        return D
+
     # ------------------------------------------------------------------ numbers out of x
     def unpack(self, x):
         """(T, steps, q, v, u, p_N (N, m), p_T (N, n_tangent)) of a vector of NLP variables."""
         pb, ix = self.pb, self.ix
         N, n, m, nt = pb.N, pb.system.n, pb.system.n_contacts, pb.system.n_tangent
         T = float(x[ix["T"]].ravel()[0]) if pb.free_time else pb.T
-        steps = np.full(N, T / N)
+        steps = x[ix["h"]].ravel() if pb.steps == "free" else np.full(N, T / N)
         q = np.vstack([pb.q0] + [x[i] for i in ix["q"]]).reshape(N + 1, n)
         v = np.vstack([pb.v0] + [x[i] for i in ix["v"]]).reshape(N + 1, n)
         u = np.vstack([x[i] for i in ix["u"]]).reshape(-1, pb.nu)
@@ -170,6 +205,7 @@ class SpatialTranscription(Transcription):
         pb, ix = self.pb, self.ix
         sys = pb.system
         m, off, mu = sys.n_contacts, sys.tangent_offsets, sys.mu
+        prev = None
         for k in range(pb.N):
             H = sys.contact_jacobian(gs.q[k])
             uN, U = H[:m] @ gs.v[k + 1], H[m:] @ gs.v[k + 1]
@@ -181,6 +217,10 @@ class SpatialTranscription(Transcription):
                 fj, Uj = f[off[j]:off[j + 1]], U[off[j]:off[j + 1]]
                 x0[ix["s"][k][j]] = max(mu[j] ** 2 * pN[j] ** 2 - float(fj @ fj), 0.0)
                 x0[ix["beta"][k][j]] = float(np.linalg.norm(Uj)) / max(mu[j] * pN[j], 1e-9)
+                if self.cross and prev is not None:
+                    fp = prev[1][off[j]:off[j + 1]]
+                    x0[ix["D"][k - 1][j]] = max(mu[j] ** 2 * pN[j] * prev[0][j] - float(fj @ fp), 0.0)
+            prev = (pN, f)
 
     def diagnose_law(self, x) -> dict:
         """The disk law's residual on each step's velocity-level problem, the dynamics residual and
@@ -190,7 +230,7 @@ class SpatialTranscription(Transcription):
         _, hs, q, v, u, pN, pT = self.unpack(x)
         N, n, m, nb = pb.N, sys.n, sys.n_contacts, sys.n_bilateral
         ua, ub = (u, u) if pb.hold == "constant" else (u[:-1], u[1:])
-        tk = np.arange(N) * hs[0]
+        tk = np.concatenate([[0.0], np.cumsum(hs)])[:-1]
         out = self.step.map(N)(tk[None, :], hs[None, :], q[:-1].T, v[:-1].T, ua.T, (0.5 * (ua + ub)).T, (ub - ua).T)
 
         def blocks(a, r, c):  # (r, c N) -> (N, r, c)
@@ -216,14 +256,27 @@ class SpatialTranscription(Transcription):
         vplus = vfree + np.einsum("kij,kj->ki", SHt, p)
         a = np.concatenate([x[self.ix[nm]].ravel() for nm, _ in SPATIAL_PAIRS])
         w = np.concatenate([x[self.ix[nm]].ravel() for _, nm in SPATIAL_PAIRS])
+        cross = prod = 0.0
+        for ia, iw in self._cross_pairs():
+            cross = max(cross, float(np.max(np.abs(np.minimum(x[ia], x[iw])), initial=0.0)))
+            prod = max(prod, float(np.max(x[ia] * x[iw], initial=0.0)))
         return {"residual": res, "dynamics": float(np.max(np.abs(vplus - v[1:]))), "modes": modes, "conflicts": 0,
-                "max_product": float(np.max(a * w)), "lcp": float(np.max(np.abs(np.minimum(a, w)))), "cross": 0.0}
+                "max_product": max(float(np.max(a * w)), prod), "lcp": float(np.max(np.abs(np.minimum(a, w)))),
+                "cross": cross}
+
+    def _cross_pairs(self):
+        """(index of a, index of w) of the cross pairs: D_k against beta_{k-1}, N_k against w_N,{k-1}."""
+        if not self.cross or self.pb.N < 2:
+            return []
+        ix = self.ix
+        return [(ix["D"].reshape(-1), ix["beta"][:-1].reshape(-1)),
+                (ix["pN"][1:].reshape(-1), ix["wN"][:-1].reshape(-1))]
 
     def fixed_mode_bounds_law(self, x):
         """Bounds with the smaller member of each pair (N, w_N), (beta, s) at x fixed at zero."""
         lbx, ubx = self.lbx.copy(), self.ubx.copy()
-        for a, w in SPATIAL_PAIRS:
-            ia, iw = self.ix[a].reshape(-1), self.ix[w].reshape(-1)
+        pairs = [(self.ix[a].reshape(-1), self.ix[w].reshape(-1)) for a, w in SPATIAL_PAIRS] + self._cross_pairs()
+        for ia, iw in pairs:
             small = x[ia] <= x[iw]
             ubx[ia[small]] = 0.0
             ubx[iw[~small]] = 0.0
