@@ -30,6 +30,7 @@ __all__ = ["NO_PEER", "PEERS", "PeerResult", "available", "solve_peer"]
 #: why an example has no nosnoc peer
 NO_PEER = {
     "point_on_plane": "nosnoc_py 0.2.0 has no spatial (disk) friction model",
+    "point_stick_slide": "nosnoc_py 0.2.0 has no spatial (disk) friction model",
     "hopper": "nosnoc_py's hopper uses time freezing with a speed-of-time control (another horizon); not run",
     "two_discs": "nosnoc_py's discs use time freezing with a speed-of-time control (another horizon); not run",
     "box_tip": "not one of nosnoc's examples",

@@ -21,7 +21,7 @@ from lcp.model.system import Contact, System
 from lcp.ocp import OptimalControlProblem, add_control, effort
 
 __all__ = ["EXAMPLES", "Example", "block_chain", "box_tip", "cart_pole", "hopper", "motor", "point_on_plane",
-           "two_discs"]
+           "point_stick_slide", "two_discs"]
 
 G = 9.81
 
@@ -84,6 +84,28 @@ def point_on_plane(mu: float = 0.3, T: float = 1.0, target=(1.0, 0.5)) -> Exampl
                    make, _effort, _zero, 20, (10, 20, 40), ref,
                    "12 d^2/T^3 + (mu g)^2 T (straight slide); the constant hold's discrete optimum is "
                    "12 d^2 N^2/(T^3 (N^2-1)) + (mu g)^2 T")
+
+
+def point_stick_slide(mu: float = 0.3, T: float = 2.0, target=(1.0, 0.5)) -> Example:
+    """:func:`point_on_plane` over T = 2 s, longer than the optimal slide time sqrt(6 d / (mu g)) = 1.51 s:
+    the point sticks, slides and sticks, and free steps (the disk law's cross complementarity) put the
+    stop on a node. Continuous optimum 4/3 (mu g)^2 tau* with tau* = (36 d^2 / (mu g)^2)^(1/4); over
+    n equal sliding steps of the constant hold 4/3 (mu g)^2 tau_n, tau_n = (36 d^2 n^2 / ((n^2 - 1)
+    (mu g)^2))^(1/4)."""
+    ex = point_on_plane(mu, T=1.0, target=target)
+    d, c = float(np.hypot(*target)), mu * G
+    tau = (36 * d ** 2 / c ** 2) ** 0.25
+    assert tau < T
+
+    def make(N):
+        return OptimalControlProblem(ex.system, N, T=T, q0=np.zeros(3), v0=np.zeros(3), stage_cost=effort,
+                                     steps="free",
+                                     terminal_constraints=lambda q, v: ca.vertcat(q[0] - target[0], q[1] - target[1],
+                                                                                  v[0], v[1]))
+
+    return Example("point_stick_slide", "point on a plane: stick, slide, stick (free steps)", ex.system, ex.q0,
+                   ex.v0, T, make, _effort, _zero, 10, (6, 10, 20), 4 / 3 * c * c * tau,
+                   "4/3 (mu g)^2 tau*; over n sliding steps 4/3 (mu g)^2 tau_n")
 
 
 # ----------------------------------------------------------------------------- block chain
@@ -324,5 +346,5 @@ def box_tip(w: float = 0.2, hgt: float = 0.4, m: float = 1.0, mu: float = 0.8, T
     return Example("box_tip", "box tipped over an edge", sys, q0, np.zeros(3), T, make, _effort, _zero, 20, (20, 40))
 
 
-EXAMPLES = {"point_on_plane": point_on_plane, "block_chain2": block_chain, "motor": motor, "cart_pole": cart_pole,
+EXAMPLES = {"point_on_plane": point_on_plane, "point_stick_slide": point_stick_slide, "block_chain2": block_chain, "motor": motor, "cart_pole": cart_pole,
             "two_discs": two_discs, "box_tip": box_tip, "hopper": hopper}

@@ -51,6 +51,11 @@ def test_quick_study_with_nosnoc(tmp_path):
         # never a success on an answer whose replay misses
         assert not r["ours_success"] or r["ours_miss"] <= study.REPLAY_TOL
     assert rows["point_on_plane"]["ours_success"]
+    ps = rows["point_stick_slide"]
+    assert ps["ours_success"] and ps["ours_miss"] <= 1e-12
+    n, c, d = 9, 0.3 * 9.81, np.hypot(1.0, 0.5)
+    assert ps["ours_cost"] == pytest.approx(4 / 3 * c * c * (36 * d * d * n * n / ((n * n - 1) * c * c)) ** 0.25,
+                                            rel=1e-10)
     chain = rows["block_chain2"]
     assert chain["nosnoc_status"].startswith("SUCCESS")
     # nosnoc's chain control replayed by the event method: it ends where nosnoc says within 1e-3
