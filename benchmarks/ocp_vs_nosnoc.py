@@ -24,7 +24,7 @@ whether it lands on distinct optima while reporting SUCCESS. Times: nosnoc ``tot
 study solve takes (building, guesses, multi-start, and its own replay check). Wall-clock on a shared
 machine: compare within one run; the load average is printed.
 
-(4) the examples of ``studies/ocp_examples.py`` (issue 27: a point on a plane through a spatial contact,
+(4) the examples of ``studies/ocp_examples.py`` (a point on a plane through a spatial contact,
 a two-block chain, nosnoc_py's motor and cart-pole with friction, nosnoc_py's hopper and two discs, a
 box tipped over an edge): per example and N, the package's objective, replay miss (and method), success
 and time, nosnoc's status, replay miss of its control through the package's event method and time,
@@ -83,7 +83,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="fewer N")
     ap.add_argument("--out", type=Path, default=HERE / "out")
-    ap.add_argument("--only-examples", action="store_true", help="only table (4), the examples of issue 27")
+    ap.add_argument("--only-examples", action="store_true", help="only table (4), the examples of studies/ocp_examples.py")
     args = ap.parse_args(argv)
     if args.only_examples:
         return examples_table(args)
@@ -190,7 +190,7 @@ def examples_table(args) -> int:
         w.writeheader()
         for r in rows:
             w.writerow({**r, "load_before": load0, "load_after": load1})
-    print(f"\n(4) examples of issue 27 (studies/ocp_examples.py); success needs the replay within "
+    print(f"\n(4) the examples of studies/ocp_examples.py; success needs the replay within "
           f"{ocp_examples.REPLAY_TOL:g}; J_replay: one continuous cost on a replay of each control")
     print(f"{'example':>15} {'N':>4} | {'ok':>3} {'J_replay':>12} {'miss':>9} {'time(s)':>7} | {'nosnoc':>8} "
           f"{'J_replay':>12} {'miss':>9} {'time(s)':>7} | {'nosnoc/lcp':>10}")

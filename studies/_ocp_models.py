@@ -1,4 +1,4 @@
-"""The systems and optimal control problems of :mod:`studies.ocp_examples` (issue 27).
+"""The systems and optimal control problems of :mod:`studies.ocp_examples`.
 
 Each builder returns an :class:`Example`: the controlled System, its start, the problem factory
 ``make(N)`` and the continuous-time cost (``integrand(t, q, v, u)`` and ``terminal(q, v)``) with
