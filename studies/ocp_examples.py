@@ -127,11 +127,17 @@ def _figure(rows, path):
     x = np.arange(len(names))
     for ax, key, label in ((axes[0], "miss", "replay miss (final state)"), (axes[1], "time", "time [s]")):
         for who, mk, dx in (("ours", "o", -0.1), ("nosnoc", "s", 0.1)):
-            for i, nm in enumerate(names):
-                vals = [r[f"{who}_{key}"] for r in rows if r["example"] == nm]
-                vals = [max(v, 1e-17) for v in vals if np.isfinite(v)]
-                ax.scatter([i + dx] * len(vals), vals, marker=mk, color="tab:blue" if who == "ours" else "tab:red",
-                           label=("lcp.ocp" if who == "ours" else "nosnoc") if i == 0 else None)
+            color = "tab:blue" if who == "ours" else "tab:red"
+            for ok in (True, False):
+                # ours: filled where the solve is a success, hollow where it is not (its iterate replayed)
+                sel = [r for r in rows if who == "nosnoc" or bool(r["ours_success"]) == ok]
+                if who == "nosnoc" and not ok:
+                    continue
+                xs = [names.index(r["example"]) + dx for r in sel if np.isfinite(r[f"{who}_{key}"])]
+                ys = [max(r[f"{who}_{key}"], 1e-17) for r in sel if np.isfinite(r[f"{who}_{key}"])]
+                lab = {("ours", True): "lcp.ocp, success", ("ours", False): "lcp.ocp, not a success",
+                         ("nosnoc", True): "nosnoc (its replay by our event method)"}[(who, ok)]
+                ax.scatter(xs, ys, marker=mk, facecolors=color if ok else "none", edgecolors=color, label=lab)
         ax.set_yscale("log")
         ax.set_xticks(x, names, rotation=30, ha="right")
         ax.set_ylabel(label)
