@@ -23,6 +23,14 @@ whether it lands on distinct optima while reporting SUCCESS. Times: nosnoc ``tot
 (model, NLP, IPOPT set-up) + the homotopy, replay excluded; the package's ``total_s`` = everything its
 study solve takes (building, guesses, multi-start, and its own replay check). Wall-clock on a shared
 machine: compare within one run; the load average is printed.
+
+(4) the examples of ``studies/ocp_examples.py`` (a point on a plane through a spatial contact,
+a two-block chain, nosnoc_py's motor and cart-pole with friction, nosnoc_py's hopper and two discs, a
+box tipped over an edge): per example and N, the package's objective, replay miss (and method), success
+and time, nosnoc's status, replay miss of its control through the package's event method and time,
+both controls scored by the same continuous cost on a replay (``J_replay``), and the time ratio
+nosnoc / package within the run. Written to ``ocp_vs_nosnoc_examples.csv``. ``--only-examples`` runs
+this table alone.
 """
 from __future__ import annotations
 
@@ -75,7 +83,10 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="fewer N")
     ap.add_argument("--out", type=Path, default=HERE / "out")
+    ap.add_argument("--only-examples", action="store_true", help="only table (4), the examples of studies/ocp_examples.py")
     args = ap.parse_args(argv)
+    if args.only_examples:
+        return examples_table(args)
     from studies import _nosnoc_peer as peer
 
     if not peer.available():
@@ -159,6 +170,37 @@ def main(argv=None):
     errors = [r for r in nos + starts if r["replay_error"]]
     for r in errors:
         print(f"replay failed: {r['problem']} N={r['N']}: {r['replay_error']}")
+    print(f"load average before / after: {load0} / {load1}")
+    print(f"written to {path}")
+    return examples_table(args)
+
+
+def examples_table(args) -> int:
+    """Table (4): the examples of studies/ocp_examples.py, ours against nosnoc in one run."""
+    from studies import ocp_examples
+
+    load0 = _load()
+    out = ocp_examples.run(out=args.out / "ocp_examples", quick=args.quick)
+    load1 = _load()
+    rows = out["rows"]
+    path = args.out / "ocp_vs_nosnoc_examples.csv"
+    cols = list(dict.fromkeys(c for r in rows for c in r))
+    with path.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=cols + ["load_before", "load_after"], restval="")
+        w.writeheader()
+        for r in rows:
+            w.writerow({**r, "load_before": load0, "load_after": load1})
+    print(f"\n(4) the examples of studies/ocp_examples.py; success needs the replay within "
+          f"{ocp_examples.REPLAY_TOL:g}; J_replay: one continuous cost on a replay of each control")
+    print(f"{'example':>15} {'N':>4} | {'ok':>3} {'J_replay':>12} {'miss':>9} {'time(s)':>7} | {'nosnoc':>8} "
+          f"{'J_replay':>12} {'miss':>9} {'time(s)':>7} | {'nosnoc/lcp':>10}")
+    for r in rows:
+        print(f"{r['example']:>15} {r['N']:>4} | {'yes' if r['ours_success'] else 'no':>3} {r['ours_J_replay']:>12.6g} "
+              f"{r['ours_miss']:>9.2e} {r['ours_time']:>7.2f} | {r['nosnoc_status'][:8] or 'n/a':>8} "
+              f"{r['nosnoc_J_replay']:>12.6g} {r['nosnoc_miss']:>9.2e} {r['nosnoc_time']:>7.2f} | {r['time_ratio']:>10.2f}")
+    for r in rows:
+        if r["nosnoc_note"] and r["N"] == min(x["N"] for x in rows if x["example"] == r["example"]):
+            print(f"{r['example']}: no nosnoc row: {r['nosnoc_note']}")
     print(f"load average before / after: {load0} / {load1}")
     print(f"written to {path}")
     return 0

@@ -12,6 +12,8 @@ control_bounds=...)``, the force affine in u); :class:`OptimalControlProblem` op
   step, jumps at the nodes);
 - :mod:`~lcp.ocp.complementarity`: the Scholtes homotopy, polishing and the independent checks;
 - :mod:`~lcp.ocp.replay`: open-loop replay and the replay miss every result carries;
+- :mod:`~lcp.ocp.spatial`: spatial contacts (the Coulomb disk law as a complementarity, velocity law);
+- :mod:`~lcp.ocp.pairs`: the user's complementarity path constraints (``complementarity=[(a, b)]``);
 - :mod:`~lcp.ocp.results`, :mod:`~lcp.ocp.options`, :mod:`~lcp.ocp.model` (``tangential_push``,
   ``add_control``).
 

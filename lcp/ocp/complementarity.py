@@ -28,10 +28,12 @@ import numpy as np
 
 from lcp.contact.problem import OPEN, ContactProblem
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions
+from lcp.ocp.pairs import fix_pairs, pair_residual
 from lcp.ocp.results import HomotopyStage
 from lcp.ocp.transcription import IMPULSE_PAIRS, PAIRS
 
-__all__ = ["diagnose", "fixed_mode_bounds", "ipopt_solver", "run_fixed_modes", "run_homotopy", "run_phases"]
+__all__ = ["diagnose", "diagnose_contacts", "fixed_mode_bounds", "fixed_mode_bounds_contacts", "ipopt_solver",
+           "run_fixed_modes", "run_homotopy", "run_phases"]
 
 
 def ipopt_solver(tr, options: HomotopyOptions, warm: bool, cache: dict) -> ca.Function:
@@ -138,6 +140,15 @@ def _normal_start_gap(tr):
 
 
 def fixed_mode_bounds(tr, x):
+    """:func:`fixed_mode_bounds_contacts` (or the transcription's own ``fixed_mode_bounds_law``),
+    with the smaller member of each user pair (:mod:`lcp.ocp.pairs`) fixed at zero too."""
+    own = getattr(tr, "fixed_mode_bounds_law", None)
+    lbx, ubx = own(x) if own is not None else fixed_mode_bounds_contacts(tr, x)
+    fix_pairs(tr, x, ubx)
+    return lbx, ubx
+
+
+def fixed_mode_bounds_contacts(tr, x):
     """Variable bounds with, pair by pair (start-gap, impulse, cross, signed and rate pairs included),
     the smaller member of each complementarity pair at ``x`` fixed at zero: the mode of every step
     frozen as at ``x``.
@@ -275,6 +286,19 @@ def _rate_pairs(tr):
 
 
 def diagnose(tr, x) -> dict:
+    """The contacts' diagnosis (:func:`diagnose_contacts`, or the transcription's own
+    ``diagnose_law`` where it has one: spatial contacts), with the user's complementarity pairs
+    (:mod:`lcp.ocp.pairs`) counted among the cross pairs."""
+    own = getattr(tr, "diagnose_law", None)
+    d = own(x) if own is not None else diagnose_contacts(tr, x)
+    res, prod = pair_residual(tr, x)
+    if res or prod:
+        d["cross"] = max(d["cross"], res)
+        d["max_product"] = max(d["max_product"], prod)
+    return d
+
+
+def diagnose_contacts(tr, x) -> dict:
     """Coulomb residual, dynamics residual and modes per step, recomputed in NumPy.
 
     ``residual`` (impulse units) is the largest of: the Coulomb residual

@@ -12,8 +12,10 @@ from lcp.model.system import System, moving_contact
 from lcp.ocp.guess import multistart, simulate_guess
 from lcp.ocp.model import add_control
 from lcp.ocp.options import HomotopyOptions, positive
+from lcp.ocp.pairs import check_pairs
 from lcp.ocp.results import OCPGuess, OCPResult, Step
 from lcp.ocp.solve import solve_problem
+from lcp.ocp.spatial import check_spatial
 from lcp.model.schedule import AffineSchedule
 
 __all__ = ["OCP_HOLDS", "OptimalControlProblem"]
@@ -99,6 +101,8 @@ class OptimalControlProblem:
         every step (every contact stays closed: exact for a block that never leaves the floor, wrong
         for anything that flies). ``"auto"`` (default): the gap law when a contact starts open
         (g(q0) > 0), else the velocity law. :mod:`lcp.ocp.transcription` says more.
+    complementarity : list of (callable(Step), callable(Step)), optional
+        Path pairs 0 <= a(step) perp b(step) >= 0 at every step, relaxed with the contacts (:mod:`lcp.ocp.pairs`).
 
     Examples
     --------
@@ -123,7 +127,7 @@ class OptimalControlProblem:
                  stage_cost: Callable | None = None, terminal_cost: Callable | None = None,
                  terminal_constraints: Callable | None = None, path_constraints: Callable | None = None,
                  path_equalities: Callable | None = None, max_cost: Callable | None = None, control_rate_weight: float = 0.0,
-                 replay_tol: float | None = 1e-6, contact_law: str = "auto"):
+                 replay_tol: float | None = 1e-6, contact_law: str = "auto", complementarity=None):
         from lcp.scenes.scene import Scene
 
         if isinstance(system, Scene):
@@ -132,7 +136,6 @@ class OptimalControlProblem:
             system = system.system
         if not isinstance(system, System):
             raise ValueError(f"system must be a System or a Scene, got {type(system).__name__}")
-        system.require_planar("the optimal-control transcription")
         refuse_kinematics(system, "the optimal-control transcription")
         _refuse_moving_contacts(system)
         if control_matrix is not None:
@@ -165,6 +168,7 @@ class OptimalControlProblem:
         if self.free_time and not self.T_bounds[0] <= self.T <= self.T_bounds[1]:
             raise ValueError(f"T (the initial guess) must lie within T_bounds {T_bounds!r}, got {T!r}")
         self.hold, self.steps, self.step_bounds = _grid(system, self.theta, hold, steps, step_bounds)
+        check_spatial(system, self.contact_law, self.hold, self.steps)  # what lcp.ocp.spatial models
         self.node_times = self._check_node_times(node_times)
         for name, fn in (("stage_cost", stage_cost), ("terminal_cost", terminal_cost),
                          ("terminal_constraints", terminal_constraints),
@@ -175,7 +179,7 @@ class OptimalControlProblem:
         self.stage_cost, self.terminal_cost = stage_cost, terminal_cost
         self.terminal_constraints, self.path_constraints = terminal_constraints, path_constraints
         self.path_equalities = path_equalities
-        self.max_cost = max_cost
+        self.max_cost, self.complementarity = max_cost, check_pairs(complementarity)
         self.control_rate_weight = positive("control_rate_weight", control_rate_weight, allow_zero=True)
         self.replay_tol = None if replay_tol is None else positive("replay_tol", replay_tol)
         self.transcription = None  # the NLP (lcp.ocp.transcription), built on the first solve, then reused

@@ -22,6 +22,7 @@ import casadi as ca
 import numpy as np
 
 from lcp.model.control import ControlSchedule
+from lcp.ocp.pairs import pair_violation
 from lcp.ocp.results import OCPResult, ReplayCheck, ReplayResult
 
 __all__ = ["replay", "replay_check"]
@@ -53,8 +54,8 @@ def _closed_form_system(result: OCPResult, options: dict):
     ``n_eval`` is asked for; else None."""
     from lcp.events.model import system_model
 
-    if set(options) - {"n_eval"} or result.control is None:
-        return None
+    if set(options) - {"n_eval"} or result.control is None or result.problem.system.is_spatial:
+        return None  # (spatial contacts: the spatial event integrator, restarted at the nodes)
     sysw = result.problem.system.with_control(result.control)
     model = system_model(sysw)
     T = float(result.t[-1])
@@ -237,7 +238,8 @@ def replay_check(result: OCPResult, tol: float, refine: int = 50) -> ReplayCheck
     final = float(max(np.max(np.abs(rp.q[-1] - result.q[-1])), np.max(np.abs(rp.v[-1] - result.v[-1]))))
     nodes = float(max(rp.max_error_q, rp.max_error_v))
     viol = 0.0
-    if pb.path_constraints is not None or pb.path_equalities is not None:
+    pairs = getattr(pb, "complementarity", [])
+    if pb.path_constraints is not None or pb.path_equalities is not None or pairs:
         u = result.u
         for k in range(len(result.t) - 1):
             j = 2 * k if result.hold == "affine" else k
@@ -253,6 +255,8 @@ def replay_check(result: OCPResult, tol: float, refine: int = 50) -> ReplayCheck
                 val = np.array(val, dtype=float).ravel()
                 if val.size:
                     viol = max(viol, float(np.max(np.abs(val) if absolute else val)))
+            if pairs:  # the user's complementarity pairs on the replayed states (lcp.ocp.pairs)
+                viol = max(viol, pair_violation(pairs, st))
     return ReplayCheck(method=method, final_miss=final, node_miss=nodes, path_violation=viol, tol=tol,
                        where=_where(result, rp, tol))
 

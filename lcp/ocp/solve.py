@@ -15,6 +15,7 @@ from lcp.ocp.guess import resample, x0_from_guess
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions
 from lcp.ocp.replay import replay_check
 from lcp.ocp.results import OCPGuess, OCPResult
+from lcp.ocp.spatial import SpatialTranscription
 from lcp.ocp.transcription import Transcription
 
 __all__ = ["bound_steps_note", "guess_from", "result_of", "solve_problem", "unbounded_note"]
@@ -31,7 +32,7 @@ def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
     if method not in ("homotopy", "phases"):
         raise ValueError(f"method must be 'homotopy' or 'phases', got {method!r}")
     if problem.transcription is None:
-        problem.transcription = Transcription(problem)
+        problem.transcription = (SpatialTranscription if problem.system.is_spatial else Transcription)(problem)
     t0 = time.perf_counter()
     first_pass = []
     if method == "phases" and guess is None:

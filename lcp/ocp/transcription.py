@@ -89,6 +89,8 @@ import time
 import casadi as ca
 import numpy as np
 
+from lcp.ocp.pairs import add_pairs
+
 __all__ = ["PAIRS", "Transcription"]
 
 #: complementarity pairs (multiplier, slack) of one contact in one step, in the order of the module
@@ -215,6 +217,7 @@ class Transcription:
         for k, tval in pb.node_times.items():
             self._constrain(tk[k] - tval, 0.0, 0.0)
         J = ca.SX(0)
+        pair_sizes = {}
         prev = None  # the previous step's (a, w) blocks, for the cross complementarity
         if self.cross:
             HN0, HT0 = sys.H_expr[:m, :], sys.H_expr[m:, :]
@@ -291,6 +294,8 @@ class Transcription:
                 self._constrain(ca.vec(ca.SX(pb.path_constraints(st))), -np.inf, 0.0)
             if pb.path_equalities is not None:
                 self._constrain(ca.vec(ca.SX(pb.path_equalities(st))), 0.0, 0.0)
+            if pb.complementarity:  # the user's pairs, relaxed with the contacts' (lcp.ocp.pairs)
+                add_pairs(pb.complementarity, k, st, sigma, self._var, self._constrain, pair_sizes)
             if pb.max_cost is not None:
                 self._constrain(_scalar(pb.max_cost(st), "max_cost") - z, -np.inf, 0.0)
         if pb.terminal_cost is not None:

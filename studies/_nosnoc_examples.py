@@ -1,0 +1,177 @@
+"""nosnoc (FESD, IPOPT) on the examples of :mod:`studies.ocp_examples` where nosnoc_py has them.
+
+The models and options are nosnoc_py's own examples, written in its Filippov (Stewart) form:
+examples/cart_pole_with_friction (RADAU IIA n_s = 2, 2 finite elements per stage, T = 5 s),
+examples/motor_with_friction (n_s = 2, 2 finite elements, comp_tol 1e-6, L2_RELAXED_SCALED step
+equilibration, T = 0.08 s), and the two-block chain of :func:`studies._ocp_models.block_chain` in the
+same form as examples/friction_block (one switching function per block velocity). The hopper and the
+two discs of nosnoc_py use time freezing with a speed-of-time control (a different horizon), the
+point on a plane needs the friction disk and the box is not one of nosnoc's examples: no peer is run
+for them (:data:`PEERS` says why).
+
+nosnoc is optional; :func:`available` says whether it imports. Imports the package's examples only
+through :mod:`studies._ocp_models`' constants; nothing here is imported by ``lcp``.
+"""
+from __future__ import annotations
+
+import contextlib
+import copy
+import importlib.util
+import io
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from lcp.model.control import ControlSchedule
+
+__all__ = ["NO_PEER", "PEERS", "PeerResult", "available", "solve_peer"]
+
+#: why an example has no nosnoc peer
+NO_PEER = {
+    "point_on_plane": "nosnoc_py 0.2.0 has no spatial (disk) friction model",
+    "point_stick_slide": "nosnoc_py 0.2.0 has no spatial (disk) friction model",
+    "hopper": "nosnoc_py's hopper uses time freezing with a speed-of-time control (another horizon); not run",
+    "two_discs": "nosnoc_py's discs use time freezing with a speed-of-time control (another horizon); not run",
+    "box_tip": "not one of nosnoc's examples",
+}
+
+
+def available() -> bool:
+    """Whether nosnoc can be imported (the optional ``ocp-peers`` extra)."""
+    return importlib.util.find_spec("nosnoc") is not None
+
+
+@dataclass
+class PeerResult:
+    """One nosnoc solve: its own objective, the control as a schedule on its stage grid, its final state
+    in the example's common coordinates (``common``), status and times (s)."""
+
+    name: str
+    N: int
+    objective: float
+    control: ControlSchedule
+    x_final: np.ndarray
+    status: str
+    ipopt_status: str
+    complementarity: float
+    build_time: float
+    solve_time: float
+    log: str = ""
+
+    @property
+    def total_time(self) -> float:
+        return self.build_time + self.solve_time
+
+
+def _opts(ns, N, T, n_s=2, fe=2, comp_tol=1e-8, step_eq=None):
+    opts = ns.NosnocOpts()
+    # the IPOPT options are a class-level dict shared by every instance: a copy per solve
+    opts.opts_casadi_nlp = copy.deepcopy(ns.NosnocOpts.opts_casadi_nlp)
+    opts.irk_scheme = ns.IrkSchemes.RADAU_IIA
+    opts.n_s, opts.N_stages, opts.N_finite_elements, opts.terminal_time = n_s, N, fe, T
+    opts.comp_tol = comp_tol
+    opts.homotopy_update_slope = 0.1
+    if step_eq is not None:
+        opts.step_equilibration = getattr(ns.StepEquilibrationMode, step_eq)
+    opts.print_level = 0
+    return opts
+
+
+def _cart_pole(ns, ca, N):
+    from studies._ocp_models import G
+
+    px, th, v, om, u = (ca.SX.sym(s) for s in ("px", "theta", "v", "om", "u"))
+    q, qd = ca.vertcat(px, th), ca.vertcat(v, om)
+    m1, m2, ell, Ff = 1.0, 0.1, 1.0, 2.0
+    M = ca.vertcat(ca.horzcat(m1 + m2, m2 * ell * ca.cos(th)), ca.horzcat(m2 * ell * ca.cos(th), m2 * ell ** 2))
+    C = ca.SX.zeros(2, 2)
+    C[0, 1] = -m2 * ell * om * ca.sin(th)
+    f_all = ca.vertcat(u, -m2 * G * ell * ca.sin(th)) - C @ qd
+    f1 = ca.vertcat(qd, ca.inv(M) @ (f_all - ca.vertcat(Ff, 0)))
+    f2 = ca.vertcat(qd, ca.inv(M) @ (f_all + ca.vertcat(Ff, 0)))
+    x = ca.vertcat(q, qd)
+    model = ns.NosnocModel(x=x, F=[ca.horzcat(f1, f2)], S=[np.array([[1], [-1]])], c=[v], x0=np.array([1.0, 0, 0, 0]),
+                           u=u)
+    x_ref = np.array([0, np.pi, 0, 0])
+    Q, QT = np.diag([10, 100, 1, 1]), np.diag([500, 100, 10, 10])
+    ocp = ns.NosnocOcp(lbu=np.array([-30.0]), ubu=np.array([30.0]),
+                       f_q=(x - x_ref).T @ Q @ (x - x_ref) + u * u, f_terminal=(x - x_ref).T @ QT @ (x - x_ref),
+                       lbx=-np.array([5.0, np.inf, np.inf, np.inf]), ubx=np.array([5.0, np.inf, np.inf, np.inf]))
+    return model, ocp, _opts(ns, N, 5.0)
+
+
+def _motor(ns, ca, N):
+    from studies._ocp_models import MOTOR as p
+
+    x1, x2, v1, v2, current, u = (ca.SX.sym(s) for s in ("x1", "x2", "v1", "v2", "I", "u"))
+    x = ca.vertcat(x1, v1, x2, v2, current)
+    A = np.array([[0, 1, 0, 0, 0],
+                  [-p["k"] / p["m1"], -p["c"] / p["m1"], p["k"] / p["m1"], p["c"] / p["m1"], p["K_F"] / p["m1"]],
+                  [0, 0, 0, 1, 0],
+                  [p["k"] / p["m2"], p["c"] / p["m2"], -p["k"] / p["m2"], -p["c"] / p["m2"], 0],
+                  [0, -p["K_S"] / p["L"], 0, 0, -p["R"] / p["L"]]])
+    B = np.zeros((5, 1))
+    B[-1, 0] = 1 / p["L"]
+    C1 = np.array([0, -p["F_R"] / p["m1"], 0, 0, 0])
+    f1, f2 = A @ x + B @ u + C1, A @ x + B @ u - C1
+    model = ns.NosnocModel(x=x, F=[ca.horzcat(f1, f2)], S=[np.array([[1], [-1]])], c=[v1], x0=np.zeros(5), u=u)
+    tg = p["target"]
+    ocp = ns.NosnocOcp(lbu=-p["u_max"] * np.ones(1), ubu=p["u_max"] * np.ones(1), f_q=u ** 2,
+                       g_terminal=x - np.array([tg, 0, tg, 0, 0]))
+    return model, ocp, _opts(ns, N, p["T"], comp_tol=1e-6, step_eq="L2_RELAXED_SCALED")
+
+
+def _chain(ns, ca, N):
+    from studies._ocp_models import G
+
+    x0, x1, v0, v1, u = (ca.SX.sym(s) for s in ("x0", "x1", "v0", "v1", "u"))
+    k, c, spacing = 50.0, 0.3 * G, 1.0
+    tension = k * (x1 - x0 - spacing)
+    base = ca.vertcat(v0, v1, u + tension, -tension)
+    F1 = ca.horzcat(base - ca.vertcat(0, 0, c, 0), base + ca.vertcat(0, 0, c, 0))
+    F2 = ca.horzcat(ca.vertcat(0, 0, 0, -c), ca.vertcat(0, 0, 0, c))
+    x = ca.vertcat(x0, x1, v0, v1)
+    S = [np.array([[1], [-1]]), np.array([[1], [-1]])]
+    model = ns.NosnocModel(x=x, F=[F1, F2], S=S, c=[v0, v1], x0=np.array([0.0, 1.0, 0, 0]), u=u)
+    ocp = ns.NosnocOcp(lbu=np.array([-30.0]), ubu=np.array([30.0]), f_q=u ** 2,
+                       g_terminal=ca.vertcat(x0 - 0.3, x1 - 1.3, v0, v1))
+    return model, ocp, _opts(ns, N, 1.0, comp_tol=1e-9)
+
+
+#: example name -> (builder, nosnoc's state -> the example's common coordinates)
+PEERS = {
+    "cart_pole": (_cart_pole, lambda x: np.asarray(x)[[0, 1, 2, 3]]),
+    "motor": (_motor, lambda x: np.asarray(x)[[0, 2, 1, 3, 4]]),  # (x1, x2, v1, v2, I)
+    "block_chain2": (_chain, lambda x: np.asarray(x)[[0, 1, 2, 3]]),
+}
+
+
+def solve_peer(name: str, N: int) -> PeerResult:
+    """nosnoc on example ``name`` with N control stages (ValueError for an example without a peer,
+    ImportError without nosnoc)."""
+    if name not in PEERS:
+        raise ValueError(f"no nosnoc peer for {name!r}: {NO_PEER.get(name, 'unknown example')}")
+    if not available():
+        raise ImportError("nosnoc is not installed (pip install 'lcp-lem[ocp-peers]')")
+    import casadi as ca
+    import nosnoc as ns
+
+    build, common = PEERS[name]
+    log = io.StringIO()
+    with contextlib.redirect_stdout(log):
+        t0 = time.perf_counter()
+        model, ocp, opts = build(ns, ca, int(N))
+        solver = ns.NosnocSolver(opts, model, ocp)
+        build_time = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        r = solver.solve()
+        solve_time = time.perf_counter() - t0
+    w = r["w_sol"]
+    comp = float(solver.problem.comp_res(w, solver.p_val).full()[0, 0])
+    u = np.asarray(r["u_list"], dtype=float).reshape(int(N), -1)
+    t_u = np.asarray(r["t_grid_u"], dtype=float)
+    return PeerResult(name=name, N=int(N), objective=float(r["cost_val"]) if "cost_val" in r else float("nan"),
+                      control=ControlSchedule(t_u, u), x_final=common(np.asarray(r["x_out"], dtype=float).ravel()),
+                      status=r["status"].name, ipopt_status=str(solver.solver.stats()["return_status"]),
+                      complementarity=comp, build_time=build_time, solve_time=solve_time, log=log.getvalue())

@@ -1,0 +1,214 @@
+"""Optimal control through contacts that open and close: examples, replay-checked, against nosnoc.
+
+Run: ``python -m studies.ocp_examples [--out DIR] [--quick]`` (headless; PNG and CSV into
+``figures/ocp_examples/``). The examples (:mod:`studies._ocp_models`): a point steered on a plane
+through a spatial contact (closed form; over 1 s it slides throughout, over 2 s it sticks, slides and
+sticks, on free steps), a two-block chain moved 0.3 m, nosnoc_py's linear motor
+with friction and cart-pole with friction, nosnoc_py's hopper and two discs, and a box tipped over
+an edge. For each, at N control intervals:
+
+- ours: :meth:`lcp.ocp.OptimalControlProblem.solve` (the homotopy from the default guess), its
+  objective, its replay miss (``result.replay``: the event method, or Moreau-Jean where the event
+  replay does not apply, and its method), its success (which requires the replay within 1e-6)
+  and time (building and solving, replay check included);
+- nosnoc (optional peer, :mod:`studies._nosnoc_examples`, nosnoc_py's own model and options where it
+  has the example): its status, its time, and the replay miss of its control through the package's
+  event method (one integration over the horizon, Moreau-Jean at T / 20000 if the event method
+  fails), measured on the coordinates both models share;
+- both controls scored by one measure, ``J_replay``: the example's continuous cost integrated
+  (midpoint rule, 200 subintervals per control interval, the states interpolated from a Moreau-Jean
+  replay of the control at T / (200 N)), plus the terminal cost at the replay's end (the objectives of the two transcriptions use different quadratures).
+
+A row is a success only when the replay is within tolerance; where the replay misses, the numbers
+are recorded as they are (``message`` says what the solver reported). The study runs without
+nosnoc and says so. ``--quick``: five examples at one N each (what the test suite runs).
+"""
+from __future__ import annotations
+
+import itertools
+import time
+
+import numpy as np
+
+import lcp
+from studies import _nosnoc_examples as peers
+from studies._common import out_dir, parse_args, save, write_csv
+from studies._ocp_models import EXAMPLES
+
+NAME = "ocp_examples"
+DESCRIPTION = "Optimal control examples through contact (spatial, chains, nosnoc's), replay-checked, with nosnoc."
+QUICK = ("point_on_plane", "point_stick_slide", "block_chain2", "motor", "cart_pole")
+REPLAY_TOL = 1e-6
+#: Moreau-Jean steps per control interval of the replay that scores J_replay
+SCORE_REFINE = 200
+
+__all__ = ["main", "replay_control", "run", "score"]
+
+
+def replay_control(ex, schedule):
+    """The control replayed open loop from the example's start: (final q, final v, method). The event
+    method over the whole horizon, else Moreau-Jean at T / 20000 (reported)."""
+    T = float(schedule.times[-1])
+    try:
+        sim = lcp.simulate(ex.system, T, method="event", control=schedule, q0=ex.q0, v0=ex.v0)
+        if sim.success:
+            return sim.q[-1], sim.v[-1], "event"
+    except (ValueError, RuntimeError):
+        pass
+    h = T / 20000
+    sim = lcp.simulate(ex.system, T, h=h, control=schedule, q0=ex.q0, v0=ex.v0)
+    return sim.q[-1], sim.v[-1], f"moreau-jean h={h:.3g}"
+
+
+def score(ex, schedule, N):
+    """J_replay: the example's cost along a Moreau-Jean replay of the control at T / (SCORE_REFINE N)."""
+    T = float(schedule.times[-1])
+    sim = lcp.simulate(ex.system, T, h=T / (SCORE_REFINE * N), control=schedule, q0=ex.q0, v0=ex.v0)
+    if not sim.success:
+        return float("nan")
+    t = np.asarray(sim.t)
+    # midpoint rule on SCORE_REFINE subintervals of every control interval (the control's jumps are
+    # ends of subintervals, so a piecewise-constant control's effort is exact), the states
+    # interpolated linearly from the replay
+    nodes = np.asarray(schedule.times, dtype=float)
+    edges = np.concatenate([np.linspace(a, b, SCORE_REFINE + 1)[:-1] for a, b in itertools.pairwise(nodes)]
+                           + [nodes[-1:]])
+    tm, dt = 0.5 * (edges[1:] + edges[:-1]), np.diff(edges)
+    u = np.asarray(schedule(tm), dtype=float).reshape(len(tm), -1)
+    qm = np.column_stack([np.interp(tm, t, sim.q[:, j]) for j in range(sim.q.shape[1])])
+    vm = np.column_stack([np.interp(tm, t, sim.v[:, j]) for j in range(sim.v.shape[1])])
+    return float(np.sum(dt * ex.integrand(tm, qm, vm, u)) + ex.terminal(sim.q[-1], sim.v[-1]))
+
+
+def _ours(ex, N):
+    t0 = time.perf_counter()
+    try:
+        ocp = ex.make(N)
+        res = ocp.solve(**ex.solve_kw)
+    except (ValueError, RuntimeError) as exc:
+        return {"ours_success": False, "ours_cost": float("nan"), "ours_J_replay": float("nan"),
+                "ours_miss": float("nan"), "ours_method": "", "ours_time": time.perf_counter() - t0,
+                "ours_message": f"error: {exc}"}, None
+    elapsed = time.perf_counter() - t0
+    rp = res.replay
+    J = score(ex, res.control, N) if np.all(np.isfinite(res.u)) else float("nan")
+    return {"ours_success": bool(res.success), "ours_cost": float(res.cost), "ours_J_replay": J,
+            "ours_miss": rp.final_miss if rp is not None else float("nan"),
+            "ours_method": rp.method if rp is not None else "", "ours_time": elapsed,
+            "ours_residual": float(res.complementarity_residual), "ours_iterations": int(res.iterations),
+            "ours_message": res.message}, res
+
+
+def _nosnoc(ex, N):
+    empty = {"nosnoc_status": "", "nosnoc_objective": float("nan"), "nosnoc_J_replay": float("nan"),
+             "nosnoc_miss": float("nan"), "nosnoc_method": "", "nosnoc_time": float("nan"), "nosnoc_note": ""}
+    if ex.name not in peers.PEERS:
+        return {**empty, "nosnoc_note": peers.NO_PEER.get(ex.name, "no peer")}, None
+    if not peers.available():
+        return {**empty, "nosnoc_note": "nosnoc is not installed (optional peer)"}, None
+    pr = peers.solve_peer(ex.name, N)
+    try:
+        qf, vf, method = replay_control(ex, pr.control)
+        miss = float(np.max(np.abs(ex.common_state(qf, vf) - pr.x_final)))
+    except (ValueError, RuntimeError) as exc:
+        miss, method = float("nan"), f"replay failed: {exc}"
+    return {"nosnoc_status": f"{pr.status} ({pr.ipopt_status})", "nosnoc_objective": pr.objective,
+            "nosnoc_J_replay": score(ex, pr.control, N), "nosnoc_miss": miss, "nosnoc_method": method,
+            "nosnoc_time": pr.total_time, "nosnoc_note": ""}, pr
+
+
+def _figure(rows, path):
+    import matplotlib.pyplot as plt
+
+    from studies._common import legend
+
+    names = list(dict.fromkeys(r["example"] for r in rows))
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4))
+    x = np.arange(len(names))
+    for ax, key, label in ((axes[0], "miss", "replay miss (final state)"), (axes[1], "time", "time [s]")):
+        for who, mk, dx in (("ours", "o", -0.1), ("nosnoc", "s", 0.1)):
+            color = "tab:blue" if who == "ours" else "tab:red"
+            for ok in (True, False):
+                # ours: filled where the solve is a success, hollow where it is not (its iterate replayed)
+                sel = [r for r in rows if who == "nosnoc" or bool(r["ours_success"]) == ok]
+                if who == "nosnoc" and not ok:
+                    continue
+                xs = [names.index(r["example"]) + dx for r in sel if np.isfinite(r[f"{who}_{key}"])]
+                ys = [max(r[f"{who}_{key}"], 1e-17) for r in sel if np.isfinite(r[f"{who}_{key}"])]
+                lab = {("ours", True): "lcp.ocp, success", ("ours", False): "lcp.ocp, not a success",
+                         ("nosnoc", True): "nosnoc (its replay by our event method)"}[(who, ok)]
+                ax.scatter(xs, ys, marker=mk, facecolors=color if ok else "none", edgecolors=color, label=lab)
+        ax.set_yscale("log")
+        ax.set_xticks(x, names, rotation=30, ha="right")
+        ax.set_ylabel(label)
+        if key == "miss":
+            ax.axhline(REPLAY_TOL, color="0.5", ls="--", lw=0.8)
+        legend(ax)
+    fig.suptitle("optimal control examples: replay miss and time (every N)")
+    return save(fig, path)
+
+
+def _trajectory_figure(ex, res, path):
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for j, nm in enumerate(ex.system.names or [f"q{j}" for j in range(ex.system.n)]):
+        ax.plot(res.t, res.q[:, j], marker=".", label=nm)
+    ax.set_xlabel("t [s]")
+    ax.set_title(f"{ex.title}: optimizer nodes (N = {len(res.t) - 1}), success = {res.success}")
+    from studies._common import legend
+
+    legend(ax)
+    return save(fig, path)
+
+
+def run(out=None, quick: bool = False, examples=None) -> dict:
+    """Solve every example (ours and nosnoc's), replay both, write the CSV and figures.
+
+    Returns ``rows`` (one dict per example and N), ``nosnoc`` (whether the peer ran) and ``files``.
+    """
+    path = out_dir(out, NAME)
+    names = examples or (QUICK if quick else tuple(EXAMPLES))
+    rows, files = [], []
+    for name in names:
+        ex = EXAMPLES[name]()
+        for N in ((ex.N_quick,) if quick else ex.N_full):
+            row = {"example": name, "title": ex.title, "N": N, "reference": ex.reference}
+            ours, res = _ours(ex, N)
+            row.update(ours)
+            row.update(_nosnoc(ex, N)[0])
+            row["time_ratio"] = row["nosnoc_time"] / row["ours_time"]
+            rows.append(row)
+            if res is not None and N == (ex.N_quick if quick else ex.N_full[0]) and np.all(np.isfinite(res.q)):
+                files.append(_trajectory_figure(ex, res, path / f"trajectory_{name}.png"))
+    cols = []
+    for r in rows:
+        cols += [c for c in r if c not in cols]
+    files.append(write_csv(path / "examples.csv", cols, [[r.get(c, "") for c in cols] for r in rows]))
+    files.append(_figure(rows, path / "summary.png"))
+    return {"rows": rows, "nosnoc": peers.available(), "files": files}
+
+
+def main(argv=None):
+    args = parse_args(NAME, DESCRIPTION, argv)
+    out = run(args.out, quick=args.quick)
+    if not out["nosnoc"]:
+        print("nosnoc (optional peer, pip install 'lcp-lem[ocp-peers]') is not installed: its columns are empty")
+    print(f"{'example':>15} {'N':>4} | {'ok':>3} {'objective':>12} {'J_replay':>12} {'miss':>9} {'method':>18} "
+          f"{'time[s]':>7} | {'nosnoc':>8} {'J_replay':>12} {'miss':>9} {'time[s]':>7} {'ratio':>6}")
+    for r in out["rows"]:
+        print(f"{r['example']:>15} {r['N']:>4} | {'yes' if r['ours_success'] else 'no':>3} {r['ours_cost']:>12.6g} "
+              f"{r['ours_J_replay']:>12.6g} {r['ours_miss']:>9.2e} {r['ours_method'][:18]:>18} {r['ours_time']:>7.2f} | "
+              f"{r['nosnoc_status'][:8]:>8} {r['nosnoc_J_replay']:>12.6g} {r['nosnoc_miss']:>9.2e} "
+              f"{r['nosnoc_time']:>7.2f} {r['time_ratio']:>6.2f}")
+    for r in out["rows"]:
+        if r["nosnoc_note"]:
+            print(f"{r['example']}: no nosnoc row: {r['nosnoc_note']}")
+        if not r["ours_success"]:
+            print(f"{r['example']} N={r['N']}: not a success: {r['ours_message'][:400]}")
+    print("wrote", ", ".join(str(f) for f in out["files"]))
+    return out
+
+
+if __name__ == "__main__":
+    main()
