@@ -19,8 +19,8 @@ and the corners' horizontal positions as tangents (Coulomb mu, Newton e). The ma
 on q (the slider's mass moves with P), the forces are gravity and the Coriolis and centrifugal terms
 of that matrix (from Lagrange's equations, as the ideal crank of :mod:`lcp.scenes.slider_crank`).
 
-Reference: with zero clearance (c = 0) the four contacts hold P_y = 0 and theta3 = 0 and the
-mechanism is the ideal one-degree-of-freedom slider-crank, whose motion
+Reference: with zero clearance (c = 0) and no friction the four contacts hold P_y = 0 and
+theta3 = 0 and the mechanism is the ideal one-degree-of-freedom slider-crank, whose motion
 :class:`~lcp.scenes.slider_crank.SliderCrankReference` integrates (``scene.exact``); with clearance
 there is no closed form (Moreau-Jean's limit h -> 0 and the energy's bookkeeping are the checks).
 """
@@ -72,8 +72,9 @@ def slider_crank_clearance(t_end: float = 0.2, c: float | None = None, e: float 
         Default horizon (0.2 s as in the tutorial: about five crank revolutions at 150 rad/s).
     c : float, optional
         The clearance (guide half-width minus the slider's half-height), >= 0; 1 mm by default.
-        With c = 0 the scene carries the ideal slider-crank's motion as ``exact`` (the start's
-        theta3' must then be 0: pass ``omega3=0``).
+        With c = 0 the scene carries the ideal (frictionless) slider-crank's motion as ``exact``
+        (pass ``omega3=0`` and ``mu=0``: the start does not tilt, and the guide's friction, which
+        the ideal crank has not, acts on the corners' normal forces).
     e, mu : float, optional
         Restitution and friction of the four corners (0.4 and 0.01 by default).
     omega1, omega3 : float, optional
@@ -130,7 +131,7 @@ def slider_crank_clearance(t_end: float = 0.2, c: float | None = None, e: float 
     q0 = np.zeros(3)
     v0 = np.array([p["omega1"], -l1 * p["omega1"] / l2, p["omega3"]])
     solution, reason = None, "with clearance there is no closed form (Moreau-Jean's limit h -> 0 is the reference)"
-    if p["c"] == 0.0 and p["omega3"] == 0.0:
+    if p["c"] == 0.0 and p["omega3"] == 0.0 and p["mu"] == 0.0:
         # the ideal crank's slider carries m3 on the axis; its Siconos-form mass matrix is the same
         # on the manifold P_y = 0, theta3 = 0 (the slider's rotation and vertical motion are held)
         ideal = dict(l1=l1, l2=l2, m1=p["m1"], m2=p["m2"], m3=p["m3"], J1=p["J1"], J2=p["J2"], g=p["g"],
