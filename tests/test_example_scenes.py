@@ -254,3 +254,43 @@ def test_impacting_rod_refuses_bad_input(bad):
 def test_example_scenes_refuse_bad_input(builder, bad):
     with pytest.raises(ValueError):
         builder(**bad)
+
+
+# ----------------------------------------------------------------------------- a column of 20 beads
+def _bead_energy(q, v, r=0.1):
+    return 0.5 * np.sum(v * v, axis=1) + 9.81 * np.sum(q[:, 1::2], axis=1)
+
+
+def test_twenty_bead_column_reaches_t_end_by_the_event_method():
+    # 20 frictionless beads, e = 0.9: from t = 0.654 on most contacts are closed at once. Before,
+    # the tie-breaking look-ahead walked all 4^k mode sets of k closed contacts to pick the few
+    # allowed ones (1e12 for k = 20): no end in minutes. Measured now: 4.6 s of CPU to t = 1.5.
+    from tests.test_impact_cascades import bead_column
+
+    system, q0, v0 = bead_column(20, 0.9)
+    res = lcp.simulate(system, 1.5, method="event", q0=q0, v0=v0)
+    assert res.success and res.status == 0, res.message
+    assert res.t[-1] == 1.5
+    assert np.min([system.gaps(q).min() for q in res.q]) >= -1e-9
+    E = _bead_energy(res.q, res.v)
+    # impacts with e < 1 only take energy; but an accumulation summed up by Aitken's extrapolation
+    # (lcp.events.accumulation: exact for geometric sequences, which 20 coupled beads' are not
+    # quite) raised it by 4.4e-4 J (7.5e-7 of E) at t = 0.733 when measured: noted, not fixed here
+    assert np.max(np.diff(E)) <= 2e-6 * np.max(np.abs(E))
+
+
+@pytest.mark.slow
+def test_twenty_bead_column_moreau_jean_converges_to_the_event_method():
+    from tests.test_impact_cascades import bead_column
+
+    system, q0, v0 = bead_column(20, 0.9)
+    ts = np.round(np.linspace(0.0, 1.5, 31), 10)
+    ev = lcp.simulate(system, 1.5, method="event", q0=q0, v0=v0, t_eval=ts)
+    assert ev.success, ev.message
+    errors = []
+    for h in (1e-3, 1e-4, 1e-5):
+        mj = lcp.simulate(system, 1.5, h=h, q0=q0, v0=v0)
+        assert mj.success, mj.message
+        errors.append(float(np.abs(mj.q[np.round(ts / h).astype(int)] - ev.q).max()))
+    # measured 7.8e-2, 2.2e-2, 3.0e-3
+    assert errors[2] < errors[1] < errors[0] and errors[2] < 1e-2, errors
