@@ -320,7 +320,7 @@ def classical_cases(quick: bool) -> list:
     return out
 
 
-# ----------------------------------------------------------------------------- example scenes (issue 25)
+# ----------------------------------------------------------------------------- example scenes
 def _energy_and_limit_check(energy, limit, tol_per_h):
     """A check for a scene without a closed form: the energy ``energy(scene, res)`` never rises
     (to rounding for Moreau-Jean, to its integrator's tolerance for the event method) and, where
@@ -347,7 +347,7 @@ def _energy_and_limit_check(energy, limit, tol_per_h):
 
 
 def example_cases(quick: bool) -> list:
-    """The example scenes of issue 25: the woodpecker toy, Flores's slider-crank with clearance,
+    """The example scenes: the woodpecker toy, Flores's slider-crank with clearance,
     a point mass in a bowl and a rod falling on two end contacts."""
     from lcp import classical as cl
     from lcp.scenes.slider_crank_clearance import slider_crank_clearance_energy
