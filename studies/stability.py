@@ -208,6 +208,7 @@ def cases(quick: bool) -> list[Case]:
     out.append(Case("must be reported", "enum forced on 3 contacts",
                     lambda: (block_chain(3), 0.1, 1e-3, 1), methods=("MJ enum (Python)",), reference=None))
     out.extend(classical_cases(quick))
+    out.extend(example_cases(quick))
     return [c for c in out if c.quick or not quick]
 
 
@@ -317,6 +318,82 @@ def classical_cases(quick: bool) -> list:
                  * max(float(np.max(np.abs(p.y[1]))) for p in sc.solution.pieces))),
     ]
     return out
+
+
+# ----------------------------------------------------------------------------- example scenes
+def _energy_and_limit_check(energy, limit, tol_per_h):
+    """A check for a scene without a closed form: the energy ``energy(scene, res)`` never rises
+    (to rounding for Moreau-Jean, to its integrator's tolerance for the event method) and, where
+    ``limit`` is given, Moreau-Jean's positions lie within ``tol_per_h * h`` of ``limit(scene, t)``
+    (the event method's run, or Moreau-Jean's limit; first order, the constant measured)."""
+    def check(scene, res, h, method):
+        m = dict(residual=float(res.stats.max_residual))
+        if not (np.all(np.isfinite(res.q)) and np.all(np.isfinite(res.v))):
+            m["nan_inf"] = True
+            return False, "non-finite state", m
+        E = energy(scene, res)
+        rise = float(np.max(np.diff(E))) if E.size > 1 else 0.0
+        m["energy_rise"] = rise
+        allow = (1e-12 if res.method == "moreau-jean" else 1e-10) * float(np.max(np.abs(E)))
+        if rise > allow:
+            return False, f"energy rose by {rise:.2e}", m
+        if limit is not None and res.method == "moreau-jean":
+            err = float(np.max(np.abs(res.q - limit(scene, res.t))))
+            m["x_error"], m["x_tol"] = err, tol_per_h * h
+            if not err <= tol_per_h * h:
+                return False, f"|q - limit| = {err:.2e} > {tol_per_h * h:.2e}", m
+        return True, "", m
+    return check
+
+
+def example_cases(quick: bool) -> list:
+    """The example scenes: the woodpecker toy, Flores's slider-crank with clearance,
+    a point mass in a bowl and a rod falling on two end contacts."""
+    from lcp import classical as cl
+    from lcp.scenes.slider_crank_clearance import slider_crank_clearance_energy
+    from lcp.scenes.woodpecker import woodpecker_energy
+
+    group = "example scenes"
+    one = ("MJ compiled", "MJ enum (Python)", "MJ lemke", "MJ osqp", "event")
+    many = ("MJ compiled", "MJ lemke", "MJ osqp", "event")
+
+    @functools.lru_cache(maxsize=1)
+    def woodpecker_event():
+        sc = cl.woodpecker()
+        return lcp.simulate(sc, 0.3, method="event", t_eval=np.linspace(0.0, 0.3, 15001))
+
+    def woodpecker_limit(sc, t):
+        ev = woodpecker_event()
+        return np.array([np.interp(t, ev.t, ev.q[:, j]) for j in range(3)]).T
+
+    def rod_q(sc, res):
+        ok = res.t <= sc.solution.t_valid
+        return res.q[ok], sc.exact(res.t[ok])["q"]
+
+    return [
+        # measured |q - event| = 3.8e-3 at h = 2e-5 (phi_M; 190 h): first order, constant 500 allowed
+        Case(group, "woodpecker (Siconos's data, start projected)", lambda: (cl.woodpecker(), 0.3, 2e-5, 1),
+             methods=("MJ compiled", "event") + (() if quick else ("MJ lemke",)), energy=False,
+             check=_energy_and_limit_check(lambda sc, r: woodpecker_energy(sc.params, r.q, r.v),
+                                           woodpecker_limit, 500.0)),
+        # measured 5.1e-3 rad at h = 1e-4 over 0.01 s (redundant corner pairs: both closed at c = 0)
+        Case(group, "slider-crank, zero clearance = ideal crank",
+             lambda: (cl.slider_crank_clearance(c=0.0, omega3=0.0, mu=0.0, t_end=0.01), 0.01, 1e-4, 1),
+             methods=("MJ compiled", "event"), energy=False,
+             check=_classical_check(lambda sc, r: (r.q[:, :2], sc.exact(np.minimum(r.t, sc.t_end))["q"][:, :2]),
+                                    1e-8, lambda sc, h: 150.0 * h)),
+        Case(group, "slider-crank, clearance 1 mm (energy)",
+             lambda: (cl.slider_crank_clearance(t_end=0.02), 0.02, 1e-4, 1), methods=("MJ compiled", "MJ lemke"),
+             energy=False, quick=False,
+             check=_energy_and_limit_check(lambda sc, r: slider_crank_clearance_energy(sc.params, r.q, r.v),
+                                           None, 0.0)),
+        Case(group, "point mass in a bowl, mu = 0.1", lambda: (cl.bowl(mu=0.1, t_end=1.2), 1.2, 2e-3, 1),
+             methods=("MJ compiled", "MJ lemke", "event") if quick else one, energy=False,
+             check=_classical_check(lambda sc, r: (r.q, sc.exact(r.t)["q"]), 1e-9)),
+        Case(group, "rod falling on two ends, e = 0.5, mu = 0.3",
+             lambda: (cl.impacting_rod(), cl.impacting_rod().solution.t_valid, 1e-3, 1),
+             methods=many, energy=False, check=_classical_check(rod_q, 1e-9)),
+    ]
 
 
 # ----------------------------------------------------------------------------- LEM cases

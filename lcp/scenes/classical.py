@@ -19,7 +19,14 @@ Each builder returns a :class:`lcp.scenes.Scene` (system, initial state, horizon
 - :func:`rocking_block`: Housner's rocking block (e = 0, no slip): rotation about a corner, and at
   each impact theta' <- (1 - 3/2 sin^2 alpha) theta' (reference: ``solve_ivp`` with events);
 - :func:`slider_crank` (from :mod:`lcp.scenes.slider_crank`): a slider-crank with a q-dependent mass
-  matrix and nonlinear loop-closure constraints (reference: ``solve_ivp`` of the reduced equation).
+  matrix and nonlinear loop-closure constraints (reference: ``solve_ivp`` of the reduced equation);
+- :func:`slider_crank_clearance` (:mod:`lcp.scenes.slider_crank_clearance`): Flores's slider-crank
+  with a clearance joint, its slider's four corners as contacts (reference with zero clearance: the
+  ideal crank);
+- :func:`woodpecker` (:mod:`lcp.scenes.woodpecker`): Glocker's woodpecker toy, Siconos's data;
+- :func:`bowl` and :func:`impacting_rod` (:mod:`lcp.scenes.bowl_rod`): a point mass in a bowl
+  (curved gap; reference: the sliding phases by ``solve_ivp``) and a rod falling onto a floor on
+  two end contacts (reference: flights in closed form and one-end impacts).
 
 The references are derived here, independently of the simulators, so that tests can compare.
 """
@@ -35,9 +42,18 @@ from lcp.model.forces import point_force
 from lcp.scenes.scene import Scene
 from lcp.model.system import Contact, System
 from lcp.scenes.slider_crank import SliderCrankReference, slider_crank
+from lcp.scenes.bowl_rod import BowlReference, RodImpactsReference, bowl, impacting_rod
+from lcp.scenes.slider_crank_clearance import slider_crank_clearance
+from lcp.scenes.woodpecker import woodpecker
 
 __all__ = [
     "BouncingBallExact",
+    "BowlReference",
+    "RodImpactsReference",
+    "bowl",
+    "impacting_rod",
+    "slider_crank_clearance",
+    "woodpecker",
     "BoxReference",
     "PainleveRod",
     "PendulumExact",
