@@ -136,8 +136,7 @@ class OptimalControlProblem:
             system = system.system
         if not isinstance(system, System):
             raise ValueError(f"system must be a System or a Scene, got {type(system).__name__}")
-        refuse_kinematics(system, "the optimal-control transcription")
-        _refuse_moving_contacts(system)
+        _refuse_unmodelled(system)
         if control_matrix is not None:
             system = add_control(system, control_matrix,
                                  -np.inf if u_min is None else u_min, np.inf if u_max is None else u_max)
@@ -327,9 +326,11 @@ class OptimalControlProblem:
         """
         return multistart(self, guesses, options, rtol, **option_kw)
 
-def _refuse_moving_contacts(system) -> None:
-    """The transcription writes each contact's law with H and g of q only: a gap or tangent that
-    moves with time (dg/dt, ds/dt) would be ignored, silently. Refused by name instead."""
+def _refuse_unmodelled(system) -> None:
+    """The transcription writes each contact's law with H and g of q only, and moves q by v: a gap or
+    tangent that moves with time (dg/dt, ds/dt), or kinematics qdot = T(q) v, would be ignored,
+    silently. Refused by name instead."""
+    refuse_kinematics(system, "the optimal-control transcription")
     name = moving_contact(system)
     if name is not None:
         raise ValueError(f"contact {name!r} has a time-dependent gap or tangent, which the optimal-control "
