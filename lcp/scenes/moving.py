@@ -105,13 +105,14 @@ def conveyor(V: float = 1.0, mu: float = 0.4, g: float = 9.81, m: float = 1.0, v
                  dict(V=V, mu=mu, g=g, m=m, v0=v0), sol)
 
 
-def cam_follower(k: float = 50.0, rest: float = 1.5, radius: float = 1.0, amplitude: float = 0.1,
+def cam_follower(k: float = 50.0, rest: float = 1.0, radius: float = 1.0, amplitude: float = 0.1,
                  omega: float = 10.0, e: float = 0.8, height: float = 1.3, m: float = 1.0, g: float = 9.81,
                  t_end: float = 1.0, pinned: bool = False) -> Scene:
     """A follower (q = (x, y), mass ``m``) held by a spring of stiffness ``k`` towards the height
     ``rest`` and by gravity above a cam whose surface moves as c(t) = radius + amplitude sin(omega t):
     the gap y - c(t) depends on time, frictionless, Newton restitution ``e``; released at rest at
-    ``height``.
+    ``height``. With the defaults the spring and gravity pull the follower onto the cam: three
+    impacts by t = 1, then it rides and bounces on the moving surface.
 
     With ``pinned`` the same physics with the cam surface a coordinate z (mass 1) pinned by the
     rheonomous bilateral constraint z - c(t) = 0 and the gap y - z of q only: the form both
