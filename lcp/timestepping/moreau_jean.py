@@ -204,7 +204,25 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
 
         if compiled_loop.applicable(asm, solver, options):
             return compiled_loop.moreau_jean_loop(asm, q0, v0, n_steps, every, solver, options.fallback)
-    return run_python_loop(system, asm, q0, v0, h, th, n_steps, every, solver, options.fallback, proj)
+    note = ""
+    if options.fast and not system.is_constant:
+        # the compiled general loop: generated C step data, a numba loop (lcp.timestepping.general_loop)
+        from lcp.timestepping import general_loop
+
+        why = general_loop.applicable(system, asm, proj)
+        if why is None:
+            from lcp.timestepping.codegen import step_library
+
+            lib = step_library(system)  # None (with a RuntimeWarning) without a C compiler
+            if lib is not None:
+                return general_loop.run_general_loop(system, asm, lib, q0, v0, h, th, n_steps, every, solver,
+                                                     options.fallback)
+        elif why == "projection":
+            note = general_loop.PROJECTION_NOTE
+    result = run_python_loop(system, asm, q0, v0, h, th, n_steps, every, solver, options.fallback, proj)
+    if note:
+        result.message += note
+    return result
 
 
 
