@@ -1,0 +1,142 @@
+"""The compiled Moreau-Jean loop for general systems (lcp.timestepping.general_loop): the same results
+as the Python loop to rounding, the same statuses and messages, and the Python loop where no C
+compiler is found."""
+import math
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import lcp
+from lcp.model.system import Contact, System
+from lcp.numerics.jit import HAVE_NUMBA
+from lcp.scenes.classical import painleve_rod, rocking_block, slider_crank
+from lcp.timestepping import codegen
+
+pytestmark = pytest.mark.skipif(not HAVE_NUMBA or codegen.c_compiler() is None,
+                                reason="needs numba and a C compiler")
+
+
+def bowl(mu=0.3, radius=1.0, g=9.81, force=None, t=None):
+    """A point in a circular bowl (curved gap, normal turning with q)."""
+    q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
+    r = ca.norm_2(q)
+    F = ca.vertcat(0, -g) if force is None else force
+    return System(q, v, ca.SX.eye(2), F, t=t,
+                  contacts=[Contact(gap=radius - r, tangent_jacobian=ca.horzcat(-q[1], q[0]) / r, mu=mu)])
+
+
+def forced_bowl():
+    t = ca.SX.sym("t")
+    return bowl(force=ca.vertcat(3 * ca.sin(5 * t), -9.81), t=t)
+
+
+def spatial_bowl(mu=0.3, radius=1.0, g=9.81):
+    """A ball in a spherical bowl: one spatial contact whose normal and tangents turn with q."""
+    q, v = ca.SX.sym("q", 3), ca.SX.sym("v", 3)
+    r = ca.norm_2(q)
+    t1 = ca.vertcat(-q[1], q[0], 0) / ca.norm_2(q[:2])
+    t2 = ca.cross(q / r, t1)
+    return System(q, v, ca.SX.eye(3), ca.vertcat(0, 0, -g),
+                  contacts=[Contact(gap=radius - r, tangent_jacobian=ca.horzcat(t1, t2).T, mu=mu)])
+
+
+def _scene(name):
+    if name == "bowl":
+        return bowl(), [0.0, -1.0], [2.0, 0.0], 1.0, 1e-3
+    if name == "bowl_rough":
+        return bowl(mu=0.6), [0.3, -math.sqrt(0.91)], [0.1, 0.0], 1.0, 1e-3
+    if name == "forced_bowl":
+        return forced_bowl(), [0.0, -1.0], [0.5, 0.0], 1.0, 1e-3
+    if name == "slider_crank":
+        s = slider_crank()
+        return s.system, s.q0, s.v0, 0.2, 1e-4
+    if name == "rocking_block":
+        s = rocking_block()
+        return s.system, s.q0, s.v0, 1.0, 1e-3
+    if name == "painleve_rod":
+        s = painleve_rod()
+        return s.system, s.q0, s.v0, s.t_end, 1e-3
+    if name == "spatial_bowl":
+        return spatial_bowl(), [0.3, 0.0, -math.sqrt(0.91)], [0.0, 1.0, 0.0], 0.3, 1e-3
+    raise KeyError(name)
+
+
+def _rel(a, b):
+    if a.size == 0:
+        return 0.0
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(a)), 1e-300))
+
+
+@pytest.mark.parametrize("name", ["bowl", "bowl_rough", "forced_bowl", "slider_crank", "rocking_block",
+                                  "painleve_rod", "spatial_bowl"])
+def test_same_results_as_the_python_loop(name):
+    system, q0, v0, t_end, h = _scene(name)
+    kw = dict(h=h, q0=q0, v0=v0, projection=False)
+    ref = lcp.simulate(system, t_end, fast=False, **kw)
+    got = lcp.simulate(system, t_end, **kw)
+    assert got.status == ref.status and got.message == ref.message
+    assert got.q.shape == ref.q.shape
+    for x, y in ((got.q, ref.q), (got.v, ref.v), (got.p_N, ref.p_N), (got.p_T, ref.p_T)):
+        assert _rel(x, y) <= 1e-12
+    assert np.array_equal(np.asarray(got.modes), np.asarray(ref.modes))
+    assert got.stats.mode_counts == ref.stats.mode_counts
+    assert (got.stats.free_steps, got.stats.solver_calls) == (ref.stats.free_steps, ref.stats.solver_calls)
+    assert [(i.contact, round(i.t, 12)) for i in got.impacts] == [(i.contact, round(i.t, 12)) for i in ref.impacts]
+
+
+def test_the_general_loop_is_the_path_taken(monkeypatch):
+    from lcp.timestepping import general_loop, python_loop
+
+    calls = []
+    monkeypatch.setattr(python_loop, "run_python_loop", lambda *a, **k: calls.append(1))
+    system, q0, v0, _, h = _scene("bowl")
+    res = lcp.simulate(system, 0.05, h=h, q0=q0, v0=v0, projection=False)
+    assert res.success and not calls
+    assert general_loop.applicable(system, type("A", (), {"schedule": None})(), object()) == "projection"
+
+
+def test_projected_runs_say_they_ran_the_python_loop():
+    system, q0, v0, _, h = _scene("bowl")
+    res = lcp.simulate(system, 0.02, h=h, q0=q0, v0=v0)
+    assert res.success and "compiled general loop does not run the position projection" in res.message
+
+
+def test_failure_is_reported_at_the_same_step():
+    # a force with a pole the block runs into: the step acceptance rejects the same step
+    q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
+    F = ca.vertcat(1e-3 / (q[0] - 0.5), -9.81)
+    s = System(q, v, ca.SX.eye(2), F, contacts=[Contact(gap=q[1], tangent=q[0], mu=0.1)])
+    kw = dict(h=1e-3, q0=[0.0, 0.0], v0=[2.0, 0.0], projection=False)
+    ref = lcp.simulate(s, 1.0, fast=False, **kw)
+    got = lcp.simulate(s, 1.0, **kw)
+    assert ref.status == -7
+    assert (got.status, got.message) == (ref.status, ref.message)
+    assert _rel(got.q, ref.q) <= 1e-12
+
+
+def test_painleve_failure_same_message():
+    # the Painleve rod with large friction: no consistent mode; both loops stop at the same step
+    s = painleve_rod(mu=1.5, u0=-1.0)
+    kw = dict(h=1e-3, q0=s.q0, v0=s.v0, projection=False, fallback=False)
+    ref = lcp.simulate(s.system, s.t_end, fast=False, **kw)
+    got = lcp.simulate(s.system, s.t_end, **kw)
+    assert (got.status, got.message) == (ref.status, ref.message)
+    assert got.q.shape == ref.q.shape and _rel(got.q, ref.q) <= 1e-12
+
+
+def test_without_a_compiler_the_python_loop_runs_with_a_warning(monkeypatch):
+    monkeypatch.setenv("CC", "/nonexistent/lcp-no-such-cc")
+    system, q0, v0, _, h = _scene("bowl")  # a new System: nothing compiled for it yet
+    with pytest.warns(RuntimeWarning, match="/nonexistent/lcp-no-such-cc"):
+        got = lcp.simulate(system, 0.05, h=h, q0=q0, v0=v0, projection=False)
+    ref = lcp.simulate(system, 0.05, h=h, q0=q0, v0=v0, projection=False, fast=False)
+    assert got.success and np.array_equal(got.q, ref.q)
+
+
+def test_library_is_cached_by_source(tmp_path, monkeypatch):
+    monkeypatch.setenv("LCP_CACHE_DIR", str(tmp_path))
+    a, b = bowl(mu=0.1), bowl(mu=0.7)  # mu is not in the step's C code: one library
+    la, lb = codegen.step_library(a), codegen.step_library(b)
+    assert la is not None and lb is not None
+    assert len(list(tmp_path.glob("lcp_general_step_*.so"))) == 1
