@@ -31,14 +31,14 @@ def forced_bowl():
     return bowl(force=ca.vertcat(3 * ca.sin(5 * t), -9.81), t=t)
 
 
-def spatial_bowl(mu=0.3, radius=1.0, g=9.81):
+def spatial_bowl(mu=0.3, radius=1.0, g=9.81, e=0.0):
     """A ball in a spherical bowl: one spatial contact whose normal and tangents turn with q."""
     q, v = ca.SX.sym("q", 3), ca.SX.sym("v", 3)
     r = ca.norm_2(q)
     t1 = ca.vertcat(-q[1], q[0], 0) / ca.norm_2(q[:2])
     t2 = ca.cross(q / r, t1)
     return System(q, v, ca.SX.eye(3), ca.vertcat(0, 0, -g),
-                  contacts=[Contact(gap=radius - r, tangent_jacobian=ca.horzcat(t1, t2).T, mu=mu)])
+                  contacts=[Contact(gap=radius - r, tangent_jacobian=ca.horzcat(t1, t2).T, mu=mu, e=e)])
 
 
 def _scene(name):
@@ -59,6 +59,8 @@ def _scene(name):
         return s.system, s.q0, s.v0, s.t_end, 1e-3
     if name == "spatial_bowl":
         return spatial_bowl(), [0.3, 0.0, -math.sqrt(0.91)], [0.0, 1.0, 0.0], 0.3, 1e-3
+    if name == "spatial_drop":  # dropped into the bowl with restitution: impacts, flights, slides
+        return spatial_bowl(e=0.5), [0.3, 0.1, -0.5], [0.5, 1.0, 0.0], 1.0, 1e-3
     raise KeyError(name)
 
 
@@ -69,7 +71,7 @@ def _rel(a, b):
 
 
 @pytest.mark.parametrize("name", ["bowl", "bowl_rough", "forced_bowl", "slider_crank", "rocking_block",
-                                  "painleve_rod", "spatial_bowl"])
+                                  "painleve_rod", "spatial_bowl", "spatial_drop"])
 def test_same_results_as_the_python_loop(name):
     system, q0, v0, t_end, h = _scene(name)
     kw = dict(h=h, q0=q0, v0=v0, projection=False)
@@ -83,6 +85,24 @@ def test_same_results_as_the_python_loop(name):
     assert got.stats.mode_counts == ref.stats.mode_counts
     assert (got.stats.free_steps, got.stats.solver_calls) == (ref.stats.free_steps, ref.stats.solver_calls)
     assert [(i.contact, round(i.t, 12)) for i in got.impacts] == [(i.contact, round(i.t, 12)) for i in ref.impacts]
+    for a, b in zip(got.impacts, ref.impacts):
+        assert np.allclose(a.p_T, b.p_T, rtol=1e-12, atol=1e-15) and np.shape(a.p_T) == np.shape(b.p_T)
+
+
+@pytest.mark.parametrize("name", ["bowl", "spatial_drop"])
+def test_one_contact_steps_stay_compiled(monkeypatch, name):
+    # the closed form (planar) and the local disk solve (spatial) run in the kernel: no step of
+    # these scenes goes back to the Python contact step
+    from lcp.timestepping import contact_step
+
+    calls = []
+    orig = contact_step.ContactStep.solve
+    monkeypatch.setattr(contact_step.ContactStep, "solve", lambda self, *a: calls.append(1) or orig(self, *a))
+    system, q0, v0, t_end, h = _scene(name)
+    res = lcp.simulate(system, t_end, h=h, q0=q0, v0=v0, projection=False)
+    assert res.success and res.stats.solver_calls > 0 and not calls
+    if name == "spatial_drop":
+        assert res.impacts and all(np.shape(i.p_T) == (2,) for i in res.impacts)
 
 
 def test_the_general_loop_is_the_path_taken(monkeypatch):

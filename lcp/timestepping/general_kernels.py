@@ -1,10 +1,10 @@
 """The numba kernel of the compiled Moreau-Jean loop for general systems: the steps themselves.
 
 Holds :func:`run_general` (steps k0 .. k_end - 1 of any system whose step data come from the C
-function of :mod:`lcp.timestepping.codegen`) and the reasons it returns for. Imports NumPy and
-numba (:mod:`lcp.numerics.jit`); never the set-up, the Python solvers, the result or anything
-above :mod:`lcp.timestepping`. Each step, as the Python loop (:mod:`lcp.timestepping.python_loop`)
-computes it:
+function of :mod:`lcp.timestepping.codegen`) and the reasons it returns for. Imports NumPy, numba
+(:mod:`lcp.numerics.jit`) and the compiled local solves of :mod:`lcp.contact`; never the set-up,
+the Python solvers, the result or anything above :mod:`lcp.timestepping`. Each step, as the
+Python loop (:mod:`lcp.timestepping.python_loop`) computes it:
 
 - the step's data from the generated C function, called through its ctypes pointer (the same
   Function the Python loop evaluates in CasADi's virtual machine: the same bits); the free
@@ -16,6 +16,10 @@ computes it:
 - one active planar contact under the closed-form solvers (``"auto"``, ``"enum"``): the closed form
   (:func:`lcp.contact.planar_closed_form.planar_enum`), its acceptance test, the modes and the
   branch refinement of :class:`lcp.timestepping.contact_step.ContactStep`;
+- one active disk contact under the disk law's ``"auto"`` or ``"local"``: the local solve
+  (:func:`lcp.contact.kernels.local_disk3`), the branch refinement and modes
+  (:func:`lcp.contact.spatial_nsgs.refine_dense`), the solver's acceptance test and the stuck
+  contact's correction of :class:`~lcp.timestepping.contact_step.ContactStep`;
 - restitution shift, impacts, the Kahan-compensated sums of v and q (q' = T(q) v where the system
   has a kinematics map), every ``save_every``-th state.
 
@@ -30,6 +34,8 @@ import math
 
 import numpy as np
 
+from lcp.contact.kernels import local_disk3
+from lcp.contact.spatial_nsgs import refine_dense, residual_blocked_dense
 from lcp.numerics.jit import njit
 
 __all__ = ["DONE", "NEEDS_PYTHON", "NONFINITE", "BAD_DATA", "REJECTED", "BUFFER_FULL", "run_general"]
@@ -152,9 +158,9 @@ def _closed_form_step(j, m, n, r, k, tk, h, o_W, o_H, o_SHt, o_b1, moving, v, vf
     istate[3] += 4
     istate[4] = max(istate[4], 4)
     if nd > 1:
-        if istate[9] == 0:
-            istate[10] = k
-        istate[9] += 1
+        if istate[10] == 0:
+            istate[11] = k
+        istate[10] += 1
     fstate[0] = max(fstate[0], res)
     # modes (ContactProblem.modes, one contact): thresholds 1e-9 of the contact's own scale
     tol_p = 1e-9 * max(abs(qN) * rhoN, abs(qT) * rhoT, abs(pN), abs(pT),
@@ -209,7 +215,122 @@ def _closed_form_step(j, m, n, r, k, tk, h, o_W, o_H, o_SHt, o_b1, moving, v, vf
                 dv[a] = dv[a] + (o_SHt[a + iN * n] * dN + o_SHt[a + iT * n] * dT)
     out[0] = pN
     out[1] = pT
-    out[2] = md
+    out[2] = 0.0
+    out[3] = md
+    return True
+
+
+@njit(cache=True)
+def _disk_error(Wl, qa, mu, p):
+    """ContactProblem.error of one disk contact (lcp.contact.law.natural_map_error, dims = [2])."""
+    u = np.empty(3)
+    for a in range(3):
+        u[a] = Wl[a, 0] * p[0] + Wl[a, 1] * p[1] + Wl[a, 2] * p[2] + qa[a]
+    zN = p[0] - u[0] - mu * math.hypot(u[1], u[2])
+    z0 = p[1] - u[1]
+    z1 = p[2] - u[2]
+    aT = math.hypot(z0, z1)
+    inside = aT <= mu * zN and zN >= 0
+    polar = mu * aT <= -zN
+    rN = (zN + mu * aT) / (1.0 + mu * mu)
+    f = 0.0 if (inside or polar) else mu * rN / (aT if aT > 0 else 1.0)
+    pN = zN if inside else (0.0 if polar else rN)
+    pT0 = z0 if inside else z0 * f
+    pT1 = z1 if inside else z1 * f
+    err = math.sqrt((p[0] - pN) ** 2 + ((p[1] - pT0) ** 2 + (p[2] - pT1) ** 2))
+    scale = max(math.sqrt(p[0] ** 2 + p[1] ** 2 + p[2] ** 2), math.sqrt(u[0] ** 2 + u[1] ** 2 + u[2] ** 2),
+                math.sqrt(qa[0] ** 2 + qa[1] ** 2 + qa[2] ** 2))
+    return err / scale if scale > _EPS else err
+
+
+@njit(cache=True)
+def _disk_step(j, m, n, r, toff, o_W, o_H, o_SHt, o_b1, moving, v, vfree, dvf, uNm, mu, e, res_tol, istate, fstate,
+               dv, w, out):
+    """One active disk contact j by the local solve, as ContactStep.solve with the ``"auto"`` (or
+    ``"local"``) disk-law solver: the exact local solve (local_disk3), the branch refinement and its
+    modes (refine_dense), the solver's acceptance test, the stuck contact's velocity correction.
+    Fills dv and out = (pN, pT0, pT1, mode); False where the Python side must solve the step."""
+    idx = np.empty(3, dtype=np.int64)
+    idx[0] = j
+    idx[1] = m + toff[j]
+    idx[2] = m + toff[j] + 1
+    qa = np.zeros(3)
+    for a in range(3):
+        x = 0.0
+        for c in range(n):
+            x += o_H[idx[a] + c * r] * vfree[c]
+        qa[a] = x
+    if moving:
+        for a in range(3):
+            qa[a] = qa[a] + o_b1[idx[a]]
+    shift = 0.0
+    has_e = e[j] != 0.0
+    if has_e:
+        shift = e[j] * min(uNm[j], 0.0)
+        qa[0] += shift
+    Wl = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            Wl[a, b] = o_W[idx[a] + idx[b] * r]
+    muj = mu[j]
+    pN, pT0, pT1, mode, _ = local_disk3(Wl, qa[0], qa[1], qa[2], muj, 0.0, 0.0)
+    if mode < 0:
+        return False
+    dN = Wl[0, 0]
+    dTm = max(Wl[1, 1], Wl[2, 2])
+    rhoN = np.array([1.0 / dN if dN > 0 else 1.0])
+    rhoT = np.array([1.0 / dTm if dTm > 0 else 1.0])
+    scale = max(max(abs(qa[0]) * rhoN[0], abs(qa[1]) * rhoT[0], abs(qa[2]) * rhoT[0]), 1e-300)
+    mus = np.array([muj])
+    dims = np.array([2], dtype=np.int64)
+    toff1 = np.zeros(1, dtype=np.int64)
+    p0 = np.array([pN, pT0, pT1])
+    p, md = refine_dense(Wl, qa, mus, dims, toff1, rhoN, rhoT, scale, p0, 3, 1e-9)
+    if not math.isfinite(p[0] + p[1] + p[2]):
+        return False
+    res = residual_blocked_dense(Wl, qa, mus, dims, toff1, rhoN, rhoT, p)
+    sc = max(scale, max(abs(p[0]), abs(p[1]), abs(p[2])), 1e-300)
+    if not math.isfinite(res) or res > res_tol * sc:
+        return False
+    if not _disk_error(Wl, qa, muj, p) <= res_tol:
+        return False
+    pv = p.copy()
+    for a in range(n):
+        dv[a] = dvf[a] + (o_SHt[a + idx[0] * n] * pv[0] + o_SHt[a + idx[1] * n] * pv[1]
+                          + o_SHt[a + idx[2] * n] * pv[2])
+    if md[0] == 1:  # stuck: one correction on the velocities themselves (ContactStep.solve)
+        for a in range(n):
+            w[a] = v[a] + dv[a]
+        rl = np.empty(3)
+        for b in range(3):
+            x = 0.0
+            for c in range(n):
+                x += o_H[idx[b] + c * r] * w[c]
+            rl[b] = x
+        if moving:
+            for b in range(3):
+                rl[b] = rl[b] + o_b1[idx[b]]
+        if has_e:
+            rl[0] += shift
+        try:
+            dp = np.linalg.solve(Wl, -rl)
+        except Exception:  # singular: the Python side takes its least-squares step
+            return False
+        if not math.isfinite(dp[0] + dp[1] + dp[2]):
+            return False
+        for b in range(3):
+            pv[b] = pv[b] + dp[b]
+        for a in range(n):
+            dv[a] = dv[a] + (o_SHt[a + idx[0] * n] * dp[0] + o_SHt[a + idx[1] * n] * dp[1]
+                             + o_SHt[a + idx[2] * n] * dp[2])
+    istate[2] += 1
+    istate[3] += 1
+    istate[4] = max(istate[4], 1)
+    fstate[0] = max(fstate[0], res)
+    out[0] = pv[0]
+    out[1] = pv[1]
+    out[2] = pv[2]
+    out[3] = md[0]
     return True
 
 
@@ -249,16 +370,16 @@ def _force_rejected(n, nq, lin, q, v, F, miss, size):
 @njit(cache=True)
 def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, o_gap, o_H, o_b0, o_b1,
                 o_F0, o_F1, o_K1, o_C1, o_T, k0, k_end, every, h, th, close_tol, open_tol, res_tol, mu, e,
-                closed_form, q, v, cq, cv, loaded, istate, fstate, lin, Q, V, PN, PT, MD, imp_t, imp_j, imp_p,
-                dvf, vfree, uNm, uNf, act, forced, fdv):
+                dims, toff, closed_form, disk_local, q, v, cq, cv, loaded, istate, fstate, lin, Q, V, PN, PT, MD,
+                imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act, forced, fdv):
     """Steps k0 .. k_end - 1 (module docstring); returns (step, reason).
 
     ``istate`` = [all_loaded, free_steps, solver_calls, iterations, max_iterations, open, stick,
-    slide+, slide-, ambiguous, first ambiguous step, impacts, active count of a handed step, skip
-    the force check of step k0]; ``fstate`` = [max residual]; ``lin`` the force check's
+    slide+, slide-, slide, ambiguous, first ambiguous step, impacts, active count of a handed step,
+    skip the force check of step k0]; ``fstate`` = [max residual]; ``lin`` the force check's
     linearisation (t, q, v, F, K, C; t NaN: none). When the reason is not DONE the state (q, v,
     sums, loaded) is that at the start of the returned step; for NEEDS_PYTHON the buffers hold its
-    data, ``act[:istate[12]]`` its active contacts. With ``forced``, step k0 takes the velocity
+    data, ``act[:istate[13]]`` its active contacts. With ``forced``, step k0 takes the velocity
     increment ``fdv`` (the Python side did the rest of it).
     """
     n = v.size
@@ -277,7 +398,7 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
     inc = np.empty(n)
     miss = np.empty(n)
     size = np.empty(n)
-    out = np.empty(3)
+    out = np.empty(4)
     cap = imp_t.size
     a_c = h * (1 - th)
     b_c = h * th
@@ -288,7 +409,7 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
             for a in range(n):
                 dv[a] = fdv[a]
         else:
-            if istate[11] + 1 > cap:
+            if istate[12] + 1 > cap:
                 return k, BUFFER_FULL
             a_t[0] = tk
             for a in range(nq):
@@ -305,10 +426,10 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
             if not good:
                 return k, BAD_DATA
             if check:
-                if not (istate[13] and k == k0) and lin[0] == tk:
+                if not (istate[14] and k == k0) and lin[0] == tk:
                     if _force_rejected(n, nq, lin, q, v, o_F0, miss, size):
                         return k, REJECTED
-                istate[13] = 0
+                istate[14] = 0
                 lin[0] = tk + h
                 b = 1
                 for a in range(nq):
@@ -370,22 +491,25 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
                 for j in range(m):
                     loaded[j] = False
                 istate[0] = 0
-            elif closed_form and na == 1 and _closed_form_step(act[0], m, n, r, k, tk, h, o_W, o_H, o_SHt, o_b1,
-                                                               moving, v, vfree, dvf, uNm, mu, e, res_tol,
-                                                               istate, fstate, dv, wv, out):
+            elif na == 1 and ((closed_form and _closed_form_step(act[0], m, n, r, k, tk, h, o_W, o_H, o_SHt, o_b1,
+                                                                  moving, v, vfree, dvf, uNm, mu, e, res_tol,
+                                                                  istate, fstate, dv, wv, out))
+                              or (disk_local and dims[act[0]] == 2
+                                  and _disk_step(act[0], m, n, r, toff, o_W, o_H, o_SHt, o_b1, moving, v, vfree,
+                                                 dvf, uNm, mu, e, res_tol, istate, fstate, dv, wv, out))):
                 j = act[0]
                 pN = out[0]
-                pT = out[1]
-                md = int(out[2])
+                md = int(out[3])
                 if istate[0] == 0:  # impacts (lcp.timestepping.outcome.record_impacts)
                     um = uNm[j]
                     if pN > 0 and not loaded[j] and um < 0 and -um > abs(uNf[j] - um):
-                        c = istate[11]
+                        c = istate[12]
                         imp_t[c] = tk + min(h, max(0.0, o_gap[j] / -um))
                         imp_j[c] = j
                         imp_p[c, 0] = pN
-                        imp_p[c, 1] = pT
-                        istate[11] = c + 1
+                        imp_p[c, 1] = out[1]
+                        imp_p[c, 2] = out[2]
+                        istate[12] = c + 1
                 if m > 1:
                     for i in range(m):
                         loaded[i] = False
@@ -393,11 +517,12 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
                 istate[0] = 1 if (m == 1 and pN > 0) else 0
                 if row >= 0:
                     PN[row, j] = pN
-                    PT[row, j] = pT
+                    for a in range(dims[j]):
+                        PT[row, toff[j] + a] = out[1 + a]
                     MD[row, j] = md
                 istate[5 + md] += 1
             else:
-                istate[12] = na
+                istate[13] = na
                 return k, NEEDS_PYTHON
         # compensated (Kahan) sums, as lcp.timestepping.assembly.kahan_add
         for a in range(n):

@@ -12,8 +12,9 @@ of :mod:`lcp.timestepping`, and :mod:`lcp.result`; never the path choice
 (:mod:`lcp.timestepping.moreau_jean`), the Python loop or anything above :mod:`lcp.timestepping`.
 
 What runs compiled: the step data, the force check, the activation rule, free steps, one active
-planar contact under ``"auto"``/``"enum"`` (closed form, modes, branch refinement), impacts, Kahan
-sums, saving. The other contact steps are solved by the Python loop's own
+planar contact under ``"auto"``/``"enum"`` (closed form, modes, branch refinement), one active disk
+contact under the disk law's ``"auto"``/``"local"`` (local solve, branch refinement, the stuck
+correction), impacts, Kahan sums, saving. The other contact steps are solved by the Python loop's own
 :class:`~lcp.timestepping.contact_step.ContactStep` on the step's data and handed back (same solver
 objects, fallbacks and notes), so every result agrees with the Python loop's to rounding. Not run
 here (the Python loop then runs): the position projection (the message says so), control
@@ -69,6 +70,14 @@ def _closed_form(solver) -> bool:
     return type(solver) is EnumSolver and getattr(solver, "error_tol", None) is None
 
 
+def _disk_local(solver) -> bool:
+    """Whether one active disk contact is solved in the kernel: the plain ``"auto"`` disk-law solver
+    or ``"local"`` with its polish (the local solve and branch refinement of both)."""
+    from lcp.contact.spatial_solvers import ConeAutoSolver, LocalSolver
+
+    return type(solver) is ConeAutoSolver or (type(solver) is LocalSolver and solver.polish)
+
+
 def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int, every: int, solver,
                      fallback: bool):
     """Moreau-Jean by the compiled general loop (module docstring); ``lib`` is the system's
@@ -94,10 +103,11 @@ def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int
     q, v = np.array(q0, dtype=float), np.array(v0, dtype=float)
     cq, cv = np.zeros(nq), np.zeros(n)
     loaded = np.zeros(m, dtype=np.bool_)
-    istate = np.zeros(14, dtype=np.int64)
+    istate = np.zeros(15, dtype=np.int64)
     fstate = np.zeros(1)
     lin = np.full(1 + nq + 2 * n + 2 * n * n, np.nan)
-    imp_t, imp_j, imp_p = np.zeros(_IMPACT_BUFFER), np.zeros(_IMPACT_BUFFER, dtype=np.int64), np.zeros((_IMPACT_BUFFER, 2))
+    imp_t, imp_j = np.zeros(_IMPACT_BUFFER), np.zeros(_IMPACT_BUFFER, dtype=np.int64)
+    imp_p = np.zeros((_IMPACT_BUFFER, 3))
     dvf, vfree, uNm, uNf = np.zeros(n), np.zeros(n), np.zeros(m), np.zeros(m)
     act = np.zeros(max(m, 1), dtype=np.int64)
     fdv = np.zeros(n)
@@ -106,24 +116,29 @@ def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int
     a_h[0], a_th[0] = h, th
     mu, e = np.asarray(system.mu, dtype=float), np.asarray(system.e, dtype=float)
     closed_form = (not spatial) and _closed_form(solver)
+    disk_local = spatial and _disk_local(solver)
+    tdims = np.asarray(system.tangent_dims, dtype=np.int64)
+    toff = np.asarray(system.tangent_offsets, dtype=np.int64)
     res_tol = float(getattr(solver, "residual_tol", 1e-10))
     step = ContactStep(system, asm, solver, fallback, notes)
     moving = system.contacts_depend_on_t
 
     def flush():
-        c = int(istate[11])
+        c = int(istate[12])
         for i in range(c):
             j = int(imp_j[i])
-            notes.impacts.append(Impact(float(imp_t[i]), j, names[j], float(imp_p[i, 0]), float(imp_p[i, 1])))
-        istate[11] = 0
+            pT = imp_p[i, 1:3].copy() if tdims[j] == 2 else float(imp_p[i, 1])
+            notes.impacts.append(Impact(float(imp_t[i]), j, names[j], float(imp_p[i, 0]), pT))
+        istate[12] = 0
 
     k, forced = 0, False
     while True:
         k, reason = run_general(lib.cfunc, lib.argp, lib.resp, lib.iw, lib.w, a_t, a_q, a_v, o["vfree"], o["S"],
                                 o["SHt"], o["W"], o["gap"], o["H"], o["b0"], o["b1"], o["F0"], o["F1"], o["K1"],
                                 o["C1"], o["Tq"], k, n_steps, every, h, th, CLOSE_ULPS * EPS, OPEN_ULPS * EPS,
-                                res_tol, mu, e, closed_form, q, v, cq, cv, loaded, istate, fstate, lin, Q, V, PN,
-                                PT, modes, imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act, forced, fdv)
+                                res_tol, mu, e, tdims, toff, closed_form, disk_local, q, v, cq, cv, loaded, istate,
+                                fstate, lin, Q, V, PN, PT, modes, imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act,
+                                forced, fdv)
         forced = False
         tk = k * h
         if reason == DONE:
@@ -142,12 +157,12 @@ def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int
         if reason == REJECTED:
             why = _rejection(system, h, lin, n, nq, tk, q, v)
             if why is None:  # NumPy's sums let the step pass: the kernel repeats it without the check
-                istate[13] = 1
+                istate[14] = 1
                 continue
             status, message = -7, f"{STATUS_MESSAGES[-7]} Step {k} (t = {tk:.10g}): {why}."
             break
         assert reason == NEEDS_PYTHON
-        na = int(istate[12])
+        na = int(istate[13])
         active = act[:na].copy()
         b1 = o["b1"] if moving else None
         dv, p, md, cols, sol = step.solve(k, tk, active, v, vfree.copy(), dvf.copy(), lib.view("SHt"),
@@ -200,10 +215,10 @@ def _merge_counters(notes, istate, fstate, h):
     stats.solver_calls += int(istate[2])
     stats.iterations += int(istate[3])
     stats.max_iterations = max(stats.max_iterations, int(istate[4]))
-    for code in range(4):
+    for code in range(5):
         if istate[5 + code]:
             stats.mode_counts[MODE_NAMES[code]] += int(istate[5 + code])
-    stats.ambiguous_steps += int(istate[9])
-    if istate[9] and (notes.first_ambiguous is None or notes.first_ambiguous[0] > istate[10]):
-        notes.first_ambiguous = (int(istate[10]), int(istate[10]) * h)
+    stats.ambiguous_steps += int(istate[10])
+    if istate[10] and (notes.first_ambiguous is None or notes.first_ambiguous[0] > istate[11]):
+        notes.first_ambiguous = (int(istate[11]), int(istate[11]) * h)
     stats.max_residual = max(stats.max_residual, float(fstate[0]))
