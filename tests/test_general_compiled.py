@@ -72,9 +72,12 @@ def _rel(a, b):
 
 @pytest.mark.parametrize("name", ["bowl", "bowl_rough", "forced_bowl", "slider_crank", "rocking_block",
                                   "painleve_rod", "spatial_bowl", "spatial_drop"])
-def test_same_results_as_the_python_loop(name):
+@pytest.mark.parametrize("projection", [False, "auto"])
+def test_same_results_as_the_python_loop(name, projection):
     system, q0, v0, t_end, h = _scene(name)
-    kw = dict(h=h, q0=q0, v0=v0, projection=False)
+    if projection and name == "slider_crank":
+        t_end = 0.05
+    kw = dict(h=h, q0=q0, v0=v0, projection=projection)
     ref = lcp.simulate(system, t_end, fast=False, **kw)
     got = lcp.simulate(system, t_end, **kw)
     assert got.status == ref.status and got.message == ref.message
@@ -82,6 +85,9 @@ def test_same_results_as_the_python_loop(name):
     for x, y in ((got.q, ref.q), (got.v, ref.v), (got.p_N, ref.p_N), (got.p_T, ref.p_T)):
         assert _rel(x, y) <= 1e-12
     assert np.array_equal(np.asarray(got.modes), np.asarray(ref.modes))
+    assert got.stats.projections == ref.stats.projections
+    assert got.stats.projection_iterations == ref.stats.projection_iterations
+    assert got.max_constraint_violation == pytest.approx(ref.max_constraint_violation, rel=1e-6, abs=1e-15)
     assert got.stats.mode_counts == ref.stats.mode_counts
     assert (got.stats.free_steps, got.stats.solver_calls) == (ref.stats.free_steps, ref.stats.solver_calls)
     assert [(i.contact, round(i.t, 12)) for i in got.impacts] == [(i.contact, round(i.t, 12)) for i in ref.impacts]
@@ -113,13 +119,18 @@ def test_the_general_loop_is_the_path_taken(monkeypatch):
     system, q0, v0, _, h = _scene("bowl")
     res = lcp.simulate(system, 0.05, h=h, q0=q0, v0=v0, projection=False)
     assert res.success and not calls
-    assert general_loop.applicable(system, type("A", (), {"schedule": None})(), object()) == "projection"
+    assert general_loop.applicable(system, type("A", (), {"schedule": None})(), object()) is None
 
 
-def test_projected_runs_say_they_ran_the_python_loop():
-    system, q0, v0, _, h = _scene("bowl")
-    res = lcp.simulate(system, 0.02, h=h, q0=q0, v0=v0)
-    assert res.success and "compiled general loop does not run the position projection" in res.message
+def test_projected_moving_contacts_say_they_ran_the_python_loop():
+    from lcp.scenes.moving import moving_table
+
+    sc = moving_table()
+    res = lcp.simulate(sc.system, 0.02, h=1e-3, q0=sc.q0, v0=sc.v0, projection=True)
+    assert res.success and "compiled general loop does not project systems with moving contacts" in res.message
+    free = lcp.simulate(sc.system, 0.3, h=1e-3, q0=sc.q0, v0=sc.v0, projection=False)
+    ref = lcp.simulate(sc.system, 0.3, h=1e-3, q0=sc.q0, v0=sc.v0, projection=False, fast=False)
+    assert free.message == ref.message and _rel(free.q, ref.q) <= 1e-12 and len(free.impacts) == len(ref.impacts)
 
 
 def test_failure_is_reported_at_the_same_step():

@@ -38,15 +38,61 @@ from lcp.contact.kernels import local_disk3
 from lcp.contact.spatial_nsgs import refine_dense, residual_blocked_dense
 from lcp.numerics.jit import njit
 
-__all__ = ["DONE", "NEEDS_PYTHON", "NONFINITE", "BAD_DATA", "REJECTED", "BUFFER_FULL", "run_general"]
+__all__ = ["DONE", "NEEDS_PYTHON", "NONFINITE", "BAD_DATA", "REJECTED", "BUFFER_FULL", "PROJECTION_FAILED",
+           "run_general"]
 
 #: reasons for which :func:`run_general` returns
-DONE, NEEDS_PYTHON, NONFINITE, BAD_DATA, REJECTED, BUFFER_FULL = 0, 1, 2, 3, 4, 5
+DONE, NEEDS_PYTHON, NONFINITE, BAD_DATA, REJECTED, BUFFER_FULL, PROJECTION_FAILED = 0, 1, 2, 3, 4, 5, 6
 
 #: the floors of the contact scale (lcp.contact.law.COUPLING_FLOOR, SCALE_FLOOR) and the unit roundoff
 _COUPLING_FLOOR = 1e-2
 _SCALE_FLOOR = 1e-12
 _EPS = 2.220446049250313e-16
+
+
+@njit(cache=True)
+def _matvec(A, x):
+    """A @ x as NumPy computes it for a C-ordered A: BLAS's dot of the row for one row, BLAS's
+    gemv otherwise (numba calls the same BLAS kernels, so the sums round the same way and the
+    compiled loop reproduces the Python loop's bits)."""
+    if A.shape[0] == 1:
+        out = np.empty(1)
+        out[0] = np.dot(A[0], x)
+        return out
+    return np.dot(A, x)
+
+
+@njit(cache=True)
+def _rows(o_X, rows, cols, idx):
+    """The rows ``idx`` of the (rows x cols) column-major buffer o_X, C-ordered (X[idx] in NumPy)."""
+    out = np.empty((idx.size, cols))
+    for a in range(idx.size):
+        for c in range(cols):
+            out[a, c] = o_X[idx[a] + c * rows]
+    return out
+
+
+@njit(cache=True)
+def _seqmv(A, x):
+    """A @ x for the F-ordered column slices X[:, idx] of the Python loop (S H' of the active set):
+    NumPy's product of such an array sums each row in order, as this loop does."""
+    out = np.zeros(A.shape[0])
+    for a in range(A.shape[0]):
+        s = 0.0
+        for c in range(A.shape[1]):
+            s += A[a, c] * x[c]
+        out[a] = s
+    return out
+
+
+@njit(cache=True)
+def _cols(o_X, rows, idx):
+    """The columns ``idx`` of the (rows x cols) column-major buffer o_X, C-ordered (X[:, idx])."""
+    out = np.empty((rows, idx.size))
+    for b in range(idx.size):
+        for a in range(rows):
+            out[a, b] = o_X[a + idx[b] * rows]
+    return out
 
 
 @njit(cache=True)
@@ -121,14 +167,17 @@ def _closed_form_step(j, m, n, r, k, tk, h, o_W, o_H, o_SHt, o_b1, moving, v, vf
     dv and out = (pN, pT, mode); False where the Python side must solve the step."""
     iN = j
     iT = m + j
-    qN = 0.0
-    qT = 0.0
-    for c in range(n):
-        qN += o_H[iN + c * r] * vfree[c]
-        qT += o_H[iT + c * r] * vfree[c]
+    idx = np.empty(2, dtype=np.int64)
+    idx[0] = iN
+    idx[1] = iT
+    Ha = _rows(o_H, r, n, idx)
+    SHta = _cols(o_SHt, n, idx)
+    qa = _matvec(Ha, vfree)
     if moving:
-        qN = qN + o_b1[iN]
-        qT = qT + o_b1[iT]
+        qa[0] = qa[0] + o_b1[iN]
+        qa[1] = qa[1] + o_b1[iT]
+    qN = qa[0]
+    qT = qa[1]
     shift = 0.0
     has_e = e[j] != 0.0
     if has_e:
@@ -175,16 +224,18 @@ def _closed_form_step(j, m, n, r, k, tk, h, o_W, o_H, o_SHt, o_b1, moving, v, vf
         md = 3
     else:
         md = 1
+    pp = np.empty(2)
+    pp[0] = pN
+    pp[1] = pT
+    sp = _seqmv(SHta, pp)
     for a in range(n):
-        dv[a] = dvf[a] + (o_SHt[a + iN * n] * pN + o_SHt[a + iT * n] * pT)
+        dv[a] = dvf[a] + sp[a]
         w[a] = v[a] + dv[a]
     # the branch refinement: r = H (v + dv) cancelled on the branch of the mode
     if md != 0:
-        rN = 0.0
-        rTl = 0.0
-        for c in range(n):
-            rN += o_H[iN + c * r] * w[c]
-            rTl += o_H[iT + c * r] * w[c]
+        rl = _matvec(Ha, w)
+        rN = rl[0]
+        rTl = rl[1]
         if moving:
             rN = rN + o_b1[iN]
             rTl = rTl + o_b1[iT]
@@ -211,8 +262,11 @@ def _closed_form_step(j, m, n, r, k, tk, h, o_W, o_H, o_SHt, o_b1, moving, v, vf
         if ok and math.isfinite(dN + dT):
             pN = pN + dN
             pT = pT + dT
+            pp[0] = dN
+            pp[1] = dT
+            sp = _seqmv(SHta, pp)
             for a in range(n):
-                dv[a] = dv[a] + (o_SHt[a + iN * n] * dN + o_SHt[a + iT * n] * dT)
+                dv[a] = dv[a] + sp[a]
     out[0] = pN
     out[1] = pT
     out[2] = 0.0
@@ -254,12 +308,9 @@ def _disk_step(j, m, n, r, toff, o_W, o_H, o_SHt, o_b1, moving, v, vfree, dvf, u
     idx[0] = j
     idx[1] = m + toff[j]
     idx[2] = m + toff[j] + 1
-    qa = np.zeros(3)
-    for a in range(3):
-        x = 0.0
-        for c in range(n):
-            x += o_H[idx[a] + c * r] * vfree[c]
-        qa[a] = x
+    Ha = _rows(o_H, r, n, idx)
+    SHta = _cols(o_SHt, n, idx)
+    qa = _matvec(Ha, vfree)
     if moving:
         for a in range(3):
             qa[a] = qa[a] + o_b1[idx[a]]
@@ -295,18 +346,13 @@ def _disk_step(j, m, n, r, toff, o_W, o_H, o_SHt, o_b1, moving, v, vfree, dvf, u
     if not _disk_error(Wl, qa, muj, p) <= res_tol:
         return False
     pv = p.copy()
+    sp = _seqmv(SHta, pv)
     for a in range(n):
-        dv[a] = dvf[a] + (o_SHt[a + idx[0] * n] * pv[0] + o_SHt[a + idx[1] * n] * pv[1]
-                          + o_SHt[a + idx[2] * n] * pv[2])
+        dv[a] = dvf[a] + sp[a]
     if md[0] == 1:  # stuck: one correction on the velocities themselves (ContactStep.solve)
         for a in range(n):
             w[a] = v[a] + dv[a]
-        rl = np.empty(3)
-        for b in range(3):
-            x = 0.0
-            for c in range(n):
-                x += o_H[idx[b] + c * r] * w[c]
-            rl[b] = x
+        rl = _matvec(Ha, w)
         if moving:
             for b in range(3):
                 rl[b] = rl[b] + o_b1[idx[b]]
@@ -320,9 +366,9 @@ def _disk_step(j, m, n, r, toff, o_W, o_H, o_SHt, o_b1, moving, v, vfree, dvf, u
             return False
         for b in range(3):
             pv[b] = pv[b] + dp[b]
+        sp = _seqmv(SHta, dp)
         for a in range(n):
-            dv[a] = dv[a] + (o_SHt[a + idx[0] * n] * dp[0] + o_SHt[a + idx[1] * n] * dp[1]
-                             + o_SHt[a + idx[2] * n] * dp[2])
+            dv[a] = dv[a] + sp[a]
     istate[2] += 1
     istate[3] += 1
     istate[4] = max(istate[4], 1)
@@ -368,19 +414,92 @@ def _force_rejected(n, nq, lin, q, v, F, miss, size):
 
 
 @njit(cache=True)
+def _project(pfunc, pargp, presp, piw, pw, p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p_mu, t, q, v, o_H, r, nb, m,
+             ploaded, ptol, max_evals, ell, h, close_tol, closed, opening, out):
+    """PositionProjection.project after a step (the Python loop's call of it, with its closed and
+    opening masks); the projected q goes to ``p_qo``; out = (ok, evaluations, violation)."""
+    n = v.size
+    if m:
+        HN = _rows(o_H, r, n, np.arange(m))
+        uN = _matvec(HN, v)
+        aN = _matvec(np.abs(HN), np.abs(v))
+        for j in range(m):
+            opening[j] = uN[j] > close_tol * aN[j]
+            closed[j] = ploaded[j] and not opening[j]
+    p_t[0] = t
+    for a in range(q.size):
+        p_q[a] = q[a]
+    for a in range(n):
+        p_L[a] = ell + h * abs(v[a])
+    for j in range(m):
+        closed[j] = closed[j] and not opening[j]  # hold: closed and free
+        p_w[j] = 1.0 if closed[j] else 0.0
+    ok = False
+    evals = 0
+    while evals < max_evals:
+        if pfunc(pargp.ctypes.data, presp.ctypes.data, piw.ctypes.data, pw.ctypes.data, 0) != 0:
+            break
+        evals += 1
+        bil_ok = True
+        for i in range(nb):
+            if not abs(p_r[i]) <= ptol * p_s[i]:
+                bil_ok = False
+        changed = False
+        closed_ok = True
+        for j in range(m):
+            lg = ptol * p_s[nb + j]
+            inw = p_w[j] != 0.0
+            if inw and not abs(p_r[nb + j]) <= lg:
+                closed_ok = False
+        for j in range(m):
+            lg = ptol * p_s[nb + j]
+            inw = p_w[j] != 0.0
+            pull = inw and not closed[j] and p_mu[nb + j] < -lg
+            pen = (not inw) and (not opening[j]) and p_r[nb + j] < -lg
+            if pull:
+                p_w[j] = 0.0
+                changed = True
+            elif pen:
+                p_w[j] = 1.0
+                changed = True
+        for a in range(q.size):
+            p_q[a] = p_qo[a]
+        if bil_ok and closed_ok and not changed:
+            ok = True
+            break
+    viol = 0.0
+    for i in range(nb):
+        viol = max(viol, abs(p_r[i]))
+    if m:
+        gmin = np.inf
+        for j in range(m):
+            gmin = min(gmin, p_r[nb + j])
+        viol = max(viol, -gmin, 0.0)
+    out[0] = 1.0 if ok else 0.0
+    out[1] = evals
+    out[2] = viol
+
+
+@njit(cache=True)
 def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, o_gap, o_H, o_b0, o_b1,
                 o_F0, o_F1, o_K1, o_C1, o_T, k0, k_end, every, h, th, close_tol, open_tol, res_tol, mu, e,
                 dims, toff, closed_form, disk_local, q, v, cq, cv, loaded, istate, fstate, lin, Q, V, PN, PT, MD,
-                imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act, forced, fdv):
+                imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act, forced, fdv, project, pfunc, pargp, presp, piw, pw,
+                p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p_mu, nb, ptol, max_evals, ell, ploaded):
     """Steps k0 .. k_end - 1 (module docstring); returns (step, reason).
 
     ``istate`` = [all_loaded, free_steps, solver_calls, iterations, max_iterations, open, stick,
     slide+, slide-, slide, ambiguous, first ambiguous step, impacts, active count of a handed step,
-    skip the force check of step k0]; ``fstate`` = [max residual]; ``lin`` the force check's
+    skip the force check of step k0, projections, projection iterations]; ``fstate`` = [max
+    residual, worst violation after a projection, violation of a failed projection]; ``lin`` the force check's
     linearisation (t, q, v, F, K, C; t NaN: none). When the reason is not DONE the state (q, v,
     sums, loaded) is that at the start of the returned step; for NEEDS_PYTHON the buffers hold its
     data, ``act[:istate[13]]`` its active contacts. With ``forced``, step k0 takes the velocity
-    increment ``fdv`` (the Python side did the rest of it).
+    increment ``fdv`` (the Python side did the rest of it). With ``project``, the positions after
+    each step are projected by the compiled update ``pfunc`` (PositionProjection's Function) with
+    the working-set rule of :meth:`PositionProjection.project
+    <lcp.timestepping.projection.PositionProjection.project>`; ``ploaded`` are the contacts
+    loaded in the step and not bounced off (the Python loop's ``loaded``).
     """
     n = v.size
     nq = q.size
@@ -399,6 +518,10 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
     miss = np.empty(n)
     size = np.empty(n)
     out = np.empty(4)
+    pout = np.empty(3)
+    closed = np.zeros(m, dtype=np.bool_)
+    opening = np.zeros(m, dtype=np.bool_)
+    allm = np.arange(m)
     cap = imp_t.size
     a_c = h * (1 - th)
     b_c = h * th
@@ -449,12 +572,12 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
             na = 0
             if m:
                 any_open = False
+                HN = _rows(o_H, r, n, allm)
+                um = _matvec(HN, v)
+                uf = _matvec(HN, vfree)
                 for j in range(m):
-                    sm = 0.0
-                    sf = 0.0
-                    for c in range(n):
-                        sm += o_H[j + c * r] * v[c]
-                        sf += o_H[j + c * r] * vfree[c]
+                    sm = um[j]
+                    sf = uf[j]
                     if moving:
                         sm = sm + o_b0[j]
                         sf = sf + o_b1[j]
@@ -470,14 +593,12 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
                     any_loaded = False
                     for j in range(m):
                         any_loaded = any_loaded or loaded[j]
+                    szq = _matvec(np.abs(HN), np.abs(q))
                     for j in range(m):
                         aa = a_c * uNm[j]
                         bb = b_c * uNf[j]
                         pred = (o_gap[j] + aa) + bb
-                        sz = 0.0
-                        for c in range(n):
-                            sz += abs(o_H[j + c * r]) * abs(q[c])
-                        sz = ((sz + abs(o_gap[j])) + abs(aa)) + abs(bb)
+                        sz = ((szq[j] + abs(o_gap[j])) + abs(aa)) + abs(bb)
                         closing = pred <= close_tol * sz
                         if any_loaded and loaded[j] and o_gap[j] + aa <= open_tol * sz:
                             closing = True
@@ -490,6 +611,7 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
                 istate[1] += 1
                 for j in range(m):
                     loaded[j] = False
+                    ploaded[j] = False
                 istate[0] = 0
             elif na == 1 and ((closed_form and _closed_form_step(act[0], m, n, r, k, tk, h, o_W, o_H, o_SHt, o_b1,
                                                                   moving, v, vfree, dvf, uNm, mu, e, res_tol,
@@ -515,6 +637,10 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
                         loaded[i] = False
                 loaded[j] = pN > 0
                 istate[0] = 1 if (m == 1 and pN > 0) else 0
+                if project:
+                    for i in range(m):
+                        ploaded[i] = False
+                    ploaded[j] = pN > 0 and (e[j] == 0 or uNm[j] >= 0)
                 if row >= 0:
                     PN[row, j] = pN
                     for a in range(dims[j]):
@@ -559,6 +685,19 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
         for a in range(n):
             v[a] = vn[a]
             cv[a] = cvn[a]
+        if project:
+            _project(pfunc, pargp, presp, piw, pw, p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p_mu, tk + h, q, v, o_H, r, nb,
+                     m, ploaded, ptol, max_evals, ell, h, close_tol, closed, opening, pout)
+            istate[15] += 1
+            istate[16] += int(pout[1])
+            if pout[0] == 0.0 or not math.isfinite(pout[2]):
+                fstate[2] = pout[2]
+                istate[17] = int(pout[1])
+                return k, PROJECTION_FAILED
+            for a in range(nq):
+                q[a] = p_qo[a]
+                cq[a] = 0.0
+            fstate[1] = max(fstate[1], pout[2])
         if row >= 0:
             for a in range(nq):
                 Q[row + 1, a] = q[a]

@@ -31,14 +31,15 @@ from lcp.result import STATUS_MESSAGES, Impact
 from lcp.timestepping.activation import CLOSE_ULPS, EPS, OPEN_ULPS
 from lcp.timestepping.contact_step import ContactStep
 from lcp.timestepping.force_check import ForceStepCheck, StepRejected, nonfinite_cause
-from lcp.timestepping.general_kernels import (BAD_DATA, BUFFER_FULL, DONE, NEEDS_PYTHON, NONFINITE, REJECTED,
-                                              run_general)
-from lcp.timestepping.outcome import RunNotes, loop_result, record_impacts
+from lcp.timestepping.general_kernels import (BAD_DATA, BUFFER_FULL, DONE, NEEDS_PYTHON, NONFINITE,
+                                              PROJECTION_FAILED, REJECTED, run_general)
+from lcp.timestepping.outcome import RunNotes, loop_result, projection_failure, record_impacts
+from lcp.timestepping.projection import NEWTON_PER_EVAL, violation_function
 
 __all__ = ["PROJECTION_NOTE", "applicable", "run_general_loop"]
 
 #: appended to the message of a run that the compiled general loop could have run but for the projection
-PROJECTION_NOTE = (" (Python loop: the compiled general loop does not run the position projection; "
+PROJECTION_NOTE = (" (Python loop: the compiled general loop does not project systems with moving contacts; "
                    "projection=False runs it)")
 
 #: impacts held by the kernel between two flushes
@@ -48,14 +49,15 @@ _IMPACT_BUFFER = 4096
 def applicable(system, asm, proj) -> str | None:
     """None where the compiled general loop runs this simulation, else the reason it does not:
     a constant system (the constant paths serve it), numba missing, a control schedule, a position
-    projection (``"projection"``)."""
+    projection on moving contacts (``"projection"``: its opening test needs the contacts' rates at
+    the projected state)."""
     if system.is_constant:
         return "constant"
     if not HAVE_NUMBA:
         return "numba"
     if asm.schedule is not None or getattr(system, "is_controlled", False):
         return "control"
-    if proj is not None:
+    if proj is not None and system.contacts_depend_on_t:
         return "projection"
     return None
 
@@ -79,10 +81,11 @@ def _disk_local(solver) -> bool:
 
 
 def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int, every: int, solver,
-                     fallback: bool):
+                     fallback: bool, proj=None, plib=None):
     """Moreau-Jean by the compiled general loop (module docstring); ``lib`` is the system's
-    :class:`~lcp.timestepping.codegen.StepLibrary`. Same arguments and result as the Python loop
-    without a projection."""
+    :class:`~lcp.timestepping.codegen.CompiledFunction` of the step, ``proj`` the run's
+    :class:`~lcp.timestepping.projection.PositionProjection` or None and ``plib`` its compiled
+    update. Same arguments and result as the Python loop."""
     if n_steps // every > 50_000_000:
         raise ValueError(f"{n_steps // every} saved states would not fit in memory: raise save_every")
     m, n = system.n_contacts, system.n
@@ -103,8 +106,8 @@ def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int
     q, v = np.array(q0, dtype=float), np.array(v0, dtype=float)
     cq, cv = np.zeros(nq), np.zeros(n)
     loaded = np.zeros(m, dtype=np.bool_)
-    istate = np.zeros(15, dtype=np.int64)
-    fstate = np.zeros(1)
+    istate = np.zeros(18, dtype=np.int64)
+    fstate = np.zeros(3)
     lin = np.full(1 + nq + 2 * n + 2 * n * n, np.nan)
     imp_t, imp_j = np.zeros(_IMPACT_BUFFER), np.zeros(_IMPACT_BUFFER, dtype=np.int64)
     imp_p = np.zeros((_IMPACT_BUFFER, 3))
@@ -122,6 +125,22 @@ def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int
     res_tol = float(getattr(solver, "residual_tol", 1e-10))
     step = ContactStep(system, asm, solver, fallback, notes)
     moving = system.contacts_depend_on_t
+    project = proj is not None
+    ploaded = np.zeros(m, dtype=np.bool_)
+    worst = 0.0
+    if project:
+        from lcp.model.start import system_length
+
+        ell = system_length(system, q0)
+        worst = violation_function(system)(q0[None, :], np.zeros(1))
+        pf = plib
+        pargs = pf.args
+        pouts = [pf.outs[k] for k in ("q_new", "r", "s", "pull")]
+        ptol, max_evals = proj.tol, proj.max_evals
+    else:  # placeholders of the kernel's arguments (never used)
+        ell, pf, ptol, max_evals = 1.0, lib, 1.0, 0
+        pargs = [np.zeros(1), np.zeros(nq), np.zeros(m), np.zeros(n)]
+        pouts = [np.zeros(nq), np.zeros(1), np.zeros(1), np.zeros(1)]
 
     def flush():
         c = int(istate[12])
@@ -138,7 +157,8 @@ def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int
                                 o["C1"], o["Tq"], k, n_steps, every, h, th, CLOSE_ULPS * EPS, OPEN_ULPS * EPS,
                                 res_tol, mu, e, tdims, toff, closed_form, disk_local, q, v, cq, cv, loaded, istate,
                                 fstate, lin, Q, V, PN, PT, modes, imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act,
-                                forced, fdv)
+                                forced, fdv, project, pf.cfunc, pf.argp, pf.resp, pf.iw, pf.w, *pargs, *pouts,
+                                system.n_bilateral, ptol, max_evals, ell, ploaded)
         forced = False
         tk = k * h
         if reason == DONE:
@@ -154,6 +174,10 @@ def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int
             status = -2
             message = f"{STATUS_MESSAGES[-2]} Step {k} (t = {tk:.10g}): {nonfinite_cause(system, h, tk, q, v, S)}."
             break
+        if reason == PROJECTION_FAILED:
+            status = -5
+            message = projection_failure(k, tk + h, float(fstate[2]), int(istate[17]) * NEWTON_PER_EVAL, ptol)
+            break
         if reason == REJECTED:
             why = _rejection(system, h, lin, n, nq, tk, q, v)
             if why is None:  # NumPy's sums let the step pass: the kernel repeats it without the check
@@ -165,8 +189,10 @@ def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int
         na = int(istate[13])
         active = act[:na].copy()
         b1 = o["b1"] if moving else None
-        dv, p, md, cols, sol = step.solve(k, tk, active, v, vfree.copy(), dvf.copy(), lib.view("SHt"),
-                                          lib.view("W"), lib.view("H"), uNm.copy(), b1)
+        # C-ordered copies, as the Python loop's operators (NumPy's products round by layout)
+        dv, p, md, cols, sol = step.solve(k, tk, active, v, vfree.copy(), dvf.copy(),
+                                          np.ascontiguousarray(lib.view("SHt")), np.ascontiguousarray(lib.view("W")),
+                                          np.ascontiguousarray(lib.view("H")), uNm.copy(), b1)
         if dv is None:
             status = -1
             message = f"{STATUS_MESSAGES[-1]} Step {k} (t = {tk:.10g}), solver '{solver.name}': {sol.message}"
@@ -180,6 +206,9 @@ def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int
             loaded[:] = False
         loaded[active] = now
         istate[0] = int(na == m and bool(np.all(now)))
+        if project:  # loaded in this step, and not bounced off (restitution)
+            ploaded[:] = False
+            ploaded[active] = now & ((e[active] == 0) | (uNm[active] >= 0))
         row = (k + 1) // every - 1 if (k + 1) % every == 0 else -1
         if row >= 0:
             PN[row, active] = pa
@@ -191,8 +220,12 @@ def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int
         forced = True
     flush()
     _merge_counters(notes, istate, fstate, h)
-    return loop_result(system, Q, V, PN, PT, modes, k, every, h, th, status, message, notes, solver.name, 0.0,
-                       False)
+    notes.stats.projections += int(istate[15])
+    notes.stats.projection_iterations += int(istate[16]) * NEWTON_PER_EVAL
+    if project:
+        worst = max(worst, float(fstate[1]))
+    return loop_result(system, Q, V, PN, PT, modes, k, every, h, th, status, message, notes, solver.name, worst,
+                       project)
 
 
 def _rejection(system, h, lin, n, nq, tk, q, v) -> str | None:

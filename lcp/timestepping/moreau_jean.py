@@ -213,12 +213,13 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
 
         why = general_loop.applicable(system, asm, proj)
         if why is None:
-            from lcp.timestepping.codegen import step_library
+            from lcp.timestepping.codegen import projection_library, step_library
 
             lib = step_library(system)  # None (with a RuntimeWarning) without a C compiler
-            if lib is not None:
+            plib = None if lib is None or proj is None else projection_library(system, proj)
+            if lib is not None and (proj is None or plib is not None):
                 return general_loop.run_general_loop(system, asm, lib, q0, v0, h, th, n_steps, every, solver,
-                                                     options.fallback)
+                                                     options.fallback, proj, plib)
         elif why == "projection":
             note = general_loop.PROJECTION_NOTE
     result = run_python_loop(system, asm, q0, v0, h, th, n_steps, every, solver, options.fallback, proj)
