@@ -146,14 +146,29 @@ def test_failure_is_reported_at_the_same_step():
     assert _rel(got.q, ref.q) <= 1e-12
 
 
-def test_painleve_failure_same_message():
-    # the Painleve rod with large friction: no consistent mode; both loops stop at the same step
-    s = painleve_rod(mu=1.5, u0=-1.0)
-    kw = dict(h=1e-3, q0=s.q0, v0=s.v0, projection=False, fallback=False)
-    ref = lcp.simulate(s.system, s.t_end, fast=False, **kw)
-    got = lcp.simulate(s.system, s.t_end, **kw)
+def test_solver_failure_same_message():
+    # a Lemke solver allowed one pivot and no fallback: the contact step fails, in the same step
+    system, q0, v0, t_end, h = _scene("rocking_block")
+    kw = dict(h=h, q0=q0, v0=v0, solver="lemke", solver_options={"max_pivots": 1}, fallback=False)
+    ref = lcp.simulate(system, t_end, fast=False, **kw)
+    got = lcp.simulate(system, t_end, **kw)
+    assert ref.status == -1
     assert (got.status, got.message) == (ref.status, ref.message)
     assert got.q.shape == ref.q.shape and _rel(got.q, ref.q) <= 1e-12
+
+
+def test_nonfinite_force_same_message():
+    # a force that becomes NaN past x = 0.3: the step's data are not finite, named as in the Python loop
+    q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
+    r = ca.norm_2(q)
+    s = System(q, v, ca.SX.eye(2), ca.vertcat(ca.sqrt(0.3 - q[0]), -9.81),
+               contacts=[Contact(gap=1.0 - r, tangent_jacobian=ca.horzcat(-q[1], q[0]) / r, mu=0.3)])
+    kw = dict(h=1e-3, q0=[0.0, -1.0], v0=[2.0, 0.0])
+    ref = lcp.simulate(s, 1.0, fast=False, **kw)
+    got = lcp.simulate(s, 1.0, **kw)
+    assert ref.status == -2 and "not finite" in ref.message
+    assert (got.status, got.message) == (ref.status, ref.message)
+    assert np.array_equal(got.q, ref.q)
 
 
 def test_without_a_compiler_the_python_loop_runs_with_a_warning(monkeypatch):
