@@ -50,7 +50,7 @@ def applicable(system, asm, proj) -> str | None:
     """None where the compiled general loop runs this simulation, else the reason it does not:
     a constant system (the constant paths serve it), numba missing, a control schedule, a position
     projection on moving contacts (``"projection"``: its opening test needs the contacts' rates at
-    the projected state)."""
+    the projected state), a kinematics map between q and v of different sizes."""
     if system.is_constant:
         return "constant"
     if not HAVE_NUMBA:
@@ -59,6 +59,9 @@ def applicable(system, asm, proj) -> str | None:
         return "control"
     if proj is not None and system.contacts_depend_on_t:
         return "projection"
+    kin = getattr(system, "kinematics_expr", None)
+    if kin is not None and system.q_sym.shape[0] != system.n:
+        return "kinematics"  # q and v of different sizes: the activation's |H| |q| needs the loop's own rule
     return None
 
 
