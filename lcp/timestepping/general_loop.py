@@ -14,10 +14,13 @@ of :mod:`lcp.timestepping`, and :mod:`lcp.result`; never the path choice
 What runs compiled: the step data, the force check, the activation rule, free steps, one active
 planar contact under ``"auto"``/``"enum"`` (closed form, modes, branch refinement), one active disk
 contact under the disk law's ``"auto"``/``"local"`` (local solve, branch refinement, the stuck
-correction), impacts, Kahan sums, saving. The other contact steps are solved by the Python loop's own
-:class:`~lcp.timestepping.contact_step.ContactStep` on the step's data and handed back (same solver
-objects, fallbacks and notes), so every result agrees with the Python loop's to rounding. Not run
-here (the Python loop then runs): the position projection (the message says so), control
+correction), impacts, Kahan sums, the position projection (its Newton update compiled from
+:attr:`PositionProjection.function <lcp.timestepping.projection.PositionProjection>`, the
+working-set rule in the kernel), saving. The other contact steps are solved by the Python loop's
+own :class:`~lcp.timestepping.contact_step.ContactStep` on the step's data and handed back (same
+solver objects, fallbacks and notes). The kernel's products are those NumPy computes, so the
+results are the Python loop's (bit for bit on the tested scenes, to rounding at worst). Not run
+here (the Python loop then runs): a projection of moving contacts (the message says so), control
 schedules, ``scheme="order2"``, systems without numba or without a C compiler (a
 :class:`RuntimeWarning` names the compiler).
 """
