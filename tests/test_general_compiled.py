@@ -186,3 +186,13 @@ def test_library_is_cached_by_source(tmp_path, monkeypatch):
     la, lb = codegen.step_library(a), codegen.step_library(b)
     assert la is not None and lb is not None
     assert len(list(tmp_path.glob("lcp_general_step_*.so"))) == 1
+
+
+def test_two_threads_on_one_system_agree_with_one():
+    from concurrent.futures import ThreadPoolExecutor
+
+    system, q0, v0, t_end, h = _scene("bowl_rough")
+    ref = lcp.simulate(system, t_end, h=h, q0=q0, v0=v0)
+    with ThreadPoolExecutor(2) as pool:
+        runs = list(pool.map(lambda _: lcp.simulate(system, t_end, h=h, q0=q0, v0=v0), range(4)))
+    assert all(np.array_equal(r.q, ref.q) and np.array_equal(r.v, ref.v) for r in runs)

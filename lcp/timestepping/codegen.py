@@ -35,6 +35,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import warnings
 import weakref
 
@@ -122,10 +123,14 @@ class CompiledFunction:
         The results by name, dense, column-major as CasADi writes them.
     argp, resp, iw, w : ndarray
         The pointer arrays and CasADi's work arrays, allocated once.
+    lock : threading.Lock
+        Held by a run for its whole length: the buffers are the run's (two threads simulating one
+        System take turns).
     """
 
     def __init__(self, fn: ca.Function, lib, names=None):
         self.lib = lib  # kept alive: the function pointer lives in it
+        self.lock = threading.Lock()
         self.cfunc = getattr(lib, fn.name())
         self.cfunc.restype = ctypes.c_int
         self.cfunc.argtypes = [ctypes.c_int64] * 4 + [ctypes.c_int]

@@ -92,6 +92,15 @@ def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int
     :class:`~lcp.timestepping.codegen.CompiledFunction` of the step, ``proj`` the run's
     :class:`~lcp.timestepping.projection.PositionProjection` or None and ``plib`` its compiled
     update. Same arguments and result as the Python loop."""
+    with lib.lock:
+        if plib is None:
+            return _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj, plib)
+        with plib.lock:
+            return _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj, plib)
+
+
+def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj, plib):
+    """The body of :func:`run_general_loop`, its libraries' buffers held."""
     if n_steps // every > 50_000_000:
         raise ValueError(f"{n_steps // every} saved states would not fit in memory: raise save_every")
     m, n = system.n_contacts, system.n
