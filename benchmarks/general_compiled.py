@@ -12,7 +12,8 @@ run repeated in-process, median of 3, or of 9 for short runs) on ``N_c`` steps (
 block 1500, its rocking phase: at rest on both corners each step has two active contacts, solved
 by the Python contact step; the per-step time includes the call's set-up); cold: a fresh interpreter with empty
 compiled-code and numba caches (C generation, gcc, numba compilation, the run) -- its wall time,
-not per step. Results are compared with the Python loop's on the common steps (max relative
+not per step; "cold C": the same with numba's cache warm (a new system on a machine that has run
+the loop once: C generation, gcc, the run). Results are compared with the Python loop's on the common steps (max relative
 difference of q).
 
 With Siconos 4.4 in ``/usr/bin/python3`` the point in the bowl is run there too, in a subprocess
@@ -85,10 +86,15 @@ def run(name, steps, fast, projection="auto"):
     return time.perf_counter() - t0, res
 
 
-def cold(name, steps):
-    """Wall time of a fresh interpreter's first compiled run (empty caches), from the run's call."""
+def cold(name, steps, keep_numba=False):
+    """Wall time of a fresh interpreter's first compiled run (empty caches), from the run's call;
+    with ``keep_numba`` the numba cache is the warm one (only the system's C code is compiled: a
+    new system on a machine that has run the loop before)."""
+    from lcp.numerics import cache
+
     with tempfile.TemporaryDirectory() as tmp:
-        env = dict(os.environ, LCP_CACHE_DIR=tmp, NUMBA_CACHE_DIR=os.path.join(tmp, "numba"),
+        numba_dir = os.environ.get("NUMBA_CACHE_DIR") or str(cache.cache_dir() / "numba")
+        env = dict(os.environ, LCP_CACHE_DIR=tmp, NUMBA_CACHE_DIR=numba_dir if keep_numba else os.path.join(tmp, "numba"),
                    PYTHONPATH=str(ROOT))
         code = (f"import sys; sys.path.insert(0, {str(ROOT / 'benchmarks')!r}); import general_compiled as g; "
                 f"t, r = g.run({name!r}, {steps}, True); print(t)")
@@ -157,7 +163,7 @@ def main():
     n_c_all = 3000 if args.quick else 100_000
     rows = []
     print(f"{'scene':14s} {'python us/step':>15s} {'compiled us/step':>17s} {'speed-up':>9s} {'cold s':>7s} "
-          f"{'max rel dq':>11s}")
+          f"{'cold C s':>9s} {'max rel dq':>11s}")
     for name in SCENES:
         t_py, ref = run(name, n_py, False)
         run(name, 10, True)  # warm: library and kernel cached
@@ -166,11 +172,12 @@ def main():
         _, got = run(name, n_py, True)
         dq = float(np.max(np.abs(got.q - ref.q)) / np.max(np.abs(ref.q)))
         t_cold = cold(name, n_py)
+        t_cold_c = cold(name, n_py, keep_numba=True)
         py, c = t_py / n_py * 1e6, t_c / n_c * 1e6
-        print(f"{name:14s} {py:15.1f} {c:17.2f} {py / c:9.0f} {t_cold:7.2f} {dq:11.2e}")
+        print(f"{name:14s} {py:15.1f} {c:17.2f} {py / c:9.0f} {t_cold:7.2f} {t_cold_c:9.2f} {dq:11.2e}")
         rows.append(dict(scene=name, python_us_per_step=f"{py:.2f}", compiled_us_per_step=f"{c:.3f}",
-                         speedup=f"{py / c:.0f}", cold_s=f"{t_cold:.2f}", max_rel_dq=f"{dq:.2e}",
-                         steps_python=n_py, steps_compiled=n_c))
+                         speedup=f"{py / c:.0f}", cold_s=f"{t_cold:.2f}", cold_c_only_s=f"{t_cold_c:.2f}",
+                         max_rel_dq=f"{dq:.2e}", steps_python=n_py, steps_compiled=n_c))
     if not args.no_siconos:
         _, _, _, h = scene("bowl")
         n_s = n_c_all // 10
@@ -181,10 +188,10 @@ def main():
             print(f"Siconos 4.4 C++ kernel, point in the bowl: {per * 1e6:.2f} us/step ({what}); ours without "
                   f"projection {t_free / n_s * 1e6:.2f} us/step, q(t_end) = ({ours.q[-1, 0]:.6f}, {ours.q[-1, 1]:.6f})")
             rows.append(dict(scene="bowl, no projection (Siconos 4.4 kernel)", python_us_per_step="",
-                             compiled_us_per_step=f"{per * 1e6:.3f}", speedup="", cold_s="", max_rel_dq="",
+                             compiled_us_per_step=f"{per * 1e6:.3f}", speedup="", cold_s="", cold_c_only_s="", max_rel_dq="",
                              steps_python="", steps_compiled=n_s))
             rows.append(dict(scene="bowl, no projection (ours)", python_us_per_step="",
-                             compiled_us_per_step=f"{t_free / n_s * 1e6:.3f}", speedup="", cold_s="", max_rel_dq="",
+                             compiled_us_per_step=f"{t_free / n_s * 1e6:.3f}", speedup="", cold_s="", cold_c_only_s="", max_rel_dq="",
                              steps_python="", steps_compiled=n_s))
         else:
             print(f"Siconos: not run ({what})")
