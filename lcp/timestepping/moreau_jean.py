@@ -75,7 +75,9 @@ class MoreauJeanOptions:
     fast : bool
         Use the compiled path (:mod:`lcp.timestepping.compiled_step`) when it applies: a constant system with one
         contact and the closed-form solver (``"auto"`` or ``"enum"``). Same results, no Python
-        per step.
+        per step. A system that is not constant runs the compiled general loop
+        (:mod:`lcp.timestepping.general_loop`: CasADi's C code of the step, a numba loop) where no
+        control schedule applies, no moving contact is projected and a C compiler is found.
     projection : {"auto", True, False}
         Project the positions onto the constraints after each step (:mod:`lcp.timestepping.projection`).
         ``"auto"``: only where a constraint is nonlinear in q or time-dependent (where the
@@ -211,7 +213,26 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
 
         if compiled_loop.applicable(asm, solver, options):
             return compiled_loop.moreau_jean_loop(asm, q0, v0, n_steps, every, solver, options.fallback)
-    return run_python_loop(system, asm, q0, v0, h, th, n_steps, every, solver, options.fallback, proj)
+    note = ""
+    if options.fast and not system.is_constant:
+        # the compiled general loop: generated C step data, a numba loop (lcp.timestepping.general_loop)
+        from lcp.timestepping import general_loop
+
+        why = general_loop.applicable(system, asm, proj)
+        if why is None:
+            from lcp.timestepping.codegen import projection_library, step_library
+
+            lib = step_library(system)  # None (with a RuntimeWarning) without a C compiler
+            plib = None if lib is None or proj is None else projection_library(system, proj)
+            if lib is not None and (proj is None or plib is not None):
+                return general_loop.run_general_loop(system, asm, lib, q0, v0, h, th, n_steps, every, solver,
+                                                     options.fallback, proj, plib)
+        elif why == "projection":
+            note = general_loop.PROJECTION_NOTE
+    result = run_python_loop(system, asm, q0, v0, h, th, n_steps, every, solver, options.fallback, proj)
+    if note:
+        result.message += note
+    return result
 
 
 

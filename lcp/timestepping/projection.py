@@ -172,7 +172,7 @@ class PositionProjection:
             raise ValueError(f"projection_tol must lie in [1e-15, 1), got {tol!r}")
         self.sys, self.tol, self.max_evals = system, float(tol), int(max_evals)
         self.nb, self.m, self.n = system.n_bilateral, system.n_contacts, system.n
-        fn = _update_function(system, NEWTON_PER_EVAL)
+        fn = self.function = _update_function(system, NEWTON_PER_EVAL)  # (the compiled general loop's C)
         self._buf, self._run = fn.buffer()
         k = self.nb + self.m
         self._t = np.zeros(1)

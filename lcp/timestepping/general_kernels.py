@@ -1,0 +1,712 @@
+"""The numba kernel of the compiled Moreau-Jean loop for general systems: the steps themselves.
+
+Holds :func:`run_general` (steps k0 .. k_end - 1 of any system whose step data come from the C
+function of :mod:`lcp.timestepping.codegen`) and the reasons it returns for. Imports NumPy, numba
+(:mod:`lcp.numerics.jit`) and the compiled local solves of :mod:`lcp.contact`; never the set-up,
+the Python solvers, the result or anything above :mod:`lcp.timestepping`. Each step, as the
+Python loop (:mod:`lcp.timestepping.python_loop`) computes it:
+
+- the step's data from the generated C function, called through its ctypes pointer (the same
+  Function the Python loop evaluates in CasADi's virtual machine: the same bits); the free
+  velocity increment ``dvf = v_free - v`` and ``v_free = v + dvf`` rounded as the loop rounds them;
+- the step acceptance of forces that are not affine (:class:`lcp.timestepping.force_check.ForceStepCheck`:
+  the previous step's linearisation against the force at the step's start);
+- the activation rule with its tolerances and hysteresis (:mod:`lcp.timestepping.activation`), the
+  same sums in the same order, with the moving contacts' rates b;
+- one active planar contact under the closed-form solvers (``"auto"``, ``"enum"``): the closed form
+  (:func:`lcp.contact.planar_closed_form.planar_enum`), its acceptance test, the modes and the
+  branch refinement of :class:`lcp.timestepping.contact_step.ContactStep`;
+- one active disk contact under the disk law's ``"auto"`` or ``"local"``: the local solve
+  (:func:`lcp.contact.kernels.local_disk3`), the branch refinement and modes
+  (:func:`lcp.contact.spatial_nsgs.refine_dense`), the solver's acceptance test and the stuck
+  contact's correction of :class:`~lcp.timestepping.contact_step.ContactStep`;
+- restitution shift, impacts, the Kahan-compensated sums of v and q (q' = T(q) v where the system
+  has a kinematics map), every ``save_every``-th state.
+
+Every other contact step (several active contacts, spatial contacts, another solver, a closed form
+that fails its test) returns NEEDS_PYTHON with the step's data in the buffers: the Python side
+solves it with the loop's own :class:`~lcp.timestepping.contact_step.ContactStep` and calls back
+with the velocity increment (``forced``), and the kernel finishes that step and goes on.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from lcp.contact.kernels import local_disk3
+from lcp.contact.spatial_nsgs import refine_dense, residual_blocked_dense
+from lcp.numerics.jit import njit
+
+__all__ = ["DONE", "NEEDS_PYTHON", "NONFINITE", "BAD_DATA", "REJECTED", "BUFFER_FULL", "PROJECTION_FAILED",
+           "run_general"]
+
+#: reasons for which :func:`run_general` returns
+DONE, NEEDS_PYTHON, NONFINITE, BAD_DATA, REJECTED, BUFFER_FULL, PROJECTION_FAILED = 0, 1, 2, 3, 4, 5, 6
+
+#: the floors of the contact scale (lcp.contact.law.COUPLING_FLOOR, SCALE_FLOOR) and the unit roundoff
+_COUPLING_FLOOR = 1e-2
+_SCALE_FLOOR = 1e-12
+_EPS = 2.220446049250313e-16
+
+
+@njit(cache=True)
+def _matvec(A, x):
+    """A @ x as NumPy computes it for a C-ordered A: BLAS's dot of the row for one row, BLAS's
+    gemv otherwise (numba calls the same BLAS kernels, so the sums round the same way and the
+    compiled loop reproduces the Python loop's bits)."""
+    if A.shape[0] == 1:
+        out = np.empty(1)
+        if A.shape[1] <= 16:  # BLAS's dot of a short row sums in order (measured): no call
+            s = 0.0
+            for c in range(A.shape[1]):
+                s += A[0, c] * x[c]
+            out[0] = s
+        else:
+            out[0] = np.dot(A[0], x)
+        return out
+    return np.dot(A, x)
+
+
+@njit(cache=True)
+def _rows(o_X, rows, cols, idx):
+    """The rows ``idx`` of the (rows x cols) column-major buffer o_X, C-ordered (X[idx] in NumPy)."""
+    out = np.empty((idx.size, cols))
+    for a in range(idx.size):
+        for c in range(cols):
+            out[a, c] = o_X[idx[a] + c * rows]
+    return out
+
+
+@njit(cache=True)
+def _seqmv(A, x):
+    """A @ x for the F-ordered column slices X[:, idx] of the Python loop (S H' of the active set):
+    NumPy's product of such an array sums each row in order, as this loop does."""
+    out = np.zeros(A.shape[0])
+    for a in range(A.shape[0]):
+        s = 0.0
+        for c in range(A.shape[1]):
+            s += A[a, c] * x[c]
+        out[a] = s
+    return out
+
+
+@njit(cache=True)
+def _cols(o_X, rows, idx):
+    """The columns ``idx`` of the (rows x cols) column-major buffer o_X, C-ordered (X[:, idx])."""
+    out = np.empty((rows, idx.size))
+    for b in range(idx.size):
+        for a in range(rows):
+            out[a, b] = o_X[a + idx[b] * rows]
+    return out
+
+
+@njit(cache=True)
+def _enum_one(W00, W01, W10, W11, qN, qT, mu):
+    """lcp.contact.planar_closed_form.planar_enum on floats (rtol 1e-12): (pN, pT, mode, n_distinct)."""
+    scale = max(max(abs(qN) / W00, abs(qT) / W11), 1e-300)
+    tol = 1e-12 * scale
+    open_ok = (qN / W00) >= -tol
+    det = W00 * W11 - W01 * W10
+    det_ok = det > 0
+    dets = det if det_ok else 1.0
+    pN_st = (-qN * W11 + qT * W01) / dets
+    pT_st = (-qT * W00 + qN * W10) / dets
+    st_ok = det_ok and (pN_st >= -tol) and (abs(pT_st) <= mu * pN_st + tol)
+    a_p = W00 - mu * W01
+    ok_p = a_p > 0
+    pN_p = -qN / (a_p if ok_p else 1.0)
+    uT_p = (W10 - mu * W11) * pN_p + qT
+    sp_ok = ok_p and (pN_p >= -tol) and ((uT_p / W11) > -tol)
+    a_m = W00 + mu * W01
+    ok_m = a_m > 0
+    pN_m = -qN / (a_m if ok_m else 1.0)
+    uT_m = (W10 + mu * W11) * pN_m + qT
+    sm_ok = ok_m and (pN_m >= -tol) and ((uT_m / W11) < tol)
+    if open_ok:
+        pN, pT, mode = 0.0, 0.0, 0
+    elif st_ok:
+        pN, pT, mode = pN_st, pT_st, 1
+    elif sp_ok:
+        pN, pT, mode = pN_p, -mu * pN_p, 2
+    elif sm_ok:
+        pN, pT, mode = pN_m, mu * pN_m, 3
+    else:
+        return np.nan, np.nan, -1, 0
+    far = 1e-9 * scale
+    nd = 1
+    if open_ok and (abs(0.0 - pN) + abs(0.0 - pT)) > far:
+        nd += 1
+    if st_ok and (abs(pN_st - pN) + abs(pT_st - pT)) > far:
+        nd += 1
+    if sp_ok and (abs(pN_p - pN) + abs(-mu * pN_p - pT)) > far:
+        nd += 1
+    if sm_ok and (abs(pN_m - pN) + abs(mu * pN_m - pT)) > far:
+        nd += 1
+    return pN, pT, mode, nd
+
+
+@njit(cache=True)
+def _error_one(W00, W01, W10, W11, qN, qT, mu, rN, rT):
+    """ContactProblem.error of one planar contact (the Siconos-normalised natural-map error)."""
+    if not (math.isfinite(rN) and math.isfinite(rT)):
+        return np.nan
+    uN, uT = W00 * rN + W01 * rT + qN, W10 * rN + W11 * rT + qT
+    zN, zT = rN - uN - mu * abs(uT), rT - uT
+    aT = abs(zT)
+    if aT <= mu * zN and zN >= 0.0:
+        pN, pT = zN, zT
+    elif mu * aT <= -zN:
+        pN = pT = 0.0
+    else:
+        pN = (zN + mu * aT) / (1.0 + mu * mu)
+        pT = math.copysign(mu * pN, zT)
+    err = math.hypot(rN - pN, rT - pT)
+    scale = max(math.hypot(rN, rT), math.hypot(uN, uT), math.hypot(qN, qT))
+    return err / scale if scale > _EPS else err
+
+
+@njit(cache=True)
+def _closed_form_step(j, m, n, r, k, tk, h, o_W, o_H, o_SHt, o_b1, moving, v, vfree, dvf, uNm, mu, e, res_tol,
+                      istate, fstate, dv, w, out):
+    """One active planar contact j by the closed form, as ContactStep.solve with EnumSolver: fills
+    dv and out = (pN, pT, mode); False where the Python side must solve the step."""
+    iN = j
+    iT = m + j
+    idx = np.empty(2, dtype=np.int64)
+    idx[0] = iN
+    idx[1] = iT
+    Ha = _rows(o_H, r, n, idx)
+    SHta = _cols(o_SHt, n, idx)
+    qa = _matvec(Ha, vfree)
+    if moving:
+        qa[0] = qa[0] + o_b1[iN]
+        qa[1] = qa[1] + o_b1[iT]
+    qN = qa[0]
+    qT = qa[1]
+    shift = 0.0
+    has_e = e[j] != 0.0
+    if has_e:
+        shift = e[j] * min(uNm[j], 0.0)
+        qN += shift
+    W00 = o_W[iN + iN * r]
+    W01 = o_W[iN + iT * r]
+    W10 = o_W[iT + iN * r]
+    W11 = o_W[iT + iT * r]
+    muj = mu[j]
+    pN, pT, mode, nd = _enum_one(W00, W01, W10, W11, qN, qT, muj)
+    if mode < 0:
+        return False
+    rhoN = 1.0 / W00 if W00 > 0 else 1.0
+    rhoT = 1.0 / W11 if W11 > 0 else 1.0
+    scale = max(max(abs(qN) * rhoN, abs(qT) * rhoT), 1e-300)
+    uN, uT = W00 * pN + W01 * pT + qN, W10 * pN + W11 * pT + qT
+    s = muj * max(pN, 0.0)
+    rT = pT - min(max(pT - rhoT * uT, -s), s)
+    res = max(abs(min(pN, rhoN * uN)), abs(rT))
+    sc = max(scale, max(abs(pN), abs(pT)), 1e-300)
+    if not math.isfinite(res) or res > res_tol * sc:
+        return False
+    if not _error_one(W00, W01, W10, W11, qN, qT, muj, pN, pT) <= res_tol:
+        return False
+    istate[2] += 1
+    istate[3] += 4
+    istate[4] = max(istate[4], 4)
+    if nd > 1:
+        if istate[10] == 0:
+            istate[11] = k
+        istate[10] += 1
+    fstate[0] = max(fstate[0], res)
+    # modes (ContactProblem.modes, one contact): thresholds 1e-9 of the contact's own scale
+    tol_p = 1e-9 * max(abs(qN) * rhoN, abs(qT) * rhoT, abs(pN), abs(pT),
+                       _COUPLING_FLOOR * rhoN * (abs(W00 * pN) + abs(W01 * pT)),
+                       _COUPLING_FLOOR * rhoT * (abs(W10 * pN) + abs(W11 * pT)), _SCALE_FLOOR * scale)
+    uTm = (W10 * pN + W11 * pT + qT) * rhoT
+    if pN <= tol_p:
+        md = 0
+    elif uTm > tol_p:
+        md = 2
+    elif uTm < -tol_p:
+        md = 3
+    else:
+        md = 1
+    pp = np.empty(2)
+    pp[0] = pN
+    pp[1] = pT
+    sp = _seqmv(SHta, pp)
+    for a in range(n):
+        dv[a] = dvf[a] + sp[a]
+        w[a] = v[a] + dv[a]
+    # the branch refinement: r = H (v + dv) cancelled on the branch of the mode
+    if md != 0:
+        rl = _matvec(Ha, w)
+        rN = rl[0]
+        rTl = rl[1]
+        if moving:
+            rN = rN + o_b1[iN]
+            rTl = rTl + o_b1[iT]
+        if has_e:
+            rN += shift
+        ok = True
+        if md == 1:
+            det = W00 * W11 - W01 * W10
+            if det == 0.0:
+                ok = False
+                dN = dT = 0.0
+            else:
+                dN = (-rN * W11 + rTl * W01) / det
+                dT = (-rTl * W00 + rN * W10) / det
+        else:
+            sg = 1.0 if md == 2 else -1.0
+            aa = W00 - sg * muj * W01
+            if aa == 0.0:
+                ok = False
+                dN = dT = 0.0
+            else:
+                dN = -rN / aa
+                dT = -sg * muj * dN
+        if ok and math.isfinite(dN + dT):
+            pN = pN + dN
+            pT = pT + dT
+            pp[0] = dN
+            pp[1] = dT
+            sp = _seqmv(SHta, pp)
+            for a in range(n):
+                dv[a] = dv[a] + sp[a]
+    out[0] = pN
+    out[1] = pT
+    out[2] = 0.0
+    out[3] = md
+    return True
+
+
+@njit(cache=True)
+def _disk_error(Wl, qa, mu, p):
+    """ContactProblem.error of one disk contact (lcp.contact.law.natural_map_error, dims = [2])."""
+    u = np.empty(3)
+    for a in range(3):
+        u[a] = Wl[a, 0] * p[0] + Wl[a, 1] * p[1] + Wl[a, 2] * p[2] + qa[a]
+    zN = p[0] - u[0] - mu * math.hypot(u[1], u[2])
+    z0 = p[1] - u[1]
+    z1 = p[2] - u[2]
+    aT = math.hypot(z0, z1)
+    inside = aT <= mu * zN and zN >= 0
+    polar = mu * aT <= -zN
+    rN = (zN + mu * aT) / (1.0 + mu * mu)
+    f = 0.0 if (inside or polar) else mu * rN / (aT if aT > 0 else 1.0)
+    pN = zN if inside else (0.0 if polar else rN)
+    pT0 = z0 if inside else z0 * f
+    pT1 = z1 if inside else z1 * f
+    err = math.sqrt((p[0] - pN) ** 2 + ((p[1] - pT0) ** 2 + (p[2] - pT1) ** 2))
+    scale = max(math.sqrt(p[0] ** 2 + p[1] ** 2 + p[2] ** 2), math.sqrt(u[0] ** 2 + u[1] ** 2 + u[2] ** 2),
+                math.sqrt(qa[0] ** 2 + qa[1] ** 2 + qa[2] ** 2))
+    return err / scale if scale > _EPS else err
+
+
+@njit(cache=True)
+def _disk_step(j, m, n, r, toff, o_W, o_H, o_SHt, o_b1, moving, v, vfree, dvf, uNm, mu, e, res_tol, istate, fstate,
+               dv, w, out):
+    """One active disk contact j by the local solve, as ContactStep.solve with the ``"auto"`` (or
+    ``"local"``) disk-law solver: the exact local solve (local_disk3), the branch refinement and its
+    modes (refine_dense), the solver's acceptance test, the stuck contact's velocity correction.
+    Fills dv and out = (pN, pT0, pT1, mode); False where the Python side must solve the step."""
+    idx = np.empty(3, dtype=np.int64)
+    idx[0] = j
+    idx[1] = m + toff[j]
+    idx[2] = m + toff[j] + 1
+    Ha = _rows(o_H, r, n, idx)
+    SHta = _cols(o_SHt, n, idx)
+    qa = _matvec(Ha, vfree)
+    if moving:
+        for a in range(3):
+            qa[a] = qa[a] + o_b1[idx[a]]
+    shift = 0.0
+    has_e = e[j] != 0.0
+    if has_e:
+        shift = e[j] * min(uNm[j], 0.0)
+        qa[0] += shift
+    Wl = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            Wl[a, b] = o_W[idx[a] + idx[b] * r]
+    muj = mu[j]
+    pN, pT0, pT1, mode, _ = local_disk3(Wl, qa[0], qa[1], qa[2], muj, 0.0, 0.0)
+    if mode < 0:
+        return False
+    dN = Wl[0, 0]
+    dTm = max(Wl[1, 1], Wl[2, 2])
+    rhoN = np.array([1.0 / dN if dN > 0 else 1.0])
+    rhoT = np.array([1.0 / dTm if dTm > 0 else 1.0])
+    scale = max(max(abs(qa[0]) * rhoN[0], abs(qa[1]) * rhoT[0], abs(qa[2]) * rhoT[0]), 1e-300)
+    mus = np.array([muj])
+    dims = np.array([2], dtype=np.int64)
+    toff1 = np.zeros(1, dtype=np.int64)
+    p0 = np.array([pN, pT0, pT1])
+    p, md = refine_dense(Wl, qa, mus, dims, toff1, rhoN, rhoT, scale, p0, 3, 1e-9)
+    if not math.isfinite(p[0] + p[1] + p[2]):
+        return False
+    res = residual_blocked_dense(Wl, qa, mus, dims, toff1, rhoN, rhoT, p)
+    sc = max(scale, max(abs(p[0]), abs(p[1]), abs(p[2])), 1e-300)
+    if not math.isfinite(res) or res > res_tol * sc:
+        return False
+    if not _disk_error(Wl, qa, muj, p) <= res_tol:
+        return False
+    pv = p.copy()
+    sp = _seqmv(SHta, pv)
+    for a in range(n):
+        dv[a] = dvf[a] + sp[a]
+    if md[0] == 1:  # stuck: one correction on the velocities themselves (ContactStep.solve)
+        for a in range(n):
+            w[a] = v[a] + dv[a]
+        rl = _matvec(Ha, w)
+        if moving:
+            for b in range(3):
+                rl[b] = rl[b] + o_b1[idx[b]]
+        if has_e:
+            rl[0] += shift
+        try:
+            dp = np.linalg.solve(Wl, -rl)
+        except Exception:  # singular: the Python side takes its least-squares step
+            return False
+        if not math.isfinite(dp[0] + dp[1] + dp[2]):
+            return False
+        for b in range(3):
+            pv[b] = pv[b] + dp[b]
+        sp = _seqmv(SHta, dp)
+        for a in range(n):
+            dv[a] = dv[a] + sp[a]
+    istate[2] += 1
+    istate[3] += 1
+    istate[4] = max(istate[4], 1)
+    fstate[0] = max(fstate[0], res)
+    out[0] = pv[0]
+    out[1] = pv[1]
+    out[2] = pv[2]
+    out[3] = md[0]
+    return True
+
+
+@njit(cache=True)
+def _force_rejected(n, nq, lin, q, v, F, miss, size):
+    """ForceStepCheck's test of the previous step's linearisation (lin: t, q0, v0, F0, K0, C0)."""
+    q0 = lin[1:1 + nq]
+    v0 = lin[1 + nq:1 + nq + n]
+    F0 = lin[1 + nq + n:1 + nq + 2 * n]
+    K0 = lin[1 + nq + 2 * n:1 + nq + 2 * n + n * n]
+    C0 = lin[1 + nq + 2 * n + n * n:]
+    big = 0.0
+    for i in range(n):
+        dq = 0.0
+        dvv = 0.0
+        for c in range(n):
+            dq += K0[i + c * n] * (q[c] - q0[c])
+            dvv += C0[i + c * n] * (v[c] - v0[c])
+        Fl = F0[i] - dq - dvv
+        miss[i] = abs(F[i] - Fl)
+        size[i] = max(abs(F0[i]), abs(F[i]), abs(Fl), abs(dq), abs(dvv))
+        big = max(big, size[i])
+    worst = 0
+    ratio = -1.0
+    finite = True
+    for i in range(n):
+        size[i] = max(size[i], 1e-8 * big + 1e-300)
+        if not math.isfinite(miss[i]):
+            finite = False
+        x = miss[i] / size[i]
+        if x > ratio:
+            ratio = x
+            worst = i
+    return (not finite) or miss[worst] > 0.5 * size[worst]
+
+
+@njit(cache=True)
+def _project(pfunc, pargp, presp, piw, pw, p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p_mu, t, q, v, o_H, r, nb, m,
+             ploaded, ptol, max_evals, ell, h, close_tol, closed, opening, out):
+    """PositionProjection.project after a step (the Python loop's call of it, with its closed and
+    opening masks); the projected q goes to ``p_qo``; out = (ok, evaluations, violation)."""
+    n = v.size
+    if m:
+        HN = _rows(o_H, r, n, np.arange(m))
+        uN = _matvec(HN, v)
+        aN = _matvec(np.abs(HN), np.abs(v))
+        for j in range(m):
+            opening[j] = uN[j] > close_tol * aN[j]
+            closed[j] = ploaded[j] and not opening[j]
+    p_t[0] = t
+    for a in range(q.size):
+        p_q[a] = q[a]
+    for a in range(n):
+        p_L[a] = ell + h * abs(v[a])
+    for j in range(m):
+        closed[j] = closed[j] and not opening[j]  # hold: closed and free
+        p_w[j] = 1.0 if closed[j] else 0.0
+    ok = False
+    evals = 0
+    while evals < max_evals:
+        if pfunc(pargp.ctypes.data, presp.ctypes.data, piw.ctypes.data, pw.ctypes.data, 0) != 0:
+            break
+        evals += 1
+        bil_ok = True
+        for i in range(nb):
+            if not abs(p_r[i]) <= ptol * p_s[i]:
+                bil_ok = False
+        changed = False
+        closed_ok = True
+        for j in range(m):
+            lg = ptol * p_s[nb + j]
+            inw = p_w[j] != 0.0
+            if inw and not abs(p_r[nb + j]) <= lg:
+                closed_ok = False
+        for j in range(m):
+            lg = ptol * p_s[nb + j]
+            inw = p_w[j] != 0.0
+            pull = inw and not closed[j] and p_mu[nb + j] < -lg
+            pen = (not inw) and (not opening[j]) and p_r[nb + j] < -lg
+            if pull:
+                p_w[j] = 0.0
+                changed = True
+            elif pen:
+                p_w[j] = 1.0
+                changed = True
+        for a in range(q.size):
+            p_q[a] = p_qo[a]
+        if bil_ok and closed_ok and not changed:
+            ok = True
+            break
+    viol = 0.0
+    for i in range(nb):
+        viol = max(viol, abs(p_r[i]))
+    if m:
+        gmin = np.inf
+        for j in range(m):
+            gmin = min(gmin, p_r[nb + j])
+        viol = max(viol, -gmin, 0.0)
+    out[0] = 1.0 if ok else 0.0
+    out[1] = evals
+    out[2] = viol
+
+
+@njit(cache=True)
+def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, o_gap, o_H, o_b0, o_b1,
+                o_F0, o_F1, o_K1, o_C1, o_T, k0, k_end, every, h, th, close_tol, open_tol, res_tol, mu, e,
+                dims, toff, closed_form, disk_local, q, v, cq, cv, loaded, istate, fstate, lin, Q, V, PN, PT, MD,
+                imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act, forced, fdv, project, pfunc, pargp, presp, piw, pw,
+                p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p_mu, nb, ptol, max_evals, ell, ploaded):
+    """Steps k0 .. k_end - 1 (module docstring); returns (step, reason).
+
+    ``istate`` = [all_loaded, free_steps, solver_calls, iterations, max_iterations, open, stick,
+    slide+, slide-, slide, ambiguous, first ambiguous step, impacts, active count of a handed step,
+    skip the force check of step k0, projections, projection iterations]; ``fstate`` = [max
+    residual, worst violation after a projection, violation of a failed projection]; ``lin`` the force check's
+    linearisation (t, q, v, F, K, C; t NaN: none). When the reason is not DONE the state (q, v,
+    sums, loaded) is that at the start of the returned step; for NEEDS_PYTHON the buffers hold its
+    data, ``act[:istate[13]]`` its active contacts. With ``forced``, step k0 takes the velocity
+    increment ``fdv`` (the Python side did the rest of it). With ``project``, the positions after
+    each step are projected by the compiled update ``pfunc`` (PositionProjection's Function) with
+    the working-set rule of :meth:`PositionProjection.project
+    <lcp.timestepping.projection.PositionProjection.project>`; ``ploaded`` are the contacts
+    loaded in the step and not bounced off (the Python loop's ``loaded``).
+    """
+    n = v.size
+    nq = q.size
+    m = mu.size
+    r = o_H.size // n if n else 0  # contact rows: H is (r, n)
+    moving = o_b0.size > 0
+    check = o_F0.size > 0
+    kin = o_T.size > 0
+    dv = np.empty(n)
+    wv = np.empty(n)
+    vn = np.empty(n)
+    qn = np.empty(nq)
+    cqn = np.empty(nq)
+    cvn = np.empty(n)
+    inc = np.empty(n)
+    miss = np.empty(n)
+    size = np.empty(n)
+    out = np.empty(4)
+    pout = np.empty(3)
+    closed = np.zeros(m, dtype=np.bool_)
+    opening = np.zeros(m, dtype=np.bool_)
+    allm = np.arange(m)
+    cap = imp_t.size
+    a_c = h * (1 - th)
+    b_c = h * th
+    for k in range(k0, k_end):
+        tk = k * h
+        row = (k + 1) // every - 1 if (k + 1) % every == 0 else -1
+        if forced and k == k0:
+            for a in range(n):
+                dv[a] = fdv[a]
+        else:
+            if istate[12] + 1 > cap:
+                return k, BUFFER_FULL
+            a_t[0] = tk
+            for a in range(nq):
+                a_q[a] = q[a]
+            for a in range(n):
+                a_v[a] = v[a]
+            if cfunc(argp.ctypes.data, resp.ctypes.data, iw.ctypes.data, w.ctypes.data, 0) != 0:
+                return k, BAD_DATA
+            good = True
+            for a in range(o_S.size):
+                good = good and math.isfinite(o_S[a])
+            for a in range(n):
+                good = good and math.isfinite(o_vf[a])
+            if not good:
+                return k, BAD_DATA
+            if check:
+                if not (istate[14] and k == k0) and lin[0] == tk:
+                    if _force_rejected(n, nq, lin, q, v, o_F0, miss, size):
+                        return k, REJECTED
+                istate[14] = 0
+                lin[0] = tk + h
+                b = 1
+                for a in range(nq):
+                    lin[b + a] = q[a]
+                b += nq
+                for a in range(n):
+                    lin[b + a] = v[a]
+                    lin[b + n + a] = o_F1[a]
+                b += 2 * n
+                for a in range(n * n):
+                    lin[b + a] = o_K1[a]
+                    lin[b + n * n + a] = o_C1[a]
+            for a in range(n):
+                dvf[a] = o_vf[a] - v[a]
+                vfree[a] = v[a] + dvf[a]
+            # activation (lcp.timestepping.activation.Activation): the same sums in the same order
+            na = 0
+            if m:
+                any_open = False
+                HN = _rows(o_H, r, n, allm)
+                um = _matvec(HN, v)
+                uf = _matvec(HN, vfree)
+                for j in range(m):
+                    sm = um[j]
+                    sf = uf[j]
+                    if moving:
+                        sm = sm + o_b0[j]
+                        sf = sf + o_b1[j]
+                    uNm[j] = sm
+                    uNf[j] = sf
+                    if (o_gap[j] + a_c * sm) + b_c * sf > 0.0:
+                        any_open = True
+                if not any_open:
+                    for j in range(m):
+                        act[na] = j
+                        na += 1
+                else:
+                    any_loaded = False
+                    for j in range(m):
+                        any_loaded = any_loaded or loaded[j]
+                    szq = _matvec(np.abs(HN), np.abs(q))
+                    for j in range(m):
+                        aa = a_c * uNm[j]
+                        bb = b_c * uNf[j]
+                        pred = (o_gap[j] + aa) + bb
+                        sz = ((szq[j] + abs(o_gap[j])) + abs(aa)) + abs(bb)
+                        closing = pred <= close_tol * sz
+                        if any_loaded and loaded[j] and o_gap[j] + aa <= open_tol * sz:
+                            closing = True
+                        if closing:
+                            act[na] = j
+                            na += 1
+            if na == 0:
+                for a in range(n):
+                    dv[a] = dvf[a]
+                istate[1] += 1
+                for j in range(m):
+                    loaded[j] = False
+                    ploaded[j] = False
+                istate[0] = 0
+            elif na == 1 and ((closed_form and _closed_form_step(act[0], m, n, r, k, tk, h, o_W, o_H, o_SHt, o_b1,
+                                                                  moving, v, vfree, dvf, uNm, mu, e, res_tol,
+                                                                  istate, fstate, dv, wv, out))
+                              or (disk_local and dims[act[0]] == 2
+                                  and _disk_step(act[0], m, n, r, toff, o_W, o_H, o_SHt, o_b1, moving, v, vfree,
+                                                 dvf, uNm, mu, e, res_tol, istate, fstate, dv, wv, out))):
+                j = act[0]
+                pN = out[0]
+                md = int(out[3])
+                if istate[0] == 0:  # impacts (lcp.timestepping.outcome.record_impacts)
+                    um = uNm[j]
+                    if pN > 0 and not loaded[j] and um < 0 and -um > abs(uNf[j] - um):
+                        c = istate[12]
+                        imp_t[c] = tk + min(h, max(0.0, o_gap[j] / -um))
+                        imp_j[c] = j
+                        imp_p[c, 0] = pN
+                        imp_p[c, 1] = out[1]
+                        imp_p[c, 2] = out[2]
+                        istate[12] = c + 1
+                if m > 1:
+                    for i in range(m):
+                        loaded[i] = False
+                loaded[j] = pN > 0
+                istate[0] = 1 if (m == 1 and pN > 0) else 0
+                if project:
+                    for i in range(m):
+                        ploaded[i] = False
+                    ploaded[j] = pN > 0 and (e[j] == 0 or uNm[j] >= 0)
+                if row >= 0:
+                    PN[row, j] = pN
+                    for a in range(dims[j]):
+                        PT[row, toff[j] + a] = out[1 + a]
+                    MD[row, j] = md
+                istate[5 + md] += 1
+            else:
+                istate[13] = na
+                return k, NEEDS_PYTHON
+        # compensated (Kahan) sums, as lcp.timestepping.assembly.kahan_add
+        for a in range(n):
+            y = dv[a] - cv[a]
+            s = v[a] + y
+            cvn[a] = (s - v[a]) - y
+            vn[a] = s
+        for a in range(n):
+            inc[a] = (1 - th) * v[a] + th * vn[a]
+        finite = True
+        for a in range(nq):
+            if kin:
+                x = 0.0
+                for c in range(n):
+                    x += o_T[a + c * nq] * inc[c]
+                x = h * x
+            else:
+                x = h * inc[a]
+            y = x - cq[a]
+            s = q[a] + y
+            cqn[a] = (s - q[a]) - y
+            qn[a] = s
+        tot = 0.0
+        for a in range(nq):
+            tot += qn[a]
+        for a in range(n):
+            tot += vn[a]
+        finite = math.isfinite(tot)
+        if not finite:
+            return k, NONFINITE
+        for a in range(nq):
+            q[a] = qn[a]
+            cq[a] = cqn[a]
+        for a in range(n):
+            v[a] = vn[a]
+            cv[a] = cvn[a]
+        if project:
+            _project(pfunc, pargp, presp, piw, pw, p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p_mu, tk + h, q, v, o_H, r, nb,
+                     m, ploaded, ptol, max_evals, ell, h, close_tol, closed, opening, pout)
+            istate[15] += 1
+            istate[16] += int(pout[1])
+            if pout[0] == 0.0 or not math.isfinite(pout[2]):
+                fstate[2] = pout[2]
+                istate[17] = int(pout[1])
+                return k, PROJECTION_FAILED
+            for a in range(nq):
+                q[a] = p_qo[a]
+                cq[a] = 0.0
+            fstate[1] = max(fstate[1], pout[2])
+        if row >= 0:
+            for a in range(nq):
+                Q[row + 1, a] = q[a]
+            for a in range(n):
+                V[row + 1, a] = v[a]
+    return k_end, DONE

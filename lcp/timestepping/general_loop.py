@@ -1,0 +1,273 @@
+"""The compiled Moreau-Jean loop for general systems: generated C step data, a numba loop.
+
+Systems whose operators change from step to step (a q-dependent mass matrix, curved gaps, moving
+contacts, time-dependent forces, nonlinear bilateral constraints) run here instead of the Python
+loop when ``fast`` is set: the step's data come from CasADi's C code of the one-step Function
+(:mod:`lcp.timestepping.codegen`, compiled once per structure into the compiled-code cache), and
+the steps run in one numba function (:mod:`lcp.timestepping.general_kernels`). Holds
+:func:`applicable` (whether it runs a simulation, and why not) and :func:`run_general_loop` (the
+run and its result, the result contract of :func:`lcp.timestepping.python_loop.run_python_loop`).
+Imports the kernel, the code generator, the contact step, the activation constants and the outcome
+of :mod:`lcp.timestepping`, and :mod:`lcp.result`; never the path choice
+(:mod:`lcp.timestepping.moreau_jean`), the Python loop or anything above :mod:`lcp.timestepping`.
+
+What runs compiled: the step data, the force check, the activation rule, free steps, one active
+planar contact under ``"auto"``/``"enum"`` (closed form, modes, branch refinement), one active disk
+contact under the disk law's ``"auto"``/``"local"`` (local solve, branch refinement, the stuck
+correction), impacts, Kahan sums, the position projection (its Newton update compiled from
+:attr:`PositionProjection.function <lcp.timestepping.projection.PositionProjection>`, the
+working-set rule in the kernel), saving. The other contact steps are solved by the Python loop's
+own :class:`~lcp.timestepping.contact_step.ContactStep` on the step's data and handed back (same
+solver objects, fallbacks and notes). The kernel's products are those NumPy computes, so the
+results are the Python loop's (bit for bit on the tested scenes, to rounding at worst). Not run
+here (the Python loop then runs): a projection of moving contacts (the message says so), control
+schedules, ``scheme="order2"``, systems without numba or without a C compiler (a
+:class:`RuntimeWarning` names the compiler).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from lcp.contact.problem import MODE_NAMES
+from lcp.numerics.jit import HAVE_NUMBA
+from lcp.result import STATUS_MESSAGES, Impact
+from lcp.timestepping.activation import CLOSE_ULPS, EPS, OPEN_ULPS
+from lcp.timestepping.contact_step import ContactStep
+from lcp.timestepping.force_check import ForceStepCheck, StepRejected, nonfinite_cause
+from lcp.timestepping.general_kernels import (BAD_DATA, BUFFER_FULL, DONE, NEEDS_PYTHON, NONFINITE,
+                                              PROJECTION_FAILED, REJECTED, run_general)
+from lcp.timestepping.outcome import RunNotes, loop_result, projection_failure, record_impacts
+from lcp.timestepping.projection import NEWTON_PER_EVAL, violation_function
+
+__all__ = ["PROJECTION_NOTE", "applicable", "run_general_loop"]
+
+#: appended to the message of a run that the compiled general loop could have run but for the projection
+PROJECTION_NOTE = (" (Python loop: the compiled general loop does not project systems with moving contacts; "
+                   "projection=False runs it)")
+
+#: impacts held by the kernel between two flushes
+_IMPACT_BUFFER = 4096
+
+
+def applicable(system, asm, proj) -> str | None:
+    """None where the compiled general loop runs this simulation, else the reason it does not:
+    a constant system (the constant paths serve it), numba missing, a control schedule, a position
+    projection on moving contacts (``"projection"``: its opening test needs the contacts' rates at
+    the projected state), a kinematics map qdot = T(q) v."""
+    if system.is_constant:
+        return "constant"
+    if not HAVE_NUMBA:
+        return "numba"
+    if asm.schedule is not None or getattr(system, "is_controlled", False):
+        return "control"
+    if proj is not None and system.contacts_depend_on_t:
+        return "projection"
+    if getattr(system, "has_kinematics", False):
+        # qdot = T(q) v: the Python loop moves unit quaternions by the exact exponential map and
+        # renormalises them; the compiled kernel would move q by h T v only
+        return "kinematics"
+    return None
+
+
+def _closed_form(solver) -> bool:
+    """Whether one active planar contact is solved by the closed form in the kernel: the plain
+    ``"auto"`` or ``"enum"`` solver without an error target of its own."""
+    from lcp.contact.solvers import AutoSolver, EnumSolver
+
+    if type(solver) is AutoSolver:
+        return solver.error_tol is None
+    return type(solver) is EnumSolver and getattr(solver, "error_tol", None) is None
+
+
+def _disk_local(solver) -> bool:
+    """Whether one active disk contact is solved in the kernel: the plain ``"auto"`` disk-law solver
+    or ``"local"`` with its polish (the local solve and branch refinement of both)."""
+    from lcp.contact.spatial_solvers import ConeAutoSolver, LocalSolver
+
+    return type(solver) is ConeAutoSolver or (type(solver) is LocalSolver and solver.polish)
+
+
+def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int, every: int, solver,
+                     fallback: bool, proj=None, plib=None):
+    """Moreau-Jean by the compiled general loop (module docstring); ``lib`` is the system's
+    :class:`~lcp.timestepping.codegen.CompiledFunction` of the step, ``proj`` the run's
+    :class:`~lcp.timestepping.projection.PositionProjection` or None and ``plib`` its compiled
+    update. Same arguments and result as the Python loop."""
+    with lib.lock:
+        if plib is None:
+            return _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj, plib)
+        with plib.lock:
+            return _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj, plib)
+
+
+def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj, plib):
+    """The body of :func:`run_general_loop`, its libraries' buffers held."""
+    if n_steps // every > 50_000_000:
+        raise ValueError(f"{n_steps // every} saved states would not fit in memory: raise save_every")
+    m, n = system.n_contacts, system.n
+    nq = lib.args[1].size
+    names = [c.name for c in system.contacts]
+    spatial = system.is_spatial
+    dims = system.tangent_dims if spatial else None
+    n_saved = n_steps // every
+    Q = np.empty((n_saved + 1, nq))
+    V = np.empty((n_saved + 1, n))
+    PN = np.zeros((n_saved, m))
+    PT = np.zeros((n_saved, system.n_tangent))
+    modes = np.full((n_saved, m), -1, dtype=np.int8)
+    Q[0], V[0] = q0, v0
+    notes = RunNotes()
+    stats = notes.stats
+    status, message = 0, STATUS_MESSAGES[0]
+    q, v = np.array(q0, dtype=float), np.array(v0, dtype=float)
+    cq, cv = np.zeros(nq), np.zeros(n)
+    loaded = np.zeros(m, dtype=np.bool_)
+    istate = np.zeros(18, dtype=np.int64)
+    fstate = np.zeros(3)
+    lin = np.full(1 + nq + 2 * n + 2 * n * n, np.nan)
+    imp_t, imp_j = np.zeros(_IMPACT_BUFFER), np.zeros(_IMPACT_BUFFER, dtype=np.int64)
+    imp_p = np.zeros((_IMPACT_BUFFER, 3))
+    dvf, vfree, uNm, uNf = np.zeros(n), np.zeros(n), np.zeros(m), np.zeros(m)
+    act = np.zeros(max(m, 1), dtype=np.int64)
+    fdv = np.zeros(n)
+    o = lib.outs
+    a_t, a_q, a_v, a_h, a_th = lib.args
+    a_h[0], a_th[0] = h, th
+    mu, e = np.asarray(system.mu, dtype=float), np.asarray(system.e, dtype=float)
+    closed_form = (not spatial) and _closed_form(solver)
+    disk_local = spatial and _disk_local(solver)
+    tdims = np.asarray(system.tangent_dims, dtype=np.int64)
+    toff = np.asarray(system.tangent_offsets, dtype=np.int64)
+    res_tol = float(getattr(solver, "residual_tol", 1e-10))
+    step = ContactStep(system, asm, solver, fallback, notes)
+    moving = system.contacts_depend_on_t
+    project = proj is not None
+    ploaded = np.zeros(m, dtype=np.bool_)
+    worst = 0.0
+    if project:
+        from lcp.model.start import system_length
+
+        ell = system_length(system, q0)
+        worst = violation_function(system)(q0[None, :], np.zeros(1))
+        pf = plib
+        pargs = pf.args
+        pouts = [pf.outs[k] for k in ("q_new", "r", "s", "pull")]
+        ptol, max_evals = proj.tol, proj.max_evals
+    else:  # placeholders of the kernel's arguments (never used)
+        ell, pf, ptol, max_evals = 1.0, lib, 1.0, 0
+        pargs = [np.zeros(1), np.zeros(nq), np.zeros(m), np.zeros(n)]
+        pouts = [np.zeros(nq), np.zeros(1), np.zeros(1), np.zeros(1)]
+
+    def flush():
+        c = int(istate[12])
+        for i in range(c):
+            j = int(imp_j[i])
+            pT = imp_p[i, 1:3].copy() if tdims[j] == 2 else float(imp_p[i, 1])
+            notes.impacts.append(Impact(float(imp_t[i]), j, names[j], float(imp_p[i, 0]), pT))
+        istate[12] = 0
+
+    k, forced = 0, False
+    while True:
+        k, reason = run_general(lib.cfunc, lib.argp, lib.resp, lib.iw, lib.w, a_t, a_q, a_v, o["vfree"], o["S"],
+                                o["SHt"], o["W"], o["gap"], o["H"], o["b0"], o["b1"], o["F0"], o["F1"], o["K1"],
+                                o["C1"], o["Tq"], k, n_steps, every, h, th, CLOSE_ULPS * EPS, OPEN_ULPS * EPS,
+                                res_tol, mu, e, tdims, toff, closed_form, disk_local, q, v, cq, cv, loaded, istate,
+                                fstate, lin, Q, V, PN, PT, modes, imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act,
+                                forced, fdv, project, pf.cfunc, pf.argp, pf.resp, pf.iw, pf.w, *pargs, *pouts,
+                                system.n_bilateral, ptol, max_evals, ell, ploaded)
+        forced = False
+        tk = k * h
+        if reason == DONE:
+            break
+        if reason == BUFFER_FULL:
+            flush()
+            continue
+        if reason == NONFINITE:
+            status, message = -2, f"{STATUS_MESSAGES[-2]} Step {k} (t = {tk:.10g})."
+            break
+        if reason == BAD_DATA:
+            S = lib.view("S")
+            status = -2
+            message = f"{STATUS_MESSAGES[-2]} Step {k} (t = {tk:.10g}): {nonfinite_cause(system, h, tk, q, v, S)}."
+            break
+        if reason == PROJECTION_FAILED:
+            status = -5
+            message = projection_failure(k, tk + h, float(fstate[2]), int(istate[17]) * NEWTON_PER_EVAL, ptol)
+            break
+        if reason == REJECTED:
+            why = _rejection(system, h, lin, n, nq, tk, q, v)
+            if why is None:  # NumPy's sums let the step pass: the kernel repeats it without the check
+                istate[14] = 1
+                continue
+            status, message = -7, f"{STATUS_MESSAGES[-7]} Step {k} (t = {tk:.10g}): {why}."
+            break
+        assert reason == NEEDS_PYTHON
+        na = int(istate[13])
+        active = act[:na].copy()
+        b1 = o["b1"] if moving else None
+        # C-ordered copies, as the Python loop's operators (NumPy's products round by layout)
+        dv, p, md, cols, sol = step.solve(k, tk, active, v, vfree.copy(), dvf.copy(),
+                                          np.ascontiguousarray(lib.view("SHt")), np.ascontiguousarray(lib.view("W")),
+                                          np.ascontiguousarray(lib.view("H")), uNm.copy(), b1)
+        if dv is None:
+            status = -1
+            message = f"{STATUS_MESSAGES[-1]} Step {k} (t = {tk:.10g}), solver '{solver.name}': {sol.message}"
+            break
+        pa = p[:na]
+        if not istate[0]:  # a contact that carried no load: perhaps an impact
+            flush()
+            record_impacts(notes.impacts, tk, h, active, pa, p[na:], loaded, o["gap"], uNm, uNf, names, dims)
+        now = pa > 0
+        if na < m:
+            loaded[:] = False
+        loaded[active] = now
+        istate[0] = int(na == m and bool(np.all(now)))
+        if project:  # loaded in this step, and not bounced off (restitution)
+            ploaded[:] = False
+            ploaded[active] = now & ((e[active] == 0) | (uNm[active] >= 0))
+        row = (k + 1) // every - 1 if (k + 1) % every == 0 else -1
+        if row >= 0:
+            PN[row, active] = pa
+            PT[row, cols] = p[na:]
+            modes[row, active] = md
+        for code in md:
+            stats.mode_counts[MODE_NAMES[int(code)]] += 1
+        fdv[:] = dv
+        forced = True
+    flush()
+    _merge_counters(notes, istate, fstate, h)
+    notes.stats.projections += int(istate[15])
+    notes.stats.projection_iterations += int(istate[16]) * NEWTON_PER_EVAL
+    if project:
+        worst = max(worst, float(fstate[1]))
+    return loop_result(system, Q, V, PN, PT, modes, k, every, h, th, status, message, notes, solver.name, worst,
+                       project)
+
+
+def _rejection(system, h, lin, n, nq, tk, q, v) -> str | None:
+    """The Python check's message for a step the kernel rejected, or None where it passes."""
+    check = ForceStepCheck(system, h)
+    b = 1 + nq + 2 * n
+    check._linearised = (lin[0], lin[1:1 + nq].copy(), lin[1 + nq:1 + nq + n].copy(), lin[1 + nq + n:b].copy(),
+                         lin[b:b + n * n].reshape(n, n).T.copy(), lin[b + n * n:].reshape(n, n).T.copy())
+    try:
+        check(tk, q, v)
+    except StepRejected as exc:
+        return str(exc)
+    return None
+
+
+def _merge_counters(notes, istate, fstate, h):
+    """Add the kernel's counters to the run's (the steps the Python side solved wrote their own)."""
+    stats = notes.stats
+    stats.free_steps += int(istate[1])
+    stats.solver_calls += int(istate[2])
+    stats.iterations += int(istate[3])
+    stats.max_iterations = max(stats.max_iterations, int(istate[4]))
+    for code in range(5):
+        if istate[5 + code]:
+            stats.mode_counts[MODE_NAMES[code]] += int(istate[5 + code])
+    stats.ambiguous_steps += int(istate[10])
+    if istate[10] and (notes.first_ambiguous is None or notes.first_ambiguous[0] > istate[11]):
+        notes.first_ambiguous = (int(istate[11]), int(istate[11]) * h)
+    stats.max_residual = max(stats.max_residual, float(fstate[0]))
