@@ -198,6 +198,11 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
     # the path, chosen once: the compiled paths only where nothing needs Python per step
     if options.fast and proj is None and solver.name in ("auto", "enum") and compiled.applicable(system):
         return run_compiled_step(asm, q0, v0, n_steps, every, solver.name)
+    if options.fast and proj is None and spatial and system.is_constant:
+        from lcp.timestepping import compiled_spatial  # independent spatial contacts (numba)
+
+        if compiled_spatial.applicable(asm, solver, options):
+            return compiled_spatial.moreau_jean_spatial(asm, q0, v0, n_steps, every, solver, options.fallback)
     if options.fast and proj is None and not spatial and system.n_contacts >= 2 and system.is_constant:
         # imported here: numba loads only where the compiled loop may run
         from lcp.timestepping import compiled_loop
