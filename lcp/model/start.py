@@ -2,7 +2,7 @@
 
 Holds :func:`consistent_start` (a :class:`~lcp.model.system.System`), :func:`consistent_affine_start`
 (the numbers of a constant model with contacts only), :func:`system_length` and the tolerances
-:data:`START_TOL`, :data:`ROUND_ULPS`. Imports NumPy only (the System is passed in); never the
+:data:`START_TOL`, :data:`ROUND_ULPS`. Imports NumPy (SciPy and :mod:`lcp.numerics.casadi_eval` for large constant rows) only (the System is passed in); never the
 contact problem, time stepping or events: both methods call it from their entry.
 
 What a start must satisfy
@@ -50,7 +50,7 @@ def _length(J, c) -> float:
     """The system's length from the rows' constants c and Jacobians J (1.0 where there is none)."""
     if J.size == 0:
         return 1.0
-    norms = np.max(np.abs(J), axis=1)
+    norms = _row_absmax(J) if hasattr(J, "indptr") else np.max(np.abs(J), axis=1)
     ok = (norms > 0) & np.isfinite(norms) & np.isfinite(c)
     ell = float(np.max(np.abs(c[ok]) / norms[ok], initial=0.0))
     return ell if ell > 0 and math.isfinite(ell) else 1.0
@@ -75,10 +75,45 @@ def _rows(system, q, t):
         # evaluation of each costs more than the whole check)
         known = _AFFINE.get(system)
         if known is None:
-            known = _AFFINE[system] = _general_rows(system, np.zeros(system.n), t)[1:]
+            known = _AFFINE[system] = _affine_rows(system, t)
         names, J, c = known
         return c + J @ q, names, J, c
     return _general_rows(system, q, t)
+
+
+def _affine_rows(system, t):
+    """(names, J, c) of constant contact rows without bilateral constraints. J is CSR where the
+    dense gap Jacobian would be large (K contacts of 3K coordinates: CasADi's dense conversion of
+    H alone takes a second at K = 1000)."""
+    n, m = system.n, system.n_contacts
+    if n * m <= 40_000:
+        return _general_rows(system, np.zeros(n), t)[1:]
+    import scipy.sparse as sp
+
+    from lcp.numerics.casadi_eval import evaluate_into
+
+    fn = system.H_fn  # its nonzeros straight into a NumPy buffer (CasADi's own conversions are slow)
+    pattern = fn.sparsity_out(0)
+    vals = np.empty(pattern.nnz())
+    evaluate_into(fn, [np.zeros(n)], [vals])
+    H = sp.csc_matrix((vals, np.array(pattern.row(), dtype=np.int64), np.array(pattern.colind(), dtype=np.int64)),
+                      shape=pattern.shape)
+    J = H.tocsr()[:m]
+    names = [f"contact {ct.name!r}" for ct in system.contacts]
+    return names, J, system.gaps(np.zeros(n), t)
+
+
+def _row_absmax(J):
+    """max_j |J_ij| of each row of a CSR matrix (SciPy's max(axis=1) costs milliseconds here)."""
+    out = np.zeros(J.shape[0])
+    nz = np.diff(J.indptr) > 0
+    if nz.any():
+        out[nz] = np.maximum.reduceat(np.abs(J.data), J.indptr[:-1][nz])
+    return out
+
+
+def _dense(J):
+    return J.toarray() if hasattr(J, "toarray") else J
 
 
 def _general_rows(system, q, t):
@@ -182,6 +217,7 @@ def _project_positions(system, q0, t0, r, J, c, ell, nb):
     held = np.ones(r.size, dtype=bool)
     held[nb:] = r[nb:] < 0
     q = q0.copy()
+    J = _dense(J)
     for _ in range(30):
         lim = np.abs(J) @ (np.abs(q) + ell) + np.abs(c)
         viol = _violations(r, nb)
@@ -192,6 +228,7 @@ def _project_positions(system, q0, t0, r, J, c, ell, nb):
         rows = np.flatnonzero(held)
         q = q - _mass_correction(A, J[rows], res[rows])
         r, _, J, _ = _rows(system, q, t0)
+        J = _dense(J)
         A = system.mass(q, t0)
     raise ValueError(f"q0 could not be projected onto the constraints: residual {float(np.max(np.abs(r))):.3g} "
                      "after 30 Newton steps")
