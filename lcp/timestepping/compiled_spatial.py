@@ -120,8 +120,12 @@ def _pack_new(asm):
     end = Hp[m]
     gap0 = np.asarray(asm.gap0, dtype=float).ravel()
     sys_ = asm.sys
+    # isotropic blocks (a point mass on its floor: W_jj = diag(w_N, w_T, w_T)) have a closed form
+    off = blocks.copy()
+    off[:, [0, 1, 2], [0, 1, 2]] = 0.0
+    iso = ~np.any(off != 0.0, axis=(1, 2)) & (blocks[:, 1, 1] == blocks[:, 2, 2]) & (dN > 0) & (dT > 0)
     ct = (Hp, Hi, Hx, Hp[:m + 1].copy(), Hi[:end].copy(), np.abs(Hx[:end]), np.abs(gap0), gap0, *SHtc,
-          blocks, rhoN, rhoT, np.asarray(sys_.mu, dtype=float), np.asarray(sys_.e, dtype=float))
+          blocks, rhoN, rhoT, np.asarray(sys_.mu, dtype=float), np.asarray(sys_.e, dtype=float), iso)
     return mode, fv, ct
 
 
@@ -169,6 +173,23 @@ def _mode(x0, u1, u2, rhoT, tol):
     if math.hypot(u1 * rhoT, u2 * rhoT) > tol:
         return 4
     return 1
+
+
+@njit(cache=True)
+def _isotropic(wN, wT, rhoN, rhoT, qN, qT0, qT1, mu):
+    """The exact solution of one contact with W_jj = diag(wN, wT, wT) (a point mass on its floor):
+    open where q_N >= 0 (to local_disk3's tolerance), stick where the impulse cancelling q lies in
+    the disk, else slide with p_N = -q_N / w_N and p_T = -mu p_N q_T / |q_T| (u_T stays parallel to
+    q_T). Returns (p_N, p_T0, p_T1, mode)."""
+    nq = math.hypot(qT0, qT1)
+    tol = 1e-13 * max(abs(qN) * rhoN, nq * rhoT, 1e-300)
+    if qN * rhoN >= -tol:
+        return 0.0, 0.0, 0.0, 0
+    pN = -qN / wN
+    if nq / wT <= mu * pN + tol:
+        return pN, -qT0 / wT, -qT1 / wT, 1
+    f = mu * pN / nq
+    return pN, -f * qT0, -f * qT1, 4
 
 
 @njit(cache=True)
@@ -238,7 +259,7 @@ def run_spatial_steps(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol
     for NEEDS_PYTHON ``act[:istate[11]]`` is its active set. With ``forced``, step k0 takes the
     impulses ``fp`` (m x 3) and modes ``fmd`` instead of solving.
     """
-    (Hp, Hi, Hx, aHp, aHi, aHx, absg0, gap0, Cp, Ci, Cx, blocks, rhoN, rhoT, mu, e) = ct
+    (Hp, Hi, Hx, aHp, aHi, aHx, absg0, gap0, Cp, Ci, Cx, blocks, rhoN, rhoT, mu, e, iso) = ct
     dv_const = fv[0]
     n = q.size
     m = mu.size
@@ -340,7 +361,12 @@ def run_spatial_steps(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol
                 for t in range(na):
                     j = act[t]
                     B = blocks[j]
-                    pN, pT0, pT1, mo, res = local_disk3(B, ql[t, 0], ql[t, 1], ql[t, 2], mu[j], -pl[j, 1], -pl[j, 2])
+                    if iso[j]:
+                        pN, pT0, pT1, mo = _isotropic(B[0, 0], B[1, 1], rhoN[j], rhoT[j], ql[t, 0], ql[t, 1],
+                                                      ql[t, 2], mu[j])
+                    else:
+                        pN, pT0, pT1, mo, res = local_disk3(B, ql[t, 0], ql[t, 1], ql[t, 2], mu[j], -pl[j, 1],
+                                                            -pl[j, 2])
                     if mo < 0:
                         ok = False
                         break
@@ -363,8 +389,17 @@ def run_spatial_steps(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol
                 all_stick = True
                 for t in range(na):
                     j = act[t]
-                    x0, x1, x2, mo, res = _refine(blocks[j], ql[t, 0], ql[t, 1], ql[t, 2], mu[j], rhoN[j], rhoT[j],
-                                                  mtol, r_ok, p[t, 0], p[t, 1], p[t, 2], J)
+                    if iso[j]:  # the closed form is the branch's solution: its modes, no Newton step
+                        x0, x1, x2 = p[t, 0], p[t, 1], p[t, 2]
+                        B = blocks[j]
+                        u0 = ql[t, 0] + B[0, 0] * x0
+                        u1 = ql[t, 1] + B[1, 1] * x1
+                        u2 = ql[t, 2] + B[2, 2] * x2
+                        mo = _mode(x0, u1, u2, rhoT[j], mtol)
+                        res = disk_residual(x0, x1, x2, u0, u1, u2, mu[j], rhoN[j], rhoT[j])
+                    else:
+                        x0, x1, x2, mo, res = _refine(blocks[j], ql[t, 0], ql[t, 1], ql[t, 2], mu[j], rhoN[j],
+                                                      rhoT[j], mtol, r_ok, p[t, 0], p[t, 1], p[t, 2], J)
                     p[t, 0], p[t, 1], p[t, 2] = x0, x1, x2
                     md[t] = mo
                     worst = max(worst, res)
