@@ -82,25 +82,40 @@ def _rows(system, q, t):
 
 
 def _affine_rows(system, t):
-    """(names, J, c) of constant contact rows without bilateral constraints. J is CSR where the
-    dense gap Jacobian would be large (K contacts of 3K coordinates: CasADi's dense conversion of
-    H alone takes a second at K = 1000)."""
+    """(names, J, c) of constant contact rows without bilateral constraints, from the nonzeros of
+    CasADi's H and g at q = 0 (its own conversions to NumPy cost more than the check). J is CSR
+    where the dense gap Jacobian would be large (K contacts of 3K coordinates: CasADi's dense
+    conversion of H alone took a second at K = 1000), else dense."""
     n, m = system.n, system.n_contacts
-    if n * m <= 40_000:
+    if system.gap_tq_fn is not None or system.H_tq_fn is not None:  # (constant kinematics never move)
         return _general_rows(system, np.zeros(n), t)[1:]
-    import scipy.sparse as sp
+    z = np.zeros(n)
+    vals, row, col, shape = _nonzeros(system.H_fn, z)
+    keep = row < m
+    if n * m <= 40_000:
+        J = np.zeros((m, n))
+        J[row[keep], col[keep]] = vals[keep]
+    else:
+        import scipy.sparse as sp
 
+        J = sp.csr_matrix((vals[keep], (row[keep], col[keep])), shape=(m, n))
+    gv, grow, _, _ = _nonzeros(system.gap_fn, z)
+    c = np.zeros(m)
+    c[grow] = gv
+    names = [f"contact {ct.name!r}" for ct in system.contacts]
+    return names, J, c
+
+
+def _nonzeros(fn, q):
+    """(values, rows, columns, shape) of the nonzeros of fn(q)'s first output."""
     from lcp.numerics.casadi_eval import evaluate_into
 
-    fn = system.H_fn  # its nonzeros straight into a NumPy buffer (CasADi's own conversions are slow)
     pattern = fn.sparsity_out(0)
     vals = np.empty(pattern.nnz())
-    evaluate_into(fn, [np.zeros(n)], [vals])
-    H = sp.csc_matrix((vals, np.array(pattern.row(), dtype=np.int64), np.array(pattern.colind(), dtype=np.int64)),
-                      shape=pattern.shape)
-    J = H.tocsr()[:m]
-    names = [f"contact {ct.name!r}" for ct in system.contacts]
-    return names, J, system.gaps(np.zeros(n), t)
+    evaluate_into(fn, [q], [vals])
+    colind = np.array(pattern.colind(), dtype=np.int64)
+    col = np.repeat(np.arange(colind.size - 1), np.diff(colind))
+    return vals, np.array(pattern.row(), dtype=np.int64), col, pattern.shape
 
 
 def _row_absmax(J):

@@ -77,17 +77,57 @@ def applicable(asm, solver, options) -> bool:
 def contact_blocks(Wp, Wi, Wx, m):
     """Each contact's 3 x 3 block of W (blocked layout: normals 0..m-1, then the tangents
     contact by contact from m) from W's CSR arrays, or None where an entry couples two contacts."""
-    rows = np.repeat(np.arange(Wp.size - 1), np.diff(Wp))
-    own_r = np.where(rows < m, rows, (rows - m) // 2)
-    own_c = np.where(Wi < m, Wi, (Wi - m) // 2)
-    keep = Wx != 0.0
-    if np.any(own_r[keep] != own_c[keep]):
-        return None
-    loc_r = np.where(rows < m, 0, 1 + (rows - m) % 2)
-    loc_c = np.where(Wi < m, 0, 1 + (Wi - m) % 2)
+    blocks, ok = _contact_blocks(Wp, Wi, Wx, m)
+    return blocks if ok else None
+
+
+@njit(cache=True)
+def _contact_blocks(Wp, Wi, Wx, m):
     blocks = np.zeros((m, 3, 3))
-    blocks[own_r, loc_r, loc_c] = Wx
-    return blocks
+    for r in range(Wp.size - 1):
+        jr = r if r < m else (r - m) // 2
+        lr = 0 if r < m else 1 + (r - m) % 2
+        for a in range(Wp[r], Wp[r + 1]):
+            c = Wi[a]
+            if Wx[a] == 0.0:
+                continue
+            jc = c if c < m else (c - m) // 2
+            if jc != jr:
+                return blocks, False
+            blocks[jr, lr, 0 if c < m else 1 + (c - m) % 2] = Wx[a]
+    return blocks, True
+
+
+@njit(cache=True)
+def _dense_csr(A):
+    """(indptr, indices, data) of a dense matrix in CSR, exact zeros dropped (as compiled_loop's
+    conversion, in one compiled pass: NumPy's takes several calls of fixed cost)."""
+    rows, cols = A.shape
+    ptr = np.zeros(rows + 1, dtype=np.int64)
+    for i in range(rows):
+        c = 0
+        for j in range(cols):
+            if A[i, j] != 0.0:
+                c += 1
+        ptr[i + 1] = ptr[i] + c
+    idx = np.empty(ptr[rows], dtype=np.int64)
+    val = np.empty(ptr[rows])
+    t = 0
+    for i in range(rows):
+        for j in range(cols):
+            if A[i, j] != 0.0:
+                idx[t] = j
+                val[t] = A[i, j]
+                t += 1
+    return ptr, idx, val
+
+
+def _operator_arrays(asm):
+    """H (CSR), S H' (CSC) and W (CSR) as compressed arrays; dense operators in one compiled pass each."""
+    if getattr(asm, "arrays", None) is None and not asm.sparse:
+        dense = [np.ascontiguousarray(x, dtype=float) for x in (asm.H, asm.SHt.T, asm.W)]
+        return tuple(_dense_csr(x) for x in dense)
+    return operator_arrays(asm)
 
 
 _PACKS = weakref.WeakKeyDictionary()  # system -> {(h, theta): packed data or None}
@@ -107,7 +147,7 @@ def _pack(asm):
 
 def _pack_new(asm):
     m = asm.m
-    (Hp, Hi, Hx), SHtc, (Wp, Wi, Wx) = operator_arrays(asm)
+    (Hp, Hi, Hx), SHtc, (Wp, Wi, Wx) = _operator_arrays(asm)
     blocks = contact_blocks(Wp, Wi, Wx, m)
     if blocks is None:
         return None
