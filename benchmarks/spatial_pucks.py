@@ -4,7 +4,7 @@
 
 Scene: K independent pucks (point masses, coordinates (x, z, y) each) on the floor y = 0, one
 Coulomb-disk contact each (mu = 0.3), under gravity; each launched in the plane with its own
-velocity (uniform in [0, 1.5 mu g], random direction, puck 0 at rest), so within the second some
+velocity (uniform in [0, 1.5 mu g], random direction; puck 0 at 0.5 mu g, so it stops at 0.5 s), so within the second some
 stop and stick and the others still slide. Moreau-Jean, h = 1e-3, theta = 1/2, 1 s, K = 1, 10,
 100, 1000 (``--quick``: up to 100).
 
@@ -60,19 +60,21 @@ so.iparam[sn.SICONOS_IPARAM_MAX_ITER] = max_iter
 n = qs.shape[1]
 r, u = np.zeros(n), np.zeros(n)
 R = np.empty_like(qs)
-total, worst, its, fails = 0.0, 0.0, 0, 0
+total, cpu, worst, its, fails = 0.0, 0.0, 0.0, 0, 0
 qv = pb.q
 for i in range(qs.shape[0]):
     qv[:] = qs[i]
+    c0 = time.process_time()
     t0 = time.perf_counter()
     info = sn.fc3d_driver(pb, r, u, so)
     total += time.perf_counter() - t0
+    cpu += time.process_time() - c0
     worst = max(worst, so.dparam[sn.SICONOS_DPARAM_RESIDU])
     its += so.iparam[sn.SICONOS_IPARAM_ITER_DONE]
     fails += int(info != 0)
     R[i] = r
 np.save(qs_path.replace("qs.npy", "rs_siconos.npy"), R)
-print(json.dumps(dict(time=float(total), worst_error=float(worst), iterations=int(its), failures=int(fails))))
+print(json.dumps(dict(time=float(total), cpu=float(cpu), worst_error=float(worst), iterations=int(its), failures=int(fails))))
 '''
 
 
@@ -88,7 +90,7 @@ def pucks(K: int, mu: float = MU, m: float = 1.0, seed: int = 0) -> Scene:
     system = System(q, v, mass, ca.SX(f), contacts=contacts)
     rng = np.random.default_rng(seed)
     speed = rng.uniform(0.0, 1.5 * mu * G, K)
-    speed[0] = 0.0
+    speed[0] = 0.5 * mu * G  # puck 0 (the only one at K = 1) slides, stops at t = 0.5 s, sticks
     ang = rng.uniform(0.0, 2 * np.pi, K)
     v0 = np.zeros(n)
     v0[0::3], v0[1::3] = speed * np.cos(ang), speed * np.sin(ang)
@@ -137,13 +139,15 @@ def bench(Ks, use_siconos):
     for K in Ks:
         lcp.simulate(pucks(K), 5 * H_STEP, h=H_STEP)
         reps = 3 if K <= 100 else 2
-        whole, one = [], []
+        whole, one, cpu = [], [], []
         res = None
         for _ in range(reps):
             scene = pucks(K)
+            c0 = time.process_time()
             t0 = time.perf_counter()
             res = lcp.simulate(scene, T_END, h=H_STEP)
             whole.append(time.perf_counter() - t0)
+            cpu.append(time.process_time() - c0)
             fresh = pucks(K)
             t0 = time.perf_counter()
             lcp.simulate(fresh, H_STEP, h=H_STEP)
@@ -152,11 +156,13 @@ def bench(Ks, use_siconos):
         us = min(whole) / (steps * K) * 1e6
         per_step = (min(whole) - min(one)) / ((steps - 1) * K) * 1e6
         mc = res.stats.mode_counts
-        row = {"K": K, "solver": res.solver, "status": res.status, "whole_call_us": us, "per_step_us": per_step,
+        cpu_us = min(cpu) / (steps * K) * 1e6
+        row = {"K": K, "solver": res.solver, "status": res.status, "whole_call_us": us, "whole_call_cpu_us": cpu_us,
+               "per_step_us": per_step,
                "one_off_ms": min(one) * 1e3, "stick": mc["stick"], "slide": mc["slide"], "siconos_nsgs_us": np.nan,
-               "ratio": np.nan, "siconos_iterations": 0, "siconos_failures": 0, "max_impulse_diff": np.nan,
+               "ratio": np.nan, "siconos_nsgs_cpu_us": np.nan, "cpu_ratio": np.nan, "siconos_iterations": 0, "siconos_failures": 0, "max_impulse_diff": np.nan,
                "max_velocity_diff": np.nan, "siconos_worst_error": np.nan}
-        print(f"K={K:5d} {res.solver:16s} status {res.status} whole call {us:8.3f} us/contact-step "
+        print(f"K={K:5d} {res.solver:16s} status {res.status} whole call {us:8.3f} us/contact-step (CPU time {cpu_us:.3f}) "
               f"(per step {per_step:.3f}, one-off {min(one) * 1e3:.2f} ms; stick {mc['stick']}, slide {mc['slide']})",
               flush=True)
         if use_siconos:
@@ -168,11 +174,14 @@ def bench(Ks, use_siconos):
                     s = None
             if s is not None:
                 sus = s["time"] / (s["steps"] * K) * 1e6
-                row.update(siconos_nsgs_us=sus, ratio=us / sus, siconos_iterations=s["iterations"],
+                scpu = s["cpu"] / (s["steps"] * K) * 1e6
+                row.update(siconos_nsgs_us=sus, ratio=us / sus, siconos_nsgs_cpu_us=scpu, cpu_ratio=cpu_us / scpu,
+                           siconos_iterations=s["iterations"],
                            siconos_failures=s["failures"], max_impulse_diff=s["max_impulse_diff"],
                            max_velocity_diff=s["max_velocity_diff"], siconos_worst_error=s["worst_error"])
                 print(f"      Siconos fc3d NSGS {sus:8.3f} us/contact-step ({s['steps']} steps, {s['iterations']} "
-                      f"iterations, {s['failures']} failures); ours / Siconos = {us / sus:.2f}; "
+                      f"iterations, {s['failures']} failures; CPU time {scpu:.3f}); ours / Siconos = {us / sus:.2f} "
+                      f"(CPU time: {cpu_us / scpu:.2f}); "
                       f"max |r_S - r| {s['max_impulse_diff']:.1e} (impulses up to {s['impulse_scale']:.2g}), "
                       f"max |dv_S - dv| {s['max_velocity_diff']:.1e}", flush=True)
         rows.append(row)
@@ -191,11 +200,13 @@ def main(argv=None):
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores", flush=True)
     rows = bench([1, 10, 100] if args.quick else [1, 10, 100, 1000], use_siconos)
     print(f"load average {os.getloadavg()[0]:.1f}", flush=True)
-    print("\n| K | ours: whole call (µs/contact-step) | per step | one-off (ms) | Siconos fc3d NSGS | ours / Siconos |")
-    print("|---|---|---|---|---|---|")
+    print("\n| K | ours: whole call (µs/contact-step) | per step | one-off (ms) | Siconos fc3d NSGS | ours / Siconos "
+          "| CPU time: ours / Siconos |")
+    print("|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['K']} | {r['whole_call_us']:.3g} | {r['per_step_us']:.3g} | {r['one_off_ms']:.3g} | "
-              f"{r['siconos_nsgs_us']:.3g} | {r['ratio']:.2f} |")
+              f"{r['siconos_nsgs_us']:.3g} | {r['ratio']:.2f} | {r['whole_call_cpu_us']:.3g} / "
+              f"{r['siconos_nsgs_cpu_us']:.3g} = {r['cpu_ratio']:.2f} |")
     args.out.mkdir(parents=True, exist_ok=True)
     header = list(rows[0])
     write_csv(args.out / "spatial_pucks.csv", header, [[r[h] for h in header] for r in rows])

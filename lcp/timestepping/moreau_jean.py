@@ -1,8 +1,8 @@
 """Moreau-Jean time stepping (the theta-method with impulses): the options and the choice of path.
 
 Holds :class:`MoreauJeanOptions`, :func:`moreau_jean` (validates, builds the step's assembly and
-chooses the path once: compiled closed-form single-contact step, compiled many-contact loop, or the
-Python loop) and :func:`moreau_jean_from_model` (the compiled single-contact step from a scene's
+chooses the path once: compiled closed-form single-contact step, compiled many-contact loop, compiled
+loop of independent spatial contacts, or the Python loop) and :func:`moreau_jean_from_model` (the compiled single-contact step from a scene's
 numbers alone). The route of a call is written down in docs/architecture.md ("The Moreau-Jean
 route"). Imports the modules of :mod:`lcp.timestepping`, :mod:`lcp.contact` and :mod:`lcp.result`;
 never the event method, scenes, sweeps, optimal control or :mod:`lcp.simulation`.
