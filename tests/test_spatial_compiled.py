@@ -150,3 +150,28 @@ def test_anisotropic_blocks_match_the_python_loop():
     b = lcp.simulate(system, 0.8, h=1e-3, q0=np.zeros(n), v0=v0, fast=False)
     _agree(a, b, tol=1e-12)
     assert a.stats.mode_counts["slide"] > 0 and a.stats.mode_counts["stick"] > 0
+
+
+def test_a_step_the_kernel_cannot_finish_goes_to_the_python_step(monkeypatch):
+    # the kernel run as plain Python (py_func), its closed form made to fail once: that step is
+    # solved by the Python contact step and the kernel resumes; the run equals the Python loop's
+    from lcp.contact.spatial_solvers import make_cone_solver
+    from lcp.timestepping import compiled_spatial
+    from lcp.timestepping.assembly import StepAssembly
+
+    system, q0, v0 = pucks(3, seed=4)
+    closed_form = compiled_spatial._isotropic
+    calls = {"n": 0}
+
+    def failing_once(*args):
+        calls["n"] += 1
+        if calls["n"] == 40:
+            return np.nan, np.nan, np.nan, -1
+        return closed_form(*args)
+
+    monkeypatch.setattr(compiled_spatial, "_isotropic", failing_once)
+    asm = StepAssembly(system, 1e-3, 0.5)
+    a = compiled_spatial.moreau_jean_spatial(asm, q0, v0, 60, 1, make_cone_solver("auto"), True, compiled=False)
+    b = lcp.simulate(system, 0.06, h=1e-3, q0=q0, v0=v0, fast=False)
+    _agree(a, b)
+    assert a.stats.fallbacks == 1 and "1 step(s) were solved by the Python solver 'auto'" in a.message

@@ -634,6 +634,7 @@ def moreau_jean_spatial(asm, q0, v0, n_steps: int, every: int, solver, fallback:
     stats.max_residual = max(stats.max_residual, float(fstate[0]))
     for code in range(5):
         stats.mode_counts[MODE_NAMES[code]] += int(istate[5 + code])
+    stats.fallbacks += handed
     message = notes.message(status, message)
     if handed:
         message += (f" {handed} step(s) were solved by the Python solver '{solver.name}' instead of the compiled "
