@@ -85,9 +85,9 @@ def test_save_every_and_the_uncompiled_kernel_agree():
     a = lcp.simulate(system, 0.2, h=1e-3, q0=q0, v0=v0, save_every=7)
     full = lcp.simulate(system, 0.2, h=1e-3, q0=q0, v0=v0)
     np.testing.assert_array_equal(a.q, full.q[::7][: a.q.shape[0]])
+    from lcp.contact.spatial_solvers import make_cone_solver
     from lcp.timestepping import compiled_spatial
     from lcp.timestepping.assembly import StepAssembly
-    from lcp.contact.spatial_solvers import make_cone_solver
 
     asm = StepAssembly(system, 1e-3, 0.5)
     py = compiled_spatial.moreau_jean_spatial(asm, q0, v0, 200, 1, make_cone_solver("auto"), True, compiled=False)

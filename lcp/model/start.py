@@ -90,7 +90,7 @@ def _affine_rows(system, t):
     if system.gap_tq_fn is not None or system.H_tq_fn is not None:  # (constant kinematics never move)
         return _general_rows(system, np.zeros(n), t)[1:]
     z = np.zeros(n)
-    vals, row, col, shape = _nonzeros(system.H_fn, z)
+    vals, row, col, _ = _nonzeros(system.H_fn, z)
     keep = row < m
     if n * m <= 40_000:
         J = np.zeros((m, n))

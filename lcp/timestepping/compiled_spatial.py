@@ -43,7 +43,13 @@ from lcp.contact.modes import MODE_NAMES, ModeArray
 from lcp.numerics.jit import HAVE_NUMBA, njit
 from lcp.result import STATUS_MESSAGES, Impact, SimulationResult
 from lcp.timestepping.activation import CLOSE_ULPS, EPS, OPEN_ULPS
-from lcp.timestepping.compiled_kernels import BUFFER_FULL, DONE, NEEDS_PYTHON, NONFINITE, free_velocity
+from lcp.timestepping.compiled_kernels import (
+    BUFFER_FULL,
+    DONE,
+    NEEDS_PYTHON,
+    NONFINITE,
+    free_velocity,
+)
 from lcp.timestepping.compiled_loop import free_velocity_data, operator_arrays
 from lcp.timestepping.contact_step import ContactStep
 from lcp.timestepping.outcome import RunNotes
