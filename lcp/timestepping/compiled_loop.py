@@ -193,17 +193,24 @@ def _pack(asm):
     return per_system[key]
 
 
+def _unused_fv():
+    z = np.zeros(0)
+    e0 = _empty_csr(0)
+    lu0 = (*e0, z, *e0, z, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+    return (z, *e0, *e0, *e0, *e0, *lu0, *e0, *e0, z)
+
+
 def free_velocity_data(asm):
     """(mode, fv): how the kernels compute the free velocity of a constant system (mode 0: a
     constant increment; 1: affine through S; 2: through the LU factors of the sparse W_h) and the
     tuple of arrays :func:`lcp.timestepping.compiled_kernels.free_velocity` reads. Shared by the
     planar and the spatial compiled loops."""
     n, h, th = asm.n, float(asm.h), float(asm.theta)
+    if asm.dv_const is not None:  # the kernels never write to the unused (empty) members: shared
+        return 0, (np.asarray(asm.dv_const, dtype=float).ravel(), *_UNUSED_FV)
     z = np.zeros(0)
     e0 = _empty_csr(0)
     lu0 = (*e0, z, *e0, z, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
-    if asm.dv_const is not None:
-        return 0, (np.asarray(asm.dv_const, dtype=float).ravel(), z, *e0, *e0, *e0, *e0, *lu0, *e0, *e0, z)
     Kq, Cv = asm.Kq, asm.Cv
     hK = asm._hhK if asm.sparse else ((h * h) * th) * Kq
     if asm.sparse and asm._lu is not None:
@@ -215,6 +222,9 @@ def free_velocity_data(asm):
     Gc = _csr(asm.G) if nb else e0
     return mode, (z, np.asarray(asm.F0, dtype=float).ravel(), *_csr(Kq), *_csr(Cv), *_csr(hK), *S, *lu, *Tc, *Gc,
                   np.asarray(asm.phi_t, dtype=float).ravel() if nb else z)
+
+
+_UNUSED_FV = _unused_fv()  # the free-velocity tuple's members beyond the constant increment (mode 0)
 
 
 def operator_arrays(asm):

@@ -105,6 +105,32 @@ def _contact_blocks(Wp, Wi, Wx, m):
 
 
 @njit(cache=True)
+def _weights(blocks):
+    """The natural-map weights of ConeContactProblem (1/W_NN, 1/max diag W_TT; 1 where not
+    positive) and whether each block is isotropic, diag(w_N, w_T, w_T) (a point mass on its floor:
+    the closed form of :func:`_isotropic` applies)."""
+    m = blocks.shape[0]
+    rhoN = np.ones(m)
+    rhoT = np.ones(m)
+    iso = np.zeros(m, dtype=np.bool_)
+    for j in range(m):
+        B = blocks[j]
+        dN = B[0, 0]
+        dT = max(B[1, 1], B[2, 2])
+        if dN > 0:
+            rhoN[j] = 1.0 / dN
+        if dT > 0:
+            rhoT[j] = 1.0 / dT
+        off = False
+        for a in range(3):
+            for b in range(3):
+                if a != b and B[a, b] != 0.0:
+                    off = True
+        iso[j] = not off and B[1, 1] == B[2, 2] and dN > 0 and dT > 0
+    return rhoN, rhoT, iso
+
+
+@njit(cache=True)
 def _dense_csr(A):
     """(indptr, indices, data) of a dense matrix in CSR, exact zeros dropped (as compiled_loop's
     conversion, in one compiled pass: NumPy's takes several calls of fixed cost)."""
@@ -158,18 +184,10 @@ def _pack_new(asm):
     if blocks is None:
         return None
     mode, fv = free_velocity_data(asm)
-    dN = blocks[:, 0, 0]
-    dT = np.maximum(blocks[:, 1, 1], blocks[:, 2, 2])
-    # natural-map weights of ConeContactProblem: 1/W_NN, 1/max diag W_TT (1 where not positive)
-    rhoN = np.where(dN > 0, 1.0 / np.where(dN > 0, dN, 1.0), 1.0)
-    rhoT = np.where(dT > 0, 1.0 / np.where(dT > 0, dT, 1.0), 1.0)
+    rhoN, rhoT, iso = _weights(blocks)
     end = Hp[m]
     gap0 = np.asarray(asm.gap0, dtype=float).ravel()
     sys_ = asm.sys
-    # isotropic blocks (a point mass on its floor: W_jj = diag(w_N, w_T, w_T)) have a closed form
-    off = blocks.copy()
-    off[:, [0, 1, 2], [0, 1, 2]] = 0.0
-    iso = ~np.any(off != 0.0, axis=(1, 2)) & (blocks[:, 1, 1] == blocks[:, 2, 2]) & (dN > 0) & (dT > 0)
     ct = (Hp, Hi, Hx, Hp[:m + 1].copy(), Hi[:end].copy(), np.abs(Hx[:end]), np.abs(gap0), gap0, *SHtc,
           blocks, rhoN, rhoT, np.asarray(sys_.mu, dtype=float), np.asarray(sys_.e, dtype=float), iso)
     return mode, fv, ct
