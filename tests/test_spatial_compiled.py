@@ -175,3 +175,26 @@ def test_a_step_the_kernel_cannot_finish_goes_to_the_python_step(monkeypatch):
     b = lcp.simulate(system, 0.06, h=1e-3, q0=q0, v0=v0, fast=False)
     _agree(a, b)
     assert a.stats.fallbacks == 1 and "1 step(s) were solved by the Python solver 'auto'" in a.message
+
+
+@pytest.mark.parametrize("K", [3, 80])
+def test_springs_and_dampers_match_the_python_loop(K):
+    # forces affine in the state (each puck tied to its origin by a spring and a damper): the free
+    # velocity through S (dense, K = 3) or the sparse assembly (K = 80, 240 contact rows)
+    n = 3 * K
+    q, v = ca.SX.sym("q", n), ca.SX.sym("v", n)
+    f = ca.SX.zeros(n)
+    for i in range(K):
+        for a in (0, 1):
+            f[3 * i + a] = -40.0 * q[3 * i + a] - 0.5 * v[3 * i + a]
+        f[3 * i + 2] = -G
+    contacts = [Contact(gap=q[3 * i + 2], tangent=ca.vertcat(q[3 * i], q[3 * i + 1]), mu=0.3, name=f"S{i}")
+                for i in range(K)]
+    system = System(q, v, ca.SX(ca.DM(sp.csc_matrix(sp.eye(n)))), f, contacts=contacts)
+    rng = np.random.default_rng(7)
+    v0 = np.zeros(n)
+    v0[0::3], v0[1::3] = rng.uniform(-2, 2, K), rng.uniform(-2, 2, K)
+    a = lcp.simulate(system, 0.5, h=1e-3, q0=np.zeros(n), v0=v0)
+    b = lcp.simulate(system, 0.5, h=1e-3, q0=np.zeros(n), v0=v0, fast=False)
+    _agree(a, b, tol=1e-12)
+    assert a.stats.mode_counts["slide"] > 0 and a.stats.mode_counts["stick"] > 0
