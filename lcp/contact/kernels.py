@@ -25,7 +25,7 @@ from lcp.contact.law import COUPLING_FLOOR
 from lcp.numerics.jit import njit
 
 __all__ = ["OPEN", "SLIDE", "SLIDE_NEG", "SLIDE_POS", "STICK", "contact_residual", "contact_scale", "disk_residual",
-           "local_disk3", "local_planar", "row_absdot", "row_dot"]
+           "local_disk3", "local_planar", "row_absdot", "row_dot", "solve3"]
 
 #: local outcome codes (as lcp.contact.modes; -1: no closed-form case admissible)
 OPEN, STICK, SLIDE_POS, SLIDE_NEG, SLIDE = 0, 1, 2, 3, 4
@@ -153,6 +153,10 @@ def _solve3(W, b0, b1, b2):
     x1 = (b1 - a12 * x2) / a11
     x0 = (b0 - a01 * x1 - a02 * x2) / a00
     return x0, x1, x2, True
+
+
+#: the 3 x 3 solve of the local problem's stick case, for the compiled loops' branch refinement
+solve3 = _solve3
 
 
 @njit(cache=True)

@@ -2,7 +2,7 @@
 
 Holds :func:`consistent_start` (a :class:`~lcp.model.system.System`), :func:`consistent_affine_start`
 (the numbers of a constant model with contacts only), :func:`system_length` and the tolerances
-:data:`START_TOL`, :data:`ROUND_ULPS`. Imports NumPy only (the System is passed in); never the
+:data:`START_TOL`, :data:`ROUND_ULPS`. Imports NumPy (SciPy and :mod:`lcp.numerics.casadi_eval` for large constant rows) only (the System is passed in); never the
 contact problem, time stepping or events: both methods call it from their entry.
 
 What a start must satisfy
@@ -56,7 +56,7 @@ def _length(J, c) -> float:
     """The system's length from the rows' constants c and Jacobians J (1.0 where there is none)."""
     if J.size == 0:
         return 1.0
-    norms = np.max(np.abs(J), axis=1)
+    norms = _row_absmax(J) if hasattr(J, "indptr") else np.max(np.abs(J), axis=1)
     ok = (norms > 0) & np.isfinite(norms) & np.isfinite(c)
     ell = float(np.max(np.abs(c[ok]) / norms[ok], initial=0.0))
     return ell if ell > 0 and math.isfinite(ell) else 1.0
@@ -81,10 +81,60 @@ def _rows(system, q, t):
         # evaluation of each costs more than the whole check)
         known = _AFFINE.get(system)
         if known is None:
-            known = _AFFINE[system] = _general_rows(system, np.zeros(_n_q(system)), t)[1:]
+            known = _AFFINE[system] = _affine_rows(system, t)
         names, J, c = known
         return c + J @ q, names, J, c
     return _general_rows(system, q, t)
+
+
+def _affine_rows(system, t):
+    """(names, J, c) of constant contact rows without bilateral constraints, from the nonzeros of
+    CasADi's H and g at q = 0 (its own conversions to NumPy cost more than the check). J is CSR
+    where the dense gap Jacobian would be large (K contacts of 3K coordinates: CasADi's dense
+    conversion of H alone took a second at K = 1000), else dense."""
+    n, m = system.n, system.n_contacts
+    if system.gap_tq_fn is not None or system.H_tq_fn is not None:  # (constant kinematics never move)
+        return _general_rows(system, np.zeros(n), t)[1:]
+    z = np.zeros(n)
+    vals, row, col, _ = _nonzeros(system.H_fn, z)
+    keep = row < m
+    if n * m <= 40_000:
+        J = np.zeros((m, n))
+        J[row[keep], col[keep]] = vals[keep]
+    else:
+        import scipy.sparse as sp
+
+        J = sp.csr_matrix((vals[keep], (row[keep], col[keep])), shape=(m, n))
+    gv, grow, _, _ = _nonzeros(system.gap_fn, z)
+    c = np.zeros(m)
+    c[grow] = gv
+    names = [f"contact {ct.name!r}" for ct in system.contacts]
+    return names, J, c
+
+
+def _nonzeros(fn, q):
+    """(values, rows, columns, shape) of the nonzeros of fn(q)'s first output."""
+    from lcp.numerics.casadi_eval import evaluate_into
+
+    pattern = fn.sparsity_out(0)
+    vals = np.empty(pattern.nnz())
+    evaluate_into(fn, [q], [vals])
+    colind = np.array(pattern.colind(), dtype=np.int64)
+    col = np.repeat(np.arange(colind.size - 1), np.diff(colind))
+    return vals, np.array(pattern.row(), dtype=np.int64), col, pattern.shape
+
+
+def _row_absmax(J):
+    """max_j |J_ij| of each row of a CSR matrix (SciPy's max(axis=1) costs milliseconds here)."""
+    out = np.zeros(J.shape[0])
+    nz = np.diff(J.indptr) > 0
+    if nz.any():
+        out[nz] = np.maximum.reduceat(np.abs(J.data), J.indptr[:-1][nz])
+    return out
+
+
+def _dense(J):
+    return J.toarray() if hasattr(J, "toarray") else J
 
 
 def _general_rows(system, q, t):
@@ -207,6 +257,7 @@ def _project_positions(system, q0, t0, r, J, c, ell, nb):
     held = np.ones(r.size, dtype=bool)
     held[nb:] = r[nb:] < 0
     q = q0.copy()
+    J = _dense(J)
     for _ in range(30):
         lim = np.abs(J) @ _reach(system, q, ell, t0) + np.abs(c)
         viol = _violations(r, nb)
@@ -223,6 +274,7 @@ def _project_positions(system, q0, t0, r, J, c, ell, nb):
         else:
             q = q - dx
         r, _, J, _ = _rows(system, q, t0)
+        J = _dense(J)
         A = system.mass(q, t0)
     raise ValueError(f"q0 could not be projected onto the constraints: residual {float(np.max(np.abs(r))):.3g} "
                      "after 30 Newton steps")

@@ -161,9 +161,13 @@ def null_space(G: np.ndarray) -> np.ndarray:
     return vt[rank:].T
 
 
-def contact_rows_degenerate(system, q, j, t: float = 0.0):
-    """(rows [H_N; H_T] of contact j at (t, q), their singular values) if they are dependent there, else None."""
-    H = system.contact_jacobian(q, t)
+def contact_rows_degenerate(system, q, j, t: float = 0.0, H=None):
+    """(rows [H_N; H_T] of contact j at (t, q), their singular values) if they are dependent there, else None.
+
+    ``H``: the contact Jacobian at (t, q) where the caller has it already (one evaluation for all
+    contacts, not one per contact: K contacts of 3K coordinates would cost K dense evaluations)."""
+    if H is None:
+        H = system.contact_jacobian(q, t)
     m, off = system.n_contacts, system.tangent_offsets
     rows = H[np.r_[j, m + off[j]:m + off[j + 1]]]
     s = np.linalg.svd(rows, compute_uv=False)
@@ -181,8 +185,9 @@ def check_contact_rows(system, q, t: float = 0.0) -> None:
     message then says that it is this configuration, by checking one nearby.
     """
     q = np.asarray(q, dtype=float)
+    H = system.contact_jacobian(q, t) if system.n_contacts else None
     for j, c in enumerate(system.contacts):
-        bad = contact_rows_degenerate(system, q, j, t)
+        bad = contact_rows_degenerate(system, q, j, t, H)
         if bad is None:
             continue
         rows, s = bad

@@ -44,7 +44,7 @@ from lcp.contact.kernels import contact_residual, contact_scale, local_planar, r
 from lcp.numerics.jit import njit
 
 __all__ = ["BRANCH_MAX_SWEEPS", "BRANCH_DIRECT_MAX", "DONE", "NEEDS_PYTHON", "NONFINITE", "BUFFER_FULL",
-           "run_steps"]
+           "free_velocity", "run_steps"]
 
 #: Gauss-Seidel sweeps of the branch refinement before the step goes to the exact Python solve
 BRANCH_MAX_SWEEPS = 60
@@ -118,6 +118,10 @@ def _free_dv(mode, fv, h, th, q, v, dvf, rhs, t1, t2):
         _csr_matvec(Tp, Ti, Tx, c, t1)
         for a in range(n):
             dvf[a] = dvf[a] + t1[a]
+
+
+#: the free velocity of a constant system (the spatial loop, lcp.timestepping.compiled_spatial, shares it)
+free_velocity = _free_dv
 
 
 @njit(cache=True)

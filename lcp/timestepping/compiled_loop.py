@@ -39,7 +39,8 @@ from lcp.timestepping.outcome import ambiguity_note
 from lcp.timestepping.projection import violation_function
 from lcp.result import STATUS_MESSAGES, Impact, SimulationResult, SolverStats
 
-__all__ = ["AUTO_MAX_SWEEPS", "BRANCH_MAX_SWEEPS", "applicable", "moreau_jean_loop"]
+__all__ = ["AUTO_MAX_SWEEPS", "BRANCH_MAX_SWEEPS", "applicable", "free_velocity_data", "moreau_jean_loop",
+           "operator_arrays"]
 
 #: NSGS sweeps of ``"auto"`` in the compiled step before the step goes to the Python solver
 #: (NSGS then semismooth Newton), which handles slowly converging problems better
@@ -192,31 +193,53 @@ def _pack(asm):
     return per_system[key]
 
 
-def _pack_new(asm):
-    n, m, h, th = asm.n, asm.m, float(asm.h), float(asm.theta)
+def _unused_fv():
     z = np.zeros(0)
     e0 = _empty_csr(0)
     lu0 = (*e0, z, *e0, z, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
-    if asm.dv_const is not None:
-        mode = 0
-        fv = (np.asarray(asm.dv_const, dtype=float).ravel(), z, *e0, *e0, *e0, *e0, *lu0, *e0, *e0, z)
+    return (z, *e0, *e0, *e0, *e0, *lu0, *e0, *e0, z)
+
+
+def free_velocity_data(asm):
+    """(mode, fv): how the kernels compute the free velocity of a constant system (mode 0: a
+    constant increment; 1: affine through S; 2: through the LU factors of the sparse W_h) and the
+    tuple of arrays :func:`lcp.timestepping.compiled_kernels.free_velocity` reads. Shared by the
+    planar and the spatial compiled loops."""
+    n, h, th = asm.n, float(asm.h), float(asm.theta)
+    if asm.dv_const is not None:  # the kernels never write to the unused (empty) members: shared
+        return 0, (np.asarray(asm.dv_const, dtype=float).ravel(), *_UNUSED_FV)
+    z = np.zeros(0)
+    e0 = _empty_csr(0)
+    lu0 = (*e0, z, *e0, z, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+    Kq, Cv = asm.Kq, asm.Cv
+    hK = asm._hhK if asm.sparse else ((h * h) * th) * Kq
+    if asm.sparse and asm._lu is not None:
+        mode, S, lu = 2, e0, _lu_parts(asm._lu, n)
     else:
-        Kq, Cv = asm.Kq, asm.Cv
-        hK = asm._hhK if asm.sparse else ((h * h) * th) * Kq
-        if asm.sparse and asm._lu is not None:
-            mode, S, lu = 2, e0, _lu_parts(asm._lu, n)
-        else:
-            mode, S, lu = 1, _csr(asm.S), lu0
-        nb = asm.T.shape[1]
-        Tc = _csr(asm.T) if nb else _empty_csr(n)
-        Gc = _csr(asm.G) if nb else e0
-        fv = (z, np.asarray(asm.F0, dtype=float).ravel(), *_csr(Kq), *_csr(Cv), *_csr(hK), *S, *lu, *Tc, *Gc,
-              np.asarray(asm.phi_t, dtype=float).ravel() if nb else z)
-    arrays = getattr(asm, "arrays", None)  # independent bodies: the compressed arrays, no SciPy matrix
+        mode, S, lu = 1, _csr(asm.S), lu0
+    nb = asm.T.shape[1]
+    Tc = _csr(asm.T) if nb else _empty_csr(n)
+    Gc = _csr(asm.G) if nb else e0
+    return mode, (z, np.asarray(asm.F0, dtype=float).ravel(), *_csr(Kq), *_csr(Cv), *_csr(hK), *S, *lu, *Tc, *Gc,
+                  np.asarray(asm.phi_t, dtype=float).ravel() if nb else z)
+
+
+_UNUSED_FV = _unused_fv()  # the free-velocity tuple's members beyond the constant increment (mode 0)
+
+
+def operator_arrays(asm):
+    """The compressed arrays of H (CSR), S H' (CSC) and W (CSR) of a constant assembly: read from
+    :attr:`StepAssembly.arrays` for independent bodies (no SciPy matrix built), else converted."""
+    arrays = getattr(asm, "arrays", None)
     if arrays is not None:
-        (Hp, Hi, Hx), SHtc, Wc = arrays["H"], arrays["SHt_csc"], arrays["W"]
-    else:
-        (Hp, Hi, Hx), SHtc, Wc = _csr(asm.H), _csc(asm.SHt), _csr(asm.W)
+        return arrays["H"], arrays["SHt_csc"], arrays["W"]
+    return _csr(asm.H), _csc(asm.SHt), _csr(asm.W)
+
+
+def _pack_new(asm):
+    m = asm.m
+    mode, fv = free_velocity_data(asm)
+    (Hp, Hi, Hx), SHtc, Wc = operator_arrays(asm)
     Wp, Wi, Wx, blocks, rho = _interleave_compiled(*Wc, m)
     end = Hp[m]  # |H_N|: the leading m rows of H's CSR arrays
     gap0 = np.asarray(asm.gap0, dtype=float).ravel()

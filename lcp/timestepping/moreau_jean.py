@@ -1,8 +1,8 @@
 """Moreau-Jean time stepping (the theta-method with impulses): the options and the choice of path.
 
 Holds :class:`MoreauJeanOptions`, :func:`moreau_jean` (validates, builds the step's assembly and
-chooses the path once: compiled closed-form single-contact step, compiled many-contact loop, or the
-Python loop) and :func:`moreau_jean_from_model` (the compiled single-contact step from a scene's
+chooses the path once: compiled closed-form single-contact step, compiled many-contact loop, compiled
+loop of independent spatial contacts, or the Python loop) and :func:`moreau_jean_from_model` (the compiled single-contact step from a scene's
 numbers alone). The route of a call is written down in docs/architecture.md ("The Moreau-Jean
 route"). Imports the modules of :mod:`lcp.timestepping`, :mod:`lcp.contact` and :mod:`lcp.result`;
 never the event method, scenes, sweeps, optimal control or :mod:`lcp.simulation`.
@@ -207,6 +207,11 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
     # the path, chosen once: the compiled paths only where nothing needs Python per step
     if options.fast and proj is None and solver.name in ("auto", "enum") and compiled.applicable(system):
         return run_compiled_step(asm, q0, v0, n_steps, every, solver.name)
+    if options.fast and proj is None and spatial and system.is_constant:
+        from lcp.timestepping import compiled_spatial  # independent spatial contacts (numba)
+
+        if compiled_spatial.applicable(asm, solver, options):
+            return compiled_spatial.moreau_jean_spatial(asm, q0, v0, n_steps, every, solver, options.fallback)
     if options.fast and proj is None and not spatial and system.n_contacts >= 2 and system.is_constant:
         # imported here: numba loads only where the compiled loop may run
         from lcp.timestepping import compiled_loop
@@ -233,8 +238,6 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
     if note:
         result.message += note
     return result
-
-
 
 
 def _n_steps(t_end, h) -> int:
