@@ -113,9 +113,15 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     n, m = system.n, system.n_contacts
     for note in integ.notes:
         message = f"{message} {note}"
-    if integ.nonunique:
+    if integ.nonunique and not integ.choice_moves:
         message = (f"{message} Contact forces are not unique in {integ.nonunique} phase(s) (redundant "
                    "contacts): the least-norm admissible forces are reported; the motion is unique.")
+    elif integ.nonunique:
+        message = (f"{message} Contact forces are not unique in {integ.nonunique} phase(s) (redundant "
+                   "contacts): the least-norm admissible forces are reported; in "
+                   f"{integ.choice_moves} of them the friction of sliding contacts grows with the "
+                   "squeeze between opposed contacts, which rigid contacts leave undetermined, so the "
+                   "motion depends on this choice (the least squeeze, the least friction).")
     if status < 0:
         t_out = t_out[t_out <= t_fail]
         if scene is not None:

@@ -122,17 +122,49 @@ def branch_forces(pb, check_modes, branch_modes) -> BranchForces | None:
     if Z.shape[1] == 0:
         p = p0
         return BranchForces(p, 0, pb.admissible(p, check_modes), p0, Z)
-    G, h, _, _ = admissibility_rows(pb, check_modes)
+    G, h, zero_mu, _ = admissibility_rows(pb, check_modes)
     slack = G @ p0 - h
     tol = 1e-12 * max(pb.scale, float(np.max(np.abs(p0))) if p0.size else 0.0)
     if slack.size == 0 or slack.min() >= -tol:
         p = p0  # p0 (orthogonal to the null space) is already the least-norm admissible point
     else:
-        z = _least_distance(G @ Z, -slack)
+        z = _least_distance_eq(G @ Z, -slack, zero_mu, tol)
         if z is None:
             return BranchForces(p0, Z.shape[1], False, p0, Z)
         p = p0 + Z @ z
     return BranchForces(p, Z.shape[1], pb.admissible(p, check_modes), p0, Z)
+
+
+def _least_distance_eq(B, c, eq, tol):
+    """argmin ||z|| subject to B z >= c on the rows not in ``eq`` and B z = c on the rows in
+    ``eq`` (the friction bounds of mu = 0 contacts, written as two opposite inequalities), or
+    None if infeasible.
+
+    The equalities are not left to the inequality solver: two opposite rows whose right-hand
+    sides are rounding (p0's friction force of a frictionless contact is 1e-17, not 0) make an
+    empty strip for it, and the least-norm solution p0 (with N < 0) was kept. Here they restrict
+    z to an affine subspace, z = z_e + Y w with z_e the least-norm solution (SVD, rank to
+    RANK_RTOL: the rows of B have norm <= 1) and Y an orthonormal basis of the rest, so that
+    ||z||^2 = ||z_e||^2 + ||w||^2 and the inequalities become a least-distance program in w.
+    Equalities that are rounding on both sides (B's row and c below ``tol``) hold already.
+    """
+    if not eq.any():
+        return _least_distance(B, c)
+    Be, ce = B[eq], c[eq]
+    d = B.shape[1]
+    U, s, Vt = np.linalg.svd(Be)
+    rank = int(np.sum(s > RANK_RTOL))
+    z_e = Vt[:rank].T @ ((U[:, :rank].T @ ce) / s[:rank])
+    if np.max(np.abs(Be @ z_e - ce)) > tol:
+        return None  # the equalities cannot hold: no admissible forces
+    Y = Vt[rank:].T
+    Bi, ci = B[~eq], c[~eq] - B[~eq] @ z_e
+    if Y.shape[1] == 0 or Bi.shape[0] == 0:
+        return z_e if np.all(ci <= tol) else None
+    w = _least_distance(Bi @ Y, ci)
+    if w is None:
+        return None
+    return z_e + Y @ w if d else z_e
 
 
 def force_margin(pb, check_modes, branch_modes) -> tuple[float, np.ndarray, list]:

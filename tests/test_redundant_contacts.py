@@ -1,0 +1,213 @@
+"""Redundant contacts in the event method: non-unique forces are chosen to satisfy the contact law.
+
+When the closed contacts' constraint rows are dependent (opposed corner pairs of a slider in a guide
+without clearance, a box between a floor and a ceiling, a corner given twice) the forces of a mode
+form a polytope, and the reported ones must lie in it: N >= 0, |f| <= mu N, friction against the
+sliding. The least-norm solution of the mode's linear equations alone has N1 = -N3 on opposed
+contacts (it was reported, and with friction it fed energy in). References:
+
+- the slider-crank without clearance, mu = 0: the ideal slider-crank (lcp.scenes.slider_crank, a
+  model with bilateral loop constraints and no contacts) by the event method;
+- the same with mu = 0.01: rigid contacts leave the squeeze between opposed corners undetermined,
+  and the friction grows with it; the least-norm forces are the least squeeze (the guide pushes from
+  one side only), whose motion is the reduced equation of the crank with the guide's reaction
+  lambda and a friction -mu |lambda| sign(slider velocity), integrated here by DOP853;
+- boxes: the weight and friction are carried exactly (closed forms).
+"""
+import math
+
+import casadi as ca
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import lcp
+from lcp.classical import slider_crank_clearance
+from lcp.events import event_driven
+from lcp.model.system import Contact, System
+from lcp.scenes.classical import slider_crank
+from lcp.scenes.slider_crank_clearance import slider_crank_clearance_energy
+
+G = 9.81
+T = 0.01
+TS = np.linspace(0.0, T, 11)
+
+
+# ----------------------------------------------------------------------------- slider-crank, c = 0
+@pytest.fixture(scope="module", params=[0.0, 0.01], ids=["mu=0", "mu=0.01"])
+def zero_clearance(request):
+    sc = slider_crank_clearance(c=0.0, omega3=0.0, mu=request.param, t_end=T)
+    return sc, lcp.simulate(sc, T, method="event", t_eval=TS)
+
+
+def test_zero_clearance_forces_satisfy_the_contact_law(zero_clearance):
+    sc, ev = zero_clearance
+    assert ev.success, ev.message
+    N, f = ev.force_N, ev.force_T
+    scale = np.max(np.abs(N))
+    assert scale > 1.0  # the guide carries the slider (measured 17.7 N at most)
+    assert np.min(N) >= -1e-12 * scale  # was -8.8 (N1 = -N3 on the opposed corners)
+    mu = sc.params["mu"]
+    assert np.all(np.abs(f) <= mu * N + 1e-12 * scale)
+    # the corners slide with the slider (backwards from the dead centre): friction pushes forwards
+    assert np.all(f[1:] >= -1e-12 * scale)
+    # the guide pushes from one side at a time (no squeeze between opposed corners 1-3, 2-4)
+    assert np.all(np.minimum(N[:, 0], N[:, 2]) <= 1e-12 * scale)
+    assert np.all(np.minimum(N[:, 1], N[:, 3]) <= 1e-12 * scale)
+
+
+def test_zero_clearance_energy_never_rises(zero_clearance):
+    sc, ev = zero_clearance
+    E = slider_crank_clearance_energy(sc.params, ev.q, ev.v)
+    # the event method's integrator tolerance (rtol 1e-12) on |E| = 7.5 J; friction takes
+    # 1.3e-2 J over 0.01 s at mu = 0.01 (it was given 1.6e-5 J)
+    assert np.max(np.diff(E)) <= 1e-10 * np.max(np.abs(E))
+    if sc.params["mu"] > 0:
+        assert E[-1] < E[0] - 1e-3
+
+
+def test_zero_clearance_frictionless_is_the_ideal_slider_crank(zero_clearance):
+    sc, ev = zero_clearance
+    if sc.params["mu"] > 0:
+        pytest.skip("the ideal crank has no friction (the frictional reference is the next test)")
+    p = sc.params
+    ideal = slider_crank(l1=p["l1"], l2=p["l2"], m1=p["m1"], m2=p["m2"], m3=p["m3"], J1=p["J1"], J2=p["J2"],
+                         g=p["g"], omega0=p["omega1"], t_end=T)
+    ref = lcp.simulate(ideal, T, method="event", t_eval=TS)
+    assert ref.success, ref.message
+    assert "the motion is unique" in ev.message
+    # measured 1.9e-13 rad and 4.5e-11 rad/s (of 150 rad/s)
+    assert np.max(np.abs(ev.q[:, :2] - ref.q[:, :2])) < 1e-9
+    assert np.max(np.abs(ev.v[:, :2] - ref.v[:, :2])) < 1e-9 * np.max(np.abs(ref.v))
+    assert np.max(np.abs(ev.q[:, 2])) < 1e-15  # the slider does not tilt
+
+
+def least_squeeze_reference(sc):
+    """(theta1, theta2, rates) of the crank with the guide's reaction lambda on P_y = 0 and the
+    friction -mu |lambda| sign(P_x') on the slider (sliding backwards, P_x' < 0, for t > 0)."""
+    p = sc.params
+    l1, l2, mu = p["l1"], p["l2"], p["mu"]
+
+    def rhs(t, y):
+        w = y[2:]
+        q, v = np.array([y[0], y[1], 0.0]), np.array([w[0], w[1], 0.0])
+        A, F = sc.system.mass(q)[:2, :2], sc.system.force(q, v)[:2]
+        s1, c1, s2, c2 = math.sin(y[0]), math.cos(y[0]), math.sin(y[1]), math.cos(y[1])
+        Gy = np.array([l1 * c1, l2 * c2])  # dP_y/d(theta1, theta2)
+        dPx = np.array([-l1 * s1, -l2 * s2])
+        for sig in (1.0, -1.0):  # the sign of lambda, checked
+            # A qdd = F + lambda (Gy + mu sig dPx): friction +mu |lambda| on the backward slide
+            K = np.zeros((3, 3))
+            K[:2, :2], K[:2, 2], K[2, :2] = A, -(Gy + mu * sig * dPx), Gy
+            x = np.linalg.solve(K, np.concatenate([F, [l1 * s1 * w[0] ** 2 + l2 * s2 * w[1] ** 2]]))
+            if sig * x[2] >= 0:
+                break
+        return np.concatenate([w, x[:2]])
+
+    y0 = np.concatenate([sc.q0[:2], sc.v0[:2]])
+    return solve_ivp(rhs, (0.0, T), y0, method="DOP853", rtol=1e-13, atol=1e-14, t_eval=TS)
+
+
+def test_zero_clearance_with_friction_is_the_least_squeeze_motion(zero_clearance):
+    sc, ev = zero_clearance
+    if sc.params["mu"] == 0:
+        pytest.skip("frictionless: the previous test")
+    ref = least_squeeze_reference(sc)
+    assert ref.success
+    # measured 2.2e-13 rad and 5.4e-11 rad/s
+    assert np.max(np.abs(ev.q[:, :2] - ref.y[:2].T)) < 1e-9
+    assert np.max(np.abs(ev.v[:, :2] - ref.y[2:].T)) < 1e-9 * np.max(np.abs(ref.y[2:]))
+    # the message says that the motion rests on the choice of forces
+    assert "motion depends on this choice" in ev.message and "least squeeze" in ev.message
+
+
+# ----------------------------------------------------------------------------- boxes
+def box(corners, m=2.0, w=1.0, h=0.5, mu=0.3, push=0.0):
+    """A planar box (x, y, theta) of width w and height h; ``corners`` lists (sx, sy, name): the
+    corner (sx w/2, sy h/2) against the floor y = 0 (sy = -1) or the ceiling y = h (sy = +1).
+    A horizontal force ``push`` acts at the centre."""
+    q, v = ca.SX.sym("q", 3), ca.SX.sym("v", 3)
+    x, y, th = q[0], q[1], q[2]
+    cs, sn = ca.cos(th), ca.sin(th)
+    contacts = []
+    for sx, sy, name in corners:
+        cx = x + cs * sx * w / 2 - sn * sy * h / 2
+        cy = y + sn * sx * w / 2 + cs * sy * h / 2
+        contacts.append(Contact(gap=cy if sy < 0 else h - cy, tangent=cx, mu=mu, name=name))
+    return System(q, v, mass=ca.diag(ca.vertcat(m, m, m * (w * w + h * h) / 12)),
+                  force=ca.vertcat(push, -m * G, 0), contacts=contacts)
+
+
+FLOOR = [(-1, -1, "rear"), (1, -1, "front")]
+CEILING = [(-1, 1, "rear top"), (1, 1, "front top")]
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.3])
+def test_box_on_a_duplicated_corner_shares_the_weight(mu):
+    m = 2.0
+    sysm = box(FLOOR + [(-1, -1, "rear again")], m=m, mu=mu)
+    res = event_driven(sysm, [0.0, 0.25, 0.0], np.zeros(3), 1.0, n_eval=5)
+    assert res.success, res.message
+    assert res.nonunique_forces == 1 and "the motion is unique" in res.message
+    assert np.max(np.abs(res.q - res.q[0])) <= 1e-15 and np.max(np.abs(res.v)) <= 1e-15
+    N = res.force_N
+    np.testing.assert_allclose(N.sum(axis=1), m * G, rtol=1e-14)
+    # moments: the rear corner (twice) carries half; the least-norm split gives each copy a quarter
+    np.testing.assert_allclose(N, np.tile([m * G / 4, m * G / 2, m * G / 4], (N.shape[0], 1)), rtol=1e-13)
+    assert np.all(np.abs(res.force_T) <= 1e-13)
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.5])
+def test_box_between_floor_and_ceiling_rests_on_the_floor(mu):
+    m = 2.0
+    res = event_driven(box(FLOOR + CEILING, m=m, mu=mu), [0.0, 0.25, 0.0], np.zeros(3), 1.0, n_eval=5)
+    assert res.success, res.message
+    assert np.max(np.abs(res.q - res.q[0])) <= 1e-15 and np.max(np.abs(res.v)) <= 1e-15
+    N = res.force_N
+    # the floor carries the weight, the ceiling nothing (the least-norm forces of the equations
+    # alone were +- m g / 4 on the ceiling and 3 m g / 4 on the floor)
+    assert np.all(N >= -1e-13 * m * G)
+    np.testing.assert_allclose(N[:, :2], m * G / 2, rtol=1e-13)
+    assert np.all(np.abs(N[:, 2:]) <= 1e-13 * m * G)
+    np.testing.assert_allclose(N[:, :2].sum(axis=1) - N[:, 2:].sum(axis=1), m * G, rtol=1e-14)
+
+
+def test_box_sliding_between_floor_and_ceiling_takes_the_least_friction():
+    m, mu, v0 = 2.0, 0.3, 1.5
+    res = event_driven(box(FLOOR + CEILING, m=m, mu=mu), [0.0, 0.25, 0.0], [v0, 0.0, 0.0], 1.0,
+                       t_eval=np.linspace(0.0, 1.0, 41))
+    assert res.success, res.message
+    # the least squeeze: friction mu m g from the floor alone, x = v0 t - mu g t^2 / 2 to the stop.
+    # (The friction's torque about the centre is taken by the floor's corners, and the ceiling's
+    # open: the decision says that several motions were consistent; an "impact" without impulse
+    # may be noted where the tilt's rounding, 1e-16, closes a ceiling corner.)
+    t_stop = v0 / (mu * G)
+    stops = [e.t for e in res.events if e.kind == "stop"]
+    assert len(stops) == 1 and abs(stops[0] - t_stop) <= 1e-12 and res.impulses == []
+    t = res.t
+    ts = np.minimum(t, t_stop)
+    np.testing.assert_allclose(res.q[:, 0], v0 * ts - mu * G * ts ** 2 / 2, rtol=1e-13, atol=1e-15)
+    sliding = t < t_stop
+    N, f = res.force_N[sliding], res.force_T[sliding]
+    assert np.all(N >= -1e-13 * m * G)
+    np.testing.assert_allclose(N.sum(axis=1), m * G, rtol=1e-13)  # no squeeze
+    assert np.all(np.abs(N[:, 2:]) <= 1e-13 * m * G)
+    np.testing.assert_allclose(f.sum(axis=1), -mu * m * G, rtol=1e-13)
+    assert np.all(f * v0 <= 1e-13)  # friction against the sliding
+    assert "motions were consistent" in res.message
+    # energy: never rises
+    E = 0.5 * m * res.v[:, 0] ** 2
+    assert np.all(np.diff(E) <= 1e-13)
+
+
+def test_frictionless_box_gliding_between_floor_and_ceiling():
+    # the corners slide (folded into the problem with a zero friction unknown, whose f = 0 rows
+    # are equalities of the force polytope): the floor carries the weight, the ceiling nothing
+    m, v0 = 2.0, 1.5
+    res = event_driven(box(FLOOR + CEILING, m=m, mu=0.0), [0.0, 0.25, 0.0], [v0, 0.0, 0.0], 1.0, n_eval=11)
+    assert res.success, res.message
+    np.testing.assert_allclose(res.q[:, 0], v0 * res.t, rtol=1e-14)
+    N = res.force_N
+    assert np.all(N >= -1e-13 * m * G)
+    np.testing.assert_allclose(N[:, :2], m * G / 2, rtol=1e-13)
+    assert np.all(np.abs(N[:, 2:]) <= 1e-13 * m * G)
