@@ -211,3 +211,20 @@ def test_frictionless_box_gliding_between_floor_and_ceiling():
     assert np.all(N >= -1e-13 * m * G)
     np.testing.assert_allclose(N[:, :2], m * G / 2, rtol=1e-13)
     assert np.all(np.abs(N[:, 2:]) <= 1e-13 * m * G)
+
+
+def test_a_pulling_normal_force_is_never_reported_silently(monkeypatch):
+    # the phase's forces replaced by the least-norm solution of the mode's equations alone (the
+    # defect fixed above, N1 = -N3): the result's message names the pulling contact
+    import lcp.events.phases as phases
+    from lcp.events.indeterminate import BranchForces, branch_forces
+
+    def equations_only(pb, check, branch):
+        bf = branch_forces(pb, check, branch)
+        return None if bf is None else BranchForces(bf.p0, bf.nullity, False, bf.p0, bf.Z)
+
+    monkeypatch.setattr(phases, "branch_forces", equations_only)
+    sc = slider_crank_clearance(c=0.0, omega3=0.0, mu=0.0, t_end=T)
+    ev = lcp.simulate(sc, T, method="event", t_eval=TS)
+    assert np.min(ev.force_N) < -1.0
+    assert "< 0: the reported forces there violate the contact law" in ev.message, ev.message
