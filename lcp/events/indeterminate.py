@@ -14,7 +14,9 @@ the sliding acceleration for a slip, a_N >= 0 for an open contact). This module
 - solves such a branch: p = p0 + Z z, p0 the least-norm solution of E p = r (SVD) and Z a basis of
   the null space of E; the reported forces are the **least-norm admissible** ones, the projection
   of 0 onto P, found as a least-distance program by Lawson and Hanson's NNLS reduction
-  (``scipy.optimize.nnls``), and checked against the Coulomb inequalities afterwards;
+  (``scipy.optimize.nnls``), and checked against the Coulomb inequalities afterwards; the friction
+  bounds of mu = 0 contacts (f = 0, two opposite rows of G) are held as equalities, as in the
+  force margin below;
 - measures how far P is from being empty, the **force margin**
   ``max {s : E p = r, G p >= h + s}`` (a linear program), whose zero crossing is the event that
   ends a phase of redundant contacts (onset of slip, or a contact unloading: tipping).
