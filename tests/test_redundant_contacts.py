@@ -228,3 +228,21 @@ def test_a_pulling_normal_force_is_never_reported_silently(monkeypatch):
     ev = lcp.simulate(sc, T, method="event", t_eval=TS)
     assert np.min(ev.force_N) < -1.0
     assert "< 0: the reported forces there violate the contact law" in ev.message, ev.message
+
+
+# ----------------------------------------------------------------------------- Moreau-Jean, c = 0
+@pytest.mark.parametrize("solver", ["auto", "lemke", "nsgs"])
+def test_moreau_jean_without_clearance_explains_the_rebound_it_cannot_meet(solver):
+    # At h = 1e-5 the drift of the q-dependent normals makes the lower corners approach at
+    # -1.9e-5 m/s and the upper ones separate as fast; u_N of opposed corners sums to that
+    # constant whatever the impulses, so u_N+ >= e |u_N-| on one side with u_N+ >= 0 on the other
+    # has no solution (an LP confirms): the failure is right, and the message says why.
+    sc = slider_crank_clearance(c=0.0, omega3=0.0, mu=0.0, t_end=T)
+    res = lcp.simulate(sc, 0.002, h=1e-5, solver=solver)
+    assert res.status == -1 and not res.success
+    assert "Without the Newton restitution" in res.message and "'corner 3'" in res.message, res.message
+    # without restitution the same steps solve, towards the ideal crank (2.5e-5 rad at t = 2 ms)
+    sc0 = slider_crank_clearance(c=0.0, omega3=0.0, mu=0.0, e=0.0, t_end=T)
+    res0 = lcp.simulate(sc0, 0.002, h=1e-5, solver=solver)
+    assert res0.success, res0.message
+    assert np.max(np.abs(res0.q[:, 0] - sc0.exact(res0.t)["q"][:, 0])) < 1e-4
