@@ -19,6 +19,8 @@ import math
 import casadi as ca
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 import lcp
@@ -246,3 +248,30 @@ def test_moreau_jean_without_clearance_explains_the_rebound_it_cannot_meet(solve
     res0 = lcp.simulate(sc0, 0.002, h=1e-5, solver=solver)
     assert res0.success, res0.message
     assert np.max(np.abs(res0.q[:, 0] - sc0.exact(res0.t)["q"][:, 0])) < 1e-4
+
+
+# ----------------------------------------------------------------------------- the force polytope
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1))
+def test_opposed_pairs_get_the_least_norm_nonnegative_forces(seed):
+    # Two pairs of opposed contacts (normals a, b, -a, -b) on a random 3-dof body, sliding and
+    # frictionless (folded as the event method does: f = 0 as equalities). The equations fix only
+    # d = (N1 - N3, N2 - N4); the least-norm forces with N >= 0 put |d_i| on one side of each pair.
+    from lcp.contact.problem import ContactProblem, SLIDE_POS, STICK
+    from lcp.events.indeterminate import branch_forces
+
+    rng = np.random.default_rng(seed)
+    a, b = rng.normal(size=3), rng.normal(size=3)
+    L = rng.normal(size=(3, 3)) + 3 * np.eye(3)
+    Minv = np.linalg.inv(L @ L.T)
+    H = np.vstack([a, b, -a, -b, rng.normal(size=(4, 3))])
+    W = H @ Minv @ H.T
+    q = H @ rng.normal(size=3)
+    pb = ContactProblem(W, q, np.zeros(4))
+    bf = branch_forces(pb, [STICK] * 4, [SLIDE_POS] * 4)
+    assert bf is not None and bf.nullity == 2 and bf.admissible
+    d = np.linalg.lstsq(np.column_stack([a, b]).T @ Minv @ np.column_stack([a, b]), -q[:2], rcond=None)[0]
+    N = np.array([max(d[0], 0.0), max(d[1], 0.0), max(-d[0], 0.0), max(-d[1], 0.0)])
+    scale = max(np.max(np.abs(N)), 1e-300)
+    np.testing.assert_allclose(bf.p[:4], N, rtol=0, atol=1e-9 * scale)
+    assert np.all(np.abs(bf.p[4:]) <= 1e-12 * scale)
