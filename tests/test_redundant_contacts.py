@@ -275,3 +275,10 @@ def test_opposed_pairs_get_the_least_norm_nonnegative_forces(seed):
     scale = max(np.max(np.abs(N)), 1e-300)
     np.testing.assert_allclose(bf.p[:4], N, rtol=0, atol=1e-9 * scale)
     assert np.all(np.abs(bf.p[4:]) <= 1e-12 * scale)
+
+
+def test_zero_clearance_mode_decision_by_lemke_gives_the_same_answer(zero_clearance):
+    sc, ev = zero_clearance
+    lem = lcp.simulate(sc, T, method="event", t_eval=TS, mode_solver="lemke")
+    assert lem.success, lem.message
+    assert np.max(np.abs(lem.q - ev.q)) <= 1e-12 and np.min(lem.force_N) >= -1e-12 * np.max(lem.force_N)
