@@ -31,7 +31,9 @@ Redundant contacts (two corners of a box, the legs of a table, a block in a groo
 positive semidefinite Delassus matrix: the motion is unique but the forces are not. Their forces
 are the least-norm admissible ones, the phase is flagged (``Phase.forces_unique``,
 ``EventResult.nonunique_forces`` and the message), and the phase ends when no admissible forces
-remain (:mod:`~lcp.events.indeterminate`). A force that the mode decision found consistent on its
+remain (:mod:`~lcp.events.indeterminate`). With friction on sliding opposed contacts (a slider in
+a guide without clearance) the squeeze between them changes the friction, so the motion depends on
+the choice too: the least squeeze is taken, and the message says so. A force that the mode decision found consistent on its
 bound (a stick exactly at the friction limit) is kept there, not flipped at every rounding error.
 
 Accumulations of impacts (a ball bouncing to rest) are detected and summed up at their limit, in

@@ -113,9 +113,15 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     n, m = system.n, system.n_contacts
     for note in integ.notes:
         message = f"{message} {note}"
-    if integ.nonunique:
+    if integ.nonunique and not integ.choice_moves:
         message = (f"{message} Contact forces are not unique in {integ.nonunique} phase(s) (redundant "
                    "contacts): the least-norm admissible forces are reported; the motion is unique.")
+    elif integ.nonunique:
+        message = (f"{message} Contact forces are not unique in {integ.nonunique} phase(s) (redundant "
+                   "contacts): the least-norm admissible forces are reported; in "
+                   f"{integ.choice_moves} of them the friction of sliding contacts grows with the "
+                   "squeeze between opposed contacts, which rigid contacts leave undetermined, so the "
+                   "motion depends on this choice (the least squeeze, the least friction).")
     if status < 0:
         t_out = t_out[t_out <= t_fail]
         if scene is not None:
@@ -161,6 +167,15 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
         after = int(np.searchsorted(t_out, imp.t, "right"))  # t_out > imp.t
         Y[2 * n + imp.contact, after:] += imp.P_N
         Y[2 * n + m + imp.contact, after:] += imp.P_T
+    if m and N_out:
+        # no silent success: a reported normal force that pulls (redundant contacts whose force
+        # polytope the phase left without its event, say) is named in the message
+        worst = int(np.argmin(FN.min(axis=1)))
+        j_w = int(np.argmin(FN[worst]))
+        if FN[worst, j_w] < -1e-9 * float(np.max(np.abs(FN))):
+            message = (f"{message} At t = {t_out[worst]:.10g} the normal force of contact "
+                       f"{system.contacts[j_w].name!r} is {FN[worst, j_w]:.3g} < 0: the reported forces "
+                       "there violate the contact law.")
     Q, V = _transposed(Y[:n]), _transposed(Y[n:2 * n])
     Pc = Y[2 * n:]
     dP = (Pc[:, 1:] - Pc[:, :-1]).T  # np.diff

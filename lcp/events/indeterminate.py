@@ -14,7 +14,9 @@ the sliding acceleration for a slip, a_N >= 0 for an open contact). This module
 - solves such a branch: p = p0 + Z z, p0 the least-norm solution of E p = r (SVD) and Z a basis of
   the null space of E; the reported forces are the **least-norm admissible** ones, the projection
   of 0 onto P, found as a least-distance program by Lawson and Hanson's NNLS reduction
-  (``scipy.optimize.nnls``), and checked against the Coulomb inequalities afterwards;
+  (``scipy.optimize.nnls``), and checked against the Coulomb inequalities afterwards; the friction
+  bounds of mu = 0 contacts (f = 0, two opposite rows of G) are held as equalities, as in the
+  force margin below;
 - measures how far P is from being empty, the **force margin**
   ``max {s : E p = r, G p >= h + s}`` (a linear program), whose zero crossing is the event that
   ends a phase of redundant contacts (onset of slip, or a contact unloading: tipping).
@@ -122,17 +124,75 @@ def branch_forces(pb, check_modes, branch_modes) -> BranchForces | None:
     if Z.shape[1] == 0:
         p = p0
         return BranchForces(p, 0, pb.admissible(p, check_modes), p0, Z)
-    G, h, _, _ = admissibility_rows(pb, check_modes)
+    G, h, zero_mu, _ = admissibility_rows(pb, check_modes)
     slack = G @ p0 - h
     tol = 1e-12 * max(pb.scale, float(np.max(np.abs(p0))) if p0.size else 0.0)
     if slack.size == 0 or slack.min() >= -tol:
         p = p0  # p0 (orthogonal to the null space) is already the least-norm admissible point
     else:
-        z = _least_distance(G @ Z, -slack)
+        z = _least_distance_eq(G @ Z, -slack, zero_mu, tol)
         if z is None:
             return BranchForces(p0, Z.shape[1], False, p0, Z)
         p = p0 + Z @ z
     return BranchForces(p, Z.shape[1], pb.admissible(p, check_modes), p0, Z)
+
+
+def _least_distance_eq(B, c, eq, tol):
+    """argmin ||z|| subject to B z >= c on the rows not in ``eq`` and B z = c on the rows in
+    ``eq`` (the friction bounds of mu = 0 contacts, written as two opposite inequalities), or
+    None if infeasible.
+
+    The equalities are not left to the inequality solver: two opposite rows whose right-hand
+    sides are rounding (p0's friction force of a frictionless contact is 1e-17, not 0) make an
+    empty strip for it, and the least-norm solution p0 (with N < 0) was kept. Here they restrict
+    z to an affine subspace, z = z_e + Y w with z_e the least-norm solution (SVD, rank to
+    RANK_RTOL: the rows of B have norm <= 1) and Y an orthonormal basis of the rest, so that
+    ||z||^2 = ||z_e||^2 + ||w||^2 and the inequalities become a least-distance program in w.
+    Equalities that are rounding on both sides (B's row and c below ``tol``) hold already.
+    """
+    z = _least_distance_rows(B, c, eq, tol)
+    return None if z is None else _polish_ldp(B, c, eq, z, tol)
+
+
+def _polish_ldp(B, c, eq, z, tol):
+    """The least-distance point recomputed on its active face: NNLS meets the active rows to about
+    1e-12 of the forces (N = -7e-11 of 87 N), which the Coulomb check on a light contact's own
+    scale rejects. At the optimum z = B_A' lam (lam >= 0 on the inequalities) with B_A z = c_A, so
+    z is the least-norm solution of the active rows: taken when it is feasible to rounding and
+    its multipliers have the right signs, else z as it was."""
+    slack = B @ z - c
+    act = eq | (slack <= 1e4 * tol)
+    if not act.any():
+        return z
+    BA, cA = B[act], c[act]
+    zs = np.linalg.lstsq(BA, cA, rcond=RANK_RTOL)[0]
+    lam = np.linalg.lstsq(BA.T, zs, rcond=RANK_RTOL)[0]
+    sl = B @ zs - c
+    if (np.all(sl[~eq] >= -tol) and np.all(np.abs(sl[eq]) <= tol)
+            and np.all(lam[~eq[act]] >= -1e-9 * max(float(np.max(np.abs(lam))), 1e-300))):
+        return zs
+    return z
+
+
+def _least_distance_rows(B, c, eq, tol):
+    """:func:`_least_distance_eq` before its polish."""
+    if not eq.any():
+        return _least_distance(B, c)
+    Be, ce = B[eq], c[eq]
+    d = B.shape[1]
+    U, s, Vt = np.linalg.svd(Be)
+    rank = int(np.sum(s > RANK_RTOL))
+    z_e = Vt[:rank].T @ ((U[:, :rank].T @ ce) / s[:rank])
+    if np.max(np.abs(Be @ z_e - ce)) > tol:
+        return None  # the equalities cannot hold: no admissible forces
+    Y = Vt[rank:].T
+    Bi, ci = B[~eq], c[~eq] - B[~eq] @ z_e
+    if Y.shape[1] == 0 or Bi.shape[0] == 0:
+        return z_e if np.all(ci <= tol) else None
+    w = _least_distance(Bi @ Y, ci)
+    if w is None:
+        return None
+    return z_e + Y @ w if d else z_e
 
 
 def force_margin(pb, check_modes, branch_modes) -> tuple[float, np.ndarray, list]:

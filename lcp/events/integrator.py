@@ -59,6 +59,7 @@ class Integrator:
         self.projector = StateProjector(system, model)
         self.accumulations, self.impact_list = [], []
         self.nonunique = 0
+        self.choice_moves = 0  # of them, phases whose motion depends on the choice (friction)
         self.penetrated = False  # a missed impact was said in the message
         self.notes = []  # said in the result's message
         self.bounces = BounceSequence()
@@ -253,6 +254,7 @@ class Integrator:
             run_phases.append(ph)
             unique = sol is None or sol.nullity == 0
             self.nonunique += not unique
+            self.choice_moves += bool(sol is not None and (sol.motion_depends or ph.choice_moves))
             self.phases.append(make_record(Phase, float(ph.t0), float(ph.t1), ph.names(), ph.integrator,
                                            int(ph.nfev), unique))
             counts = self.stats.mode_counts

@@ -41,7 +41,7 @@ from lcp.events.model import EPS, StateData
 from lcp.events.options import ModeSolver
 
 __all__ = ["AccelProblem", "ModeSolution", "ModeSelector", "enumerate_branches", "boundary_alternatives",
-           "closed_variant",
+           "closed_variant", "redundant_solution", "null_space_moves",
            "group_motions"]
 
 
@@ -111,6 +111,27 @@ class ModeSolution:
     #: dimension of the set of forces giving this motion (0: unique; > 0: redundant contacts,
     #: p is the least-norm admissible choice)
     nullity: int = 0
+    #: redundant contacts whose forces along the null space change the accelerations: a sliding
+    #: contact's friction grows with the squeeze between opposed contacts, so the motion depends
+    #: on the choice of forces (the least squeeze is taken); False when the motion is unique
+    motion_depends: bool = False
+
+
+def null_space_moves(acc: AccelProblem, Z) -> bool:
+    """Whether forces along the null space Z of a branch change the accelerations (S D Z != 0):
+    then the motion depends on the choice of forces, not only the forces on the motion."""
+    if Z.shape[1] == 0:
+        return False
+    # frictionless redundancy: S D Z is rounding (2e-16 of S D on the slider-crank's corner
+    # pairs); a sliding contact's friction makes it mu-sized (6e-5 of S D at mu = 0.01)
+    return bool(np.max(np.abs(acc.SD @ Z)) > 1e-9 * max(float(np.max(np.abs(acc.SD))), 1e-300))
+
+
+def redundant_solution(acc: AccelProblem, modes, bf) -> ModeSolution:
+    """The ModeSolution of a branch solved by :func:`~lcp.events.indeterminate.branch_forces`,
+    with whether its forces' null space moves the body (``motion_depends``)."""
+    return ModeSolution(modes, bf.p, acc.qdd(bf.p), nullity=bf.nullity,
+                        motion_depends=null_space_moves(acc, bf.Z))
 
 
 def enumerate_branches(acc: AccelProblem, allowed=None) -> tuple[list, int]:
@@ -143,7 +164,7 @@ def enumerate_branches(acc: AccelProblem, allowed=None) -> tuple[list, int]:
         # several contacts, or one singular contact: a singular branch has a set of forces
         bf = branch_forces(pb, check, branch)
         if bf is not None and bf.admissible:
-            sols.append(ModeSolution(modes, bf.p, acc.qdd(bf.p), nullity=bf.nullity))
+            sols.append(redundant_solution(acc, modes, bf))
     return sols, tried
 
 
@@ -170,7 +191,7 @@ def closed_variant(acc: AccelProblem, sol: ModeSolution, rtol: float = 1e-9) -> 
     bf = branch_forces(pb, acc.check_modes(modes), acc.branch_modes(modes))
     if bf is None or not bf.admissible:
         return None
-    return ModeSolution(modes, bf.p, acc.qdd(bf.p), nullity=bf.nullity)
+    return redundant_solution(acc, modes, bf)
 
 
 def boundary_alternatives(acc: AccelProblem, modes, p, rtol: float = 1e-9) -> list:

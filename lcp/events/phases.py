@@ -19,7 +19,7 @@ from lcp.contact.problem import MODE_NAMES, OPEN, SLIDE_NEG, SLIDE_POS
 from lcp.events.event_location import first_landing, first_stop
 from lcp.events.indeterminate import branch_forces, force_margin
 from lcp.events.model import EPS, coordinate_rows, mass_projection
-from lcp.events.modes import AccelProblem
+from lcp.events.modes import AccelProblem, null_space_moves
 
 __all__ = ["phase_static", "SmoothPhase", "ClosedFormPhase", "closed_form_output"]
 
@@ -48,6 +48,9 @@ class SmoothPhase:
     #: the forces of this phase's modes are not unique (redundant contacts): least-norm admissible
     #: forces are reported, and the phase ends when no admissible forces remain
     indeterminate = False
+    #: of an indeterminate phase: its motion depends on the choice of forces somewhere (friction
+    #: growing with the squeeze between opposed contacts, :func:`~lcp.events.modes.null_space_moves`)
+    choice_moves = False
 
     def __init__(self, model, t0, q0, v0, P0, idx, modes, mu, static=None):
         self.model = model
@@ -78,6 +81,8 @@ class SmoothPhase:
         if self.indeterminate:
             bf = branch_forces(acc.pb, acc.check_modes(self.modes), acc.branch_modes(self.modes))
             p = None if bf is None else bf.p  # not admissible past the phase's end: its event
+            if bf is not None and not self.choice_moves:
+                self.choice_moves = null_space_moves(acc, bf.Z)
         else:
             p = acc.pb.solve_branch(acc.branch_modes(self.modes))
         if p is None:

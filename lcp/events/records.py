@@ -123,8 +123,9 @@ class EventResult(SimulationResult):
         The smooth phases with their modes and the integrator used.
     nonunique_forces : int
         Number of phases whose contact forces are not unique (redundant contacts: the reported
-        forces are the least-norm admissible ones; the motion is unique). Also noted in
-        ``message``.
+        forces are the least-norm admissible ones; the motion is unique, unless friction on
+        sliding opposed contacts grows with their squeeze, which the message then says). Also
+        noted in ``message``.
     """
 
     force_N: np.ndarray = None

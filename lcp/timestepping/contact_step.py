@@ -81,6 +81,23 @@ class ContactStep:
         self.fallbacks = {}
         self.solver, self.fallback, self.notes = solver, fallback, notes
 
+    def _explain_restitution(self, pb, qa, shift, active, sol):
+        """After every solver failed on a step with a restitution shift: if the same step without
+        it has a solution, say so in ``sol.message``. Opposed contacts without clearance (a slider
+        in a guide) are the case: the drift of a q-dependent normal, O(h), makes one corner
+        approach and its opposite separate, and u_N+ >= e |u_N-| on the one cannot hold while the
+        other stays closed: the problem has no solution, and no tolerance would make one."""
+        q0 = qa.copy()
+        q0[: active.size] -= shift
+        plain = self.solver.solve(pb.with_q(q0))
+        if plain.success:
+            names = ", ".join(repr(self.system.contacts[j].name) for j in active[shift != 0].tolist())
+            sol.message = (f"{sol.message}. Without the Newton restitution of the approaching contact(s) "
+                           f"{names} (u_N- down to {float(np.min(shift / self.e[active].clip(1e-300))):.3g}) "
+                           "the step has a solution: their rebound cannot be met together with the other active "
+                           "contacts (redundant contacts, e.g. opposed faces without clearance, whose "
+                           "normal velocities sum to a constant)")
+
     def local(self, active, SHt, W, H):
         """(rows, H rows, S H' columns, restitution coefficients or None, problem template, tangent
         columns) of the active set, cached per active set when the operators are constant."""
@@ -145,6 +162,8 @@ class ContactStep:
                 if notes.first_fallback is None:
                     notes.first_fallback = (k, tk, why, fb_name)
             if not sol.success:
+                if ea is not None and np.any(shift):
+                    self._explain_restitution(pb, qa, shift, active, sol)
                 return None, None, None, None, sol
         if sol.message.startswith("fallback"):
             stats.fallbacks += 1
