@@ -90,7 +90,8 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     if not (isinstance(t_end, (int, float, np.floating)) and math.isfinite(t_end) and t_end > 0):
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
     t_end = float(t_end)
-    if getattr(system, "has_kinematics", False):  # qdot = T(q) v: lcp.events.kinematic_ode
+    if getattr(system, "has_kinematics", False) and not (system.n_contacts or system.n_bilateral):
+        # qdot = T(q) v and nothing to collide with: one smooth phase (lcp.events.kinematic_ode)
         from lcp.events.kinematic_ode import kinematic_event_driven
 
         return kinematic_event_driven(system, q0, v0, t_end, opts, scene)
@@ -110,7 +111,7 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     phases, status, message, t_fail = integ.run(q0, v0)
     if start_note is not None:
         message = f"{message} {start_note}"
-    n, m = system.n, system.n_contacts
+    n, m, nq = system.n, system.n_contacts, system.n_q  # n_q != n under Newton-Euler kinematics
     for note in integ.notes:
         message = f"{message} {note}"
     if integ.nonunique:
@@ -121,15 +122,15 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
         if scene is not None:
             message = f"{message} (scene '{scene.name}')"
     N_out = t_out.size
-    # rows q (n), v (n), cumulative impulses (2m); one column per output time
-    Y = np.empty((2 * n + 2 * m, N_out))
+    # rows q (n_q), v (n), cumulative impulses (2m); one column per output time
+    Y = np.empty((nq + n + 2 * m, N_out))
     FN = np.empty((N_out, m))
     FT = np.empty((N_out, m))
     MD = np.empty((N_out, m), dtype=np.int8)
 
     def blank(a, b):  # output times no phase covers: no state, no force, no mode
-        Y[:2 * n, a:b] = np.nan
-        Y[2 * n:, a:b] = 0.0
+        Y[:nq + n, a:b] = np.nan
+        Y[nq + n:, a:b] = 0.0
         FN[a:b] = FT[a:b] = 0.0
         MD[a:b] = -1
 
@@ -159,10 +160,10 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     # impulses over [t_i, t_{i+1}): the left-limit cumulative impulse, shocks at t_s < t included
     for imp in integ.impulses:
         after = int(np.searchsorted(t_out, imp.t, "right"))  # t_out > imp.t
-        Y[2 * n + imp.contact, after:] += imp.P_N
-        Y[2 * n + m + imp.contact, after:] += imp.P_T
-    Q, V = _transposed(Y[:n]), _transposed(Y[n:2 * n])
-    Pc = Y[2 * n:]
+        Y[nq + n + imp.contact, after:] += imp.P_N
+        Y[nq + n + m + imp.contact, after:] += imp.P_T
+    Q, V = _transposed(Y[:nq]), _transposed(Y[nq:nq + n])
+    Pc = Y[nq + n:]
     dP = (Pc[:, 1:] - Pc[:, :-1]).T  # np.diff
     integ.stats.steps = len(phases)
     used = sorted(integ.selector.used)

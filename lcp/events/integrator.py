@@ -308,6 +308,13 @@ class Integrator:
         self.bounces.push(t, at, q, v, (closed, sol.modes if sol is not None else ()))
         if not self.bounces.geometric():
             return None
+        if self.model.kinematic:
+            # Aitken's extrapolation would leave the unit quaternions' sphere, and the tail's
+            # velocity (q_inf - q) / dt is not a v of Newton-Euler kinematics
+            if not any("kinematics" in note for note in self.notes):
+                self.notes.append(f"From t = {t:.10g} impacts accumulate on a system with Newton-Euler kinematics: "
+                                  "resolved impact by impact (no extrapolation to their limit).")
+            return None
         if self.model.moving:
             # The jump to the limit is the geometric series of a fixed obstacle (constant relative
             # acceleration between bounces); under a moving one (a table's acceleration varies

@@ -46,6 +46,13 @@ def watch_bounces(integ, t, q, v, P, idx, modes, flight):
     seq.push(t, at, q, v, (tuple(idx), tuple(modes)))
     if not seq.geometric():
         return None
+    if integ.model.kinematic:
+        # Aitken's extrapolation of q would leave the unit quaternions' sphere, and the tail's
+        # velocity (q_inf - q) / dt is not a v of Newton-Euler kinematics: resolved one by one
+        if not any("kinematics" in note for note in integ.notes):
+            integ.notes.append(f"From t = {t:.10g} impacts accumulate on a system with Newton-Euler kinematics: "
+                               "resolved impact by impact (no extrapolation to their limit).")
+        return None
     if integ.model.moving:
         # no jump on a moving obstacle (the series is a fixed obstacle's): resolved one by one, as
         # the planar integrator does (lcp.events.integrator.Integrator.watch_bounces)
@@ -59,8 +66,8 @@ def watch_bounces(integ, t, q, v, P, idx, modes, flight):
 
 def _flight_acceleration(flight):
     """The flight's acceleration at its end, and whether it was constant over the flight."""
-    model, n = flight.model, flight.model.n
-    qdd = flight.evaluate(flight.t1, flight.y1)[0][n:2 * n]
+    model, n, nq = flight.model, flight.model.n, flight.model.nq
+    qdd = flight.evaluate(flight.t1, flight.y1)[0][nq:nq + n]
     constant = bool(model.constant and model.affine_force and not model.state_force and not flight.slide)
     return qdd, constant
 

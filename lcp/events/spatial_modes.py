@@ -75,6 +75,7 @@ class SpatialModel(ContactKinematics):
         self.sys = system
         n, m = system.n, system.n_contacts
         self.n, self.m, self.nb = n, m, system.n_bilateral
+        self.init_kinematics(system)
         self.dims = system.tangent_dims.copy()
         off = system.tangent_offsets
         #: rows of H holding contact j's tangent directions
