@@ -5,7 +5,7 @@ import numpy as np
 
 from lcp.contact.problem import OPEN, STICK
 from lcp.result import SolverStats
-from lcp.events.accumulation import BounceSequence, sum_up
+from lcp.events.accumulation import BounceSequence, kinematic_accumulation, sum_up
 from lcp.events.cubic_phase import CubicPhase
 from lcp.events.event_location import too_many_events
 from lcp.events.impacts import ImpactLaw
@@ -309,12 +309,7 @@ class Integrator:
         if not self.bounces.geometric():
             return None
         if self.model.kinematic:
-            # Aitken's extrapolation would leave the unit quaternions' sphere, and the tail's
-            # velocity (q_inf - q) / dt is not a v of Newton-Euler kinematics
-            if not any("kinematics" in note for note in self.notes):
-                self.notes.append(f"From t = {t:.10g} impacts accumulate on a system with Newton-Euler kinematics: "
-                                  "resolved impact by impact (no extrapolation to their limit).")
-            return None
+            return kinematic_accumulation(self.notes, t)
         if self.model.moving:
             # The jump to the limit is the geometric series of a fixed obstacle (constant relative
             # acceleration between bounces); under a moving one (a table's acceleration varies

@@ -559,6 +559,21 @@ class SpatialIntegrator:
                     v[i] = val
         return q, v
 
+    def _redundant_note(self, t, q, idx) -> str:
+        """Where the closed contacts of a chattering stop have redundant normal rows (a rigid box
+        on four corners of a face): say so, the spatial phases' forces being those of a linear
+        solve that is then singular (Moreau-Jean's impulses handle such contacts)."""
+        if len(idx) < 2:
+            return ""
+        Hn = self.model.jac(q, t)[list(idx)]
+        rank = int(np.linalg.matrix_rank(Hn))
+        if rank == len(idx):
+            return ""
+        names = ", ".join(repr(self.sys.contacts[j].name) for j in idx)
+        return (f". The closed contacts {names} are redundant (their {len(idx)} normal rows have rank {rank}): the "
+                "spatial event method does not resolve the forces of redundant contacts; use "
+                "method='moreau-jean' past this time")
+
     # ------------------------------------------------------------------ the loop
     def run(self, q0, v0):
         o = self.o
@@ -637,7 +652,7 @@ class SpatialIntegrator:
             t = te
             stop_message = too_many_events(len(self.events), short, t, o.max_events, EVENT_STATUS_MESSAGES[-4])
             if stop_message:
-                status, message = -4, stop_message
+                status, message = -4, stop_message + self._redundant_note(t, q, idx)
                 break
         self.stats.steps = len(run_phases)
         self.stats.free_steps = sum(1 for ph in run_phases if not ph.idx)

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from lcp.contact.problem import STICK
-from lcp.events.accumulation import TailPhase, tail_impulse
+from lcp.events.accumulation import TailPhase, kinematic_accumulation, tail_impulse
 from lcp.events.records import Accumulation, Event, Impulse
 
 __all__ = ["watch_bounces"]
@@ -47,12 +47,7 @@ def watch_bounces(integ, t, q, v, P, idx, modes, flight):
     if not seq.geometric():
         return None
     if integ.model.kinematic:
-        # Aitken's extrapolation of q would leave the unit quaternions' sphere, and the tail's
-        # velocity (q_inf - q) / dt is not a v of Newton-Euler kinematics: resolved one by one
-        if not any("kinematics" in note for note in integ.notes):
-            integ.notes.append(f"From t = {t:.10g} impacts accumulate on a system with Newton-Euler kinematics: "
-                               "resolved impact by impact (no extrapolation to their limit).")
-        return None
+        return kinematic_accumulation(integ.notes, t)
     if integ.model.moving:
         # no jump on a moving obstacle (the series is a fixed obstacle's): resolved one by one, as
         # the planar integrator does (lcp.events.integrator.Integrator.watch_bounces)
