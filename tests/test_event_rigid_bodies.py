@@ -186,3 +186,47 @@ def test_heavy_top_on_three_bilateral_constraints():
     axis = [np.array(ca.evalf(ca.substitute(b.rotation, b.quaternion, ca.DM(q[3:7]))), dtype=float)[:, 2]
             for q in res.q[[0, -1]]]
     assert math.degrees(math.acos(min(1.0, float(axis[0] @ axis[1])))) > 1.0
+
+
+# ---------------------------------------------------------------------------- planar contacts
+def _planar_ball(e, m=1.0, r=0.1, mu=0.3, g=9.81):
+    """The sphere with a planar contact: one tangent, the x velocity of its lowest material point
+    (the motion stays in the x-z plane, spinning about y)."""
+    b = free_body(m, 0.4 * m * r * r * np.eye(3), name="ball")
+    J = ca.horzcat(1, 0, 0, -r * b.rotation[1, :])
+    return bodies_system([b], [Contact(gap=b.q[2] - r, tangent_jacobian=J, mu=mu, e=e, name="floor")], gravity=g)
+
+
+def test_planar_contact_on_a_rigid_body_slides_then_rolls_exactly():
+    r, mu, g = 0.1, 0.3, 9.81
+    s = _planar_ball(0.0, r=r, mu=mu, g=g)
+    assert not s.is_spatial
+    v0 = np.array([2.0, 0.0, 0.0, 0.0, -10.0, 0.0])
+    res = lcp.simulate(s, 1.0, method="event", q0=[0, 0, r, 1.0, 0, 0, 0], v0=v0, n_eval=101)
+    assert res.success, res.message
+    assert res.mode_sequence == [("slide+",), ("stick",)]
+    u0 = v0[0] - r * v0[4]
+    ts = 2 * abs(u0) / (7 * mu * g)
+    assert abs(res.t_events[0] - ts) <= 1e-10
+    assert abs(res.v[-1, 0] - (v0[0] - mu * g * ts)) <= 1e-10
+    assert abs(res.v[-1, 0] - r * res.v[-1, 4]) <= 1e-10  # rolling: v = r omega_y
+
+
+def test_spinning_ball_bounces_to_rolling():
+    """Dropped spinning with e = 0.5: the bounces accumulate (resolved one by one, said in the
+    message) at sqrt(2 h/g) (1 + 2e/(1 - e)); the angular momentum about the contact point is kept
+    through the impacts and the slides, so the ball ends rolling at (5 v0 + 2 r omega0) / 7."""
+    r, g, e = 0.1, 9.81, 0.5
+    s = _planar_ball(e, r=r, g=g)
+    h0, vx, wy = 1.0, 1.0, 5.0
+    res = lcp.simulate(s, 2.0, method="event", q0=[0, 0, h0, 1.0, 0, 0, 0], v0=[vx, 0, 0, 0, wy, 0], n_eval=201)
+    assert res.success, res.message
+    assert "Newton-Euler kinematics" in res.message
+    t1 = math.sqrt(2 * (h0 - r) / g)
+    assert abs(res.t_events[0] - t1) <= 1e-12
+    t_inf = t1 * (1 + 2 * e / (1 - e))
+    impacts = [ev.t for ev in res.events if ev.kind == "impact"]
+    assert len(impacts) > 10 and impacts[-1] < t_inf + 1e-6
+    assert abs(res.q[-1, 2] - r) <= 1e-12 and abs(res.v[-1, 2]) <= 1e-9
+    v_roll = (5 * vx + 2 * r * wy) / 7
+    assert abs(res.v[-1, 0] - v_roll) <= 1e-9 and abs(res.v[-1, 4] * r - v_roll) <= 1e-9

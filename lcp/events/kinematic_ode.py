@@ -13,7 +13,8 @@ between consecutive force breakpoints (``System.breakpoints``, seen from the lef
 step by step: after every accepted step the unit quaternions are projected back onto the sphere (divided by
 their norm) and the stepper continues from there; the output times are interpolated by the step's
 dense output and projected the same way. Systems with kinematics and contacts or bilateral
-constraints are refused by name (Moreau-Jean's Python loop handles them).
+constraints go to the event method's contact integrators instead (:mod:`lcp.events.integrator`,
+:mod:`lcp.events.spatial`), whose phases use :func:`normalising_method` for the same projection.
 
 Imports :mod:`lcp.events.options`, :mod:`lcp.events.records`, :mod:`lcp.model` and
 :mod:`lcp.result`; never the contact phases of the event method, time stepping, scenes or sweeps.
