@@ -8,6 +8,7 @@ import math
 import casadi as ca
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings, strategies as st
 
 import lcp
 from lcp.model.kinematics import quat_exp, quat_mul
@@ -146,6 +147,23 @@ def test_ball_slides_then_rolls_exactly(v0):
     after = res.t > ts + 1e-9
     Ek = np.array([s.kinetic_energy(q, v) for q, v in zip(res.q[after], res.v[after])])
     assert np.ptp(Ek) <= 1e-10 * Ek[0]
+
+
+@settings(max_examples=4, deadline=None)
+@given(speed=st.floats(0.2, 3.0), heading=st.floats(-math.pi, math.pi), wx=st.floats(-30.0, 30.0),
+       wy=st.floats(-30.0, 30.0), wz=st.floats(-10.0, 10.0))
+def test_ball_stop_time_over_throws(speed, heading, wx, wy, wz):
+    """Any throw whose contact point slips: t* = 2|u0|/(7 mu g) and the final velocity to 1e-10."""
+    r, mu, g = 0.1, 0.3, 9.81
+    v0 = np.array([speed * math.cos(heading), speed * math.sin(heading), 0.0, wx, wy, wz])
+    ts, vf = _ball_exact(v0, r, mu, g)
+    assume(ts > 1e-3)
+    res = lcp.simulate(_ball(r=r, mu=mu, g=g), ts + 0.05, method="event", q0=[0, 0, r, 1.0, 0, 0, 0], v0=v0,
+                       t_eval=[0.0, ts + 0.05])
+    assert res.success, res.message
+    assert res.mode_sequence == [("slide",), ("stick",)]
+    assert abs(res.t_events[0] - ts) <= 1e-10 * max(1.0, ts)
+    assert np.max(np.abs(res.v[-1, :2] - vf)) <= 1e-10
 
 
 def test_ball_moreau_jean_first_order():

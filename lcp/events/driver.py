@@ -34,8 +34,9 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     Parameters
     ----------
     system : System
-    q0, v0 : array_like, shape (n,)
-        Initial state (consistent with the bilateral constraints, no penetration).
+    q0, v0 : array_like, shapes (n_q,) and (n,)
+        Initial state (consistent with the bilateral constraints, no penetration); n_q = n unless
+        the System has Newton-Euler kinematics (qdot = T(q) v, :mod:`lcp.model.kinematics`).
     t_end : float
         Horizon, > 0.
     scene : Scene, optional
@@ -47,7 +48,7 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     Returns
     -------
     EventResult
-        ``t`` (n_points,), ``q`` and ``v`` (n_points, n) at the output times, impulses ``p_N``,
+        ``t`` (n_points,), ``q`` (n_points, n_q) and ``v`` (n_points, n) at the output times, impulses ``p_N``,
         ``p_T`` and ``modes`` (n_points - 1, m) per output interval, ``force_N`` and ``force_T``
         (n_points, m), ``t_events``, ``events``, ``impulses``, ``impacts``, ``accumulations``,
         ``phases`` (with the integrator of each), ``nonunique_forces``, ``mode_sequence``,
