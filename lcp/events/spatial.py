@@ -407,6 +407,7 @@ class SpatialIntegrator:
         self.max_drift = 0.0
         self.bounces, self.accumulations = BounceSequence(), []
         self.penetrated = False
+        self.nonunique = 0  # phases of redundant contacts (least-norm forces)
 
     # ------------------------------------------------------------------ decisions
     def record_impulse(self, t, contacts, P, kind, reason):
@@ -559,6 +560,13 @@ class SpatialIntegrator:
                     v[i] = val
         return q, v
 
+    def _redundant(self, t, q, idx) -> bool:
+        """Whether a rigid body's closed contacts ``idx`` have redundant normal rows (four corners of
+        a face): their phase then has the least-norm forces (:meth:`SpatialModel.phase_accel`)."""
+        if not (self.model.kinematic and len(idx) > 1):
+            return False
+        return int(np.linalg.matrix_rank(self.model.jac(q, t)[list(idx)])) < len(idx)
+
     def _redundant_note(self, t, q, idx) -> str:
         """Where the closed contacts of a chattering stop have redundant normal rows (a rigid box
         on four corners of a face): say so, the spatial phases' forces being those of a linear
@@ -616,7 +624,9 @@ class SpatialIntegrator:
                 break
             run_phases.append(ph)
             self.max_drift = max(self.max_drift, ph.speed_drift())
-            self.phases.append(Phase(float(ph.t0), float(ph.t1), ph.names(), ph.integrator, int(ph.nfev)))
+            unique = not self._redundant(t, q, idx)
+            self.nonunique += not unique
+            self.phases.append(Phase(float(ph.t0), float(ph.t1), ph.names(), ph.integrator, int(ph.nfev), unique))
             for name in ph.names():
                 self.stats.mode_counts[name] += 1
             if ev is None:
@@ -698,6 +708,9 @@ def spatial_event_driven(system, q0, v0, t_end, opts, given, scene=None) -> Even
         message = f"{message} {start_note}"
     for note in integ.notes:
         message = f"{message} {note}"
+    if integ.nonunique:
+        message = (f"{message} Contact forces are not unique in {integ.nonunique} phase(s) (redundant "
+                   "contacts): the least-norm forces are reported.")
     if status < 0:
         t_out = t_out[t_out <= t_fail]
         if scene is not None:
@@ -728,4 +741,5 @@ def spatial_event_driven(system, q0, v0, t_end, opts, given, scene=None) -> Even
                        status=status, message=message, stats=integ.stats, method="event",
                        solver="disk", t_events=[ev.t for ev in integ.events], force_N=FN, force_T=FT,
                        events=integ.events, impulses=integ.impulses, phases=integ.phases,
-                       impacts=integ.impact_list, accumulations=integ.accumulations, nonunique_forces=0)
+                       impacts=integ.impact_list, accumulations=integ.accumulations,
+                       nonunique_forces=integ.nonunique)

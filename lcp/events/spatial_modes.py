@@ -166,11 +166,16 @@ class SpatialModel(ContactKinematics):
         M = Hr @ SD
         rhs = -(Hr @ fr.qdd_free + fr.Hdv[rows])
         singular = False
-        try:
-            x = np.linalg.solve(M, rhs)
-        except np.linalg.LinAlgError:
-            x = np.linalg.lstsq(M, rhs, rcond=None)[0]
-            singular = True
+        if self.kinematic and len(idx) > 1:
+            # a rigid body's redundant contacts (four corners of a face): the least-norm forces
+            x, _, rank, _ = np.linalg.lstsq(M, rhs, rcond=1e-10)
+            singular = rank < M.shape[0]
+        else:
+            try:
+                x = np.linalg.solve(M, rhs)
+            except np.linalg.LinAlgError:
+                x = np.linalg.lstsq(M, rhs, rcond=None)[0]
+                singular = True
         qdd = fr.qdd_free + SD @ x
         if self.constant:
             # a flat contact at rest stays exactly at rest (a coordinate fixed by one row)
