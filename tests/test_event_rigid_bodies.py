@@ -141,6 +141,16 @@ def _ball_exact(v0, r, mu, g):
     return ts, v0[:2] - mu * g * ts * u0 / np.linalg.norm(u0)
 
 
+def test_box_stop_on_too_many_events_names_the_redundant_corners():
+    """A run cut by max_events while four corners of a face are closed stops with status -4 and says
+    which contacts are redundant, before the motion it could not finish."""
+    sc = lcp.scenes.tumbling_box()
+    res = lcp.simulate(sc, 2.0, method="event", max_events=5)
+    assert res.status == -4 and not res.success
+    assert "redundant" in res.message and "'corner0', 'corner2', 'corner4', 'corner6'" in res.message
+    assert res.t[-1] <= res.t_events[-1]
+
+
 @pytest.mark.slow
 def test_box_rest_position_is_moreau_jean_limit(box):
     """The face slide (four redundant corners, least-norm forces) and the rest are Moreau-Jean's

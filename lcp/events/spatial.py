@@ -569,8 +569,7 @@ class SpatialIntegrator:
 
     def _redundant_note(self, t, q, idx) -> str:
         """Where the closed contacts of a chattering stop have redundant normal rows (a rigid box
-        on four corners of a face): say so, the spatial phases' forces being those of a linear
-        solve that is then singular (Moreau-Jean's impulses handle such contacts)."""
+        on four corners of a face): say so, their forces being the least-norm ones."""
         if len(idx) < 2:
             return ""
         Hn = self.model.jac(q, t)[list(idx)]
@@ -578,9 +577,9 @@ class SpatialIntegrator:
         if rank == len(idx):
             return ""
         names = ", ".join(repr(self.sys.contacts[j].name) for j in idx)
-        return (f". The closed contacts {names} are redundant (their {len(idx)} normal rows have rank {rank}): the "
-                "spatial event method does not resolve the forces of redundant contacts; use "
-                "method='moreau-jean' past this time")
+        return (f". The closed contacts {names} are redundant (their {len(idx)} normal rows have rank {rank}): "
+                "their phases take the least-norm forces, and chattering between their modes may come from "
+                "that choice (method='moreau-jean' resolves such contacts by impulses).")
 
     # ------------------------------------------------------------------ the loop
     def run(self, q0, v0):
