@@ -311,7 +311,14 @@ class SpatialPhase:
         if out is None or out[1] != "unfreeze":
             return out
         self.integrator = f"{self.o.ode_method}+{self.o.ode_method}"
-        return self._solve(out[0], t_stop, self.y1, method, rtol, atol, evs, meta)
+        # the sliding speeds restart from |U|: while the direction was held, s followed d0 . U,
+        # which lags |U| by the angle between them (the stop is located on s)
+        y1 = self.y1.copy()
+        u = model.local_velocity(min(out[0], self.t_left), y1[:nq], y1[nq:nq + n])
+        base = y1.size - len(self.slide)
+        for k_, i in enumerate(self.slide):
+            y1[base + k_] = math.copysign(math.hypot(*u[model.trows[self.idx[i]]].tolist()), y1[base + k_])
+        return self._solve(out[0], t_stop, y1, method, rtol, atol, evs, meta)
 
     def _closed_form(self, cf, t_stop):
         """A straight slide (:mod:`lcp.events.spatial_closed_form`): the quadratic to t_stop or to
