@@ -116,8 +116,7 @@ def test_paths_without_kinematics_refuse_by_name():
     sc = tumbling_box()
     with pytest.raises(ValueError, match="order2.*kinematics"):
         lcp.simulate(sc, 0.01, h=1e-3, scheme="order2")
-    with pytest.raises(ValueError, match="event method.*kinematics.*contacts"):
-        lcp.simulate(sc, 0.01, method="event")
+    # (the event method handles kinematics with contacts: tests/test_event_rigid_bodies.py)
     from lcp.batch import simulate_batch
 
     with pytest.raises(ValueError, match="kinematics"):

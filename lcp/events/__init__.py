@@ -96,7 +96,10 @@ Modules
 - :mod:`~lcp.events.projection`: the projection onto the active constraints at events;
 - :mod:`~lcp.events.integrator`, :mod:`~lcp.events.driver`: the event loop and :func:`event_driven`;
 - :mod:`~lcp.events.kinematic_ode`: systems with Newton-Euler kinematics (qdot = T(q) v, unit
-  quaternions) and no contacts.
+  quaternions) and no contacts or constraints; with them the planar and spatial integrators run
+  on the state (q, v), n_q != n_v, with qdot = T(q) v, Jacobians and impacts in v-space, drift
+  terms along T v (:func:`~lcp.events.model.accel_function`), corrections moving q by T dx and the
+  quaternions renormalised after every accepted step (docs/rigid_bodies.md).
 """
 from lcp.events.driver import event_driven
 from lcp.events.options import EVENT_STATUS_MESSAGES, EventOptions, ModeSolver, SmoothIntegrator

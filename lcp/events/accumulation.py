@@ -31,7 +31,7 @@ from lcp.contact.problem import STICK
 from lcp.events.model import EPS
 from lcp.events.records import Accumulation, Event, Impulse
 
-__all__ = ["BounceSequence", "TailPhase", "aitken", "tail_impulse", "sum_up"]
+__all__ = ["BounceSequence", "TailPhase", "aitken", "kinematic_accumulation", "tail_impulse", "sum_up"]
 
 
 def aitken(x0, x1, x2):
@@ -108,6 +108,16 @@ class BounceSequence:
         if not (math.isfinite(t_inf) and t_inf > t2):
             return None
         return t_inf, q_inf, v_inf, method
+
+
+def kinematic_accumulation(notes: list, t: float) -> None:
+    """An accumulation of impacts on a system with Newton-Euler kinematics is not extrapolated:
+    Aitken's limit of q would leave the unit quaternions' sphere, and the tail's velocity
+    (q_inf - q) / dt is not a v of qdot = T(q) v. Says so once in ``notes``; returns None (the
+    impacts are resolved one by one, down to the velocity zero test)."""
+    if not any("Newton-Euler kinematics" in note for note in notes):
+        notes.append(f"From t = {t:.10g} impacts accumulate on a system with Newton-Euler kinematics: resolved "
+                     "impact by impact (no extrapolation to their limit).")
 
 
 def tail_impulse(A, Hc, G, dv, qdd, T):

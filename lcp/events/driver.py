@@ -34,8 +34,9 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     Parameters
     ----------
     system : System
-    q0, v0 : array_like, shape (n,)
-        Initial state (consistent with the bilateral constraints, no penetration).
+    q0, v0 : array_like, shapes (n_q,) and (n,)
+        Initial state (consistent with the bilateral constraints, no penetration); n_q = n unless
+        the System has Newton-Euler kinematics (qdot = T(q) v, :mod:`lcp.model.kinematics`).
     t_end : float
         Horizon, > 0.
     scene : Scene, optional
@@ -47,7 +48,7 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     Returns
     -------
     EventResult
-        ``t`` (n_points,), ``q`` and ``v`` (n_points, n) at the output times, impulses ``p_N``,
+        ``t`` (n_points,), ``q`` (n_points, n_q) and ``v`` (n_points, n) at the output times, impulses ``p_N``,
         ``p_T`` and ``modes`` (n_points - 1, m) per output interval, ``force_N`` and ``force_T``
         (n_points, m), ``t_events``, ``events``, ``impulses``, ``impacts``, ``accumulations``,
         ``phases`` (with the integrator of each), ``nonunique_forces``, ``mode_sequence``,
@@ -90,7 +91,8 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     if not (isinstance(t_end, (int, float, np.floating)) and math.isfinite(t_end) and t_end > 0):
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
     t_end = float(t_end)
-    if getattr(system, "has_kinematics", False):  # qdot = T(q) v: lcp.events.kinematic_ode
+    if getattr(system, "has_kinematics", False) and not (system.n_contacts or system.n_bilateral):
+        # qdot = T(q) v and nothing to collide with: one smooth phase (lcp.events.kinematic_ode)
         from lcp.events.kinematic_ode import kinematic_event_driven
 
         return kinematic_event_driven(system, q0, v0, t_end, opts, scene)
@@ -110,7 +112,7 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     phases, status, message, t_fail = integ.run(q0, v0)
     if start_note is not None:
         message = f"{message} {start_note}"
-    n, m = system.n, system.n_contacts
+    n, m, nq = system.n, system.n_contacts, system.n_q  # n_q != n under Newton-Euler kinematics
     for note in integ.notes:
         message = f"{message} {note}"
     if integ.nonunique and not integ.choice_moves:
@@ -127,15 +129,15 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
         if scene is not None:
             message = f"{message} (scene '{scene.name}')"
     N_out = t_out.size
-    # rows q (n), v (n), cumulative impulses (2m); one column per output time
-    Y = np.empty((2 * n + 2 * m, N_out))
+    # rows q (n_q), v (n), cumulative impulses (2m); one column per output time
+    Y = np.empty((nq + n + 2 * m, N_out))
     FN = np.empty((N_out, m))
     FT = np.empty((N_out, m))
     MD = np.empty((N_out, m), dtype=np.int8)
 
     def blank(a, b):  # output times no phase covers: no state, no force, no mode
-        Y[:2 * n, a:b] = np.nan
-        Y[2 * n:, a:b] = 0.0
+        Y[:nq + n, a:b] = np.nan
+        Y[nq + n:, a:b] = 0.0
         FN[a:b] = FT[a:b] = 0.0
         MD[a:b] = -1
 
@@ -165,8 +167,8 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
     # impulses over [t_i, t_{i+1}): the left-limit cumulative impulse, shocks at t_s < t included
     for imp in integ.impulses:
         after = int(np.searchsorted(t_out, imp.t, "right"))  # t_out > imp.t
-        Y[2 * n + imp.contact, after:] += imp.P_N
-        Y[2 * n + m + imp.contact, after:] += imp.P_T
+        Y[nq + n + imp.contact, after:] += imp.P_N
+        Y[nq + n + m + imp.contact, after:] += imp.P_T
     if m and N_out:
         # no silent success: a reported normal force that pulls (redundant contacts whose force
         # polytope the phase left without its event, say) is named in the message
@@ -176,8 +178,8 @@ def event_driven(system, q0, v0, t_end: float, scene=None, **options) -> EventRe
             message = (f"{message} At t = {t_out[worst]:.10g} the normal force of contact "
                        f"{system.contacts[j_w].name!r} is {FN[worst, j_w]:.3g} < 0: the reported forces "
                        "there violate the contact law.")
-    Q, V = _transposed(Y[:n]), _transposed(Y[n:2 * n])
-    Pc = Y[2 * n:]
+    Q, V = _transposed(Y[:nq]), _transposed(Y[nq:nq + n])
+    Pc = Y[nq + n:]
     dP = (Pc[:, 1:] - Pc[:, :-1]).T  # np.diff
     integ.stats.steps = len(phases)
     used = sorted(integ.selector.used)

@@ -173,23 +173,25 @@ def approach_gap(model, y, n, j, t=None) -> float:
     leaves the surface starts at gap 0, and a first step too short to change the gap in floating
     point must not read as an impact. The landing is unchanged (the gap, approached with u_N < 0).
     For a moving contact both are taken at time t: g(t, q(t)), u_N = H v + dg/dt."""
-    q = y[:n]
+    nq = getattr(model, "nq", None) or n  # n_q coordinates first (Newton-Euler kinematics: n_q != n)
+    q, v = y[:nq], y[nq:nq + n]
     if t is None or not model.moving:
         gap = float(model.gaps(q)[j])
-        if gap > 0 or float(model.jac(q)[j] @ y[n:2 * n]) < 0:
+        if gap > 0 or float(model.jac(q)[j] @ v) < 0:
             return gap
         return 1.0 + abs(gap)
     gap = float(model.gaps(q, t)[j])
-    if gap > 0 or float(model.local_velocity(t, q, y[n:2 * n])[j]) < 0:
+    if gap > 0 or float(model.local_velocity(t, q, v)[j]) < 0:
         return gap
     return 1.0 + abs(gap)
 
 
 def _local_velocity(model, t, y, n):
     """u = H v (+ b(t, q) for moving contacts) at the ODE state y = (q, v, ...)."""
+    nq = getattr(model, "nq", None) or n
     if not model.moving:
-        return model.jac(y[:n]) @ y[n:2 * n]
-    return model.local_velocity(t, y[:n], y[n:2 * n])
+        return model.jac(y[:nq]) @ y[nq:nq + n]
+    return model.local_velocity(t, y[:nq], y[nq:nq + n])
 
 
 def first_terminal_event(sol, meta):

@@ -5,7 +5,7 @@ import numpy as np
 
 from lcp.contact.problem import OPEN, STICK
 from lcp.result import SolverStats
-from lcp.events.accumulation import BounceSequence, sum_up
+from lcp.events.accumulation import BounceSequence, kinematic_accumulation, sum_up
 from lcp.events.cubic_phase import CubicPhase
 from lcp.events.event_location import too_many_events
 from lcp.events.impacts import ImpactLaw
@@ -310,6 +310,8 @@ class Integrator:
         self.bounces.push(t, at, q, v, (closed, sol.modes if sol is not None else ()))
         if not self.bounces.geometric():
             return None
+        if self.model.kinematic:
+            return kinematic_accumulation(self.notes, t)
         if self.model.moving:
             # The jump to the limit is the geometric series of a fixed obstacle (constant relative
             # acceleration between bounces); under a moving one (a table's acceleration varies

@@ -13,7 +13,8 @@ between consecutive force breakpoints (``System.breakpoints``, seen from the lef
 step by step: after every accepted step the unit quaternions are projected back onto the sphere (divided by
 their norm) and the stepper continues from there; the output times are interpolated by the step's
 dense output and projected the same way. Systems with kinematics and contacts or bilateral
-constraints are refused by name (Moreau-Jean's Python loop handles them).
+constraints go to the event method's contact integrators instead (:mod:`lcp.events.integrator`,
+:mod:`lcp.events.spatial`), whose phases use :func:`normalising_method` for the same projection.
 
 Imports :mod:`lcp.events.options`, :mod:`lcp.events.records`, :mod:`lcp.model` and
 :mod:`lcp.result`; never the contact phases of the event method, time stepping, scenes or sweeps.
@@ -29,7 +30,37 @@ from lcp.model.kinematics import normalize_quaternions, normalized_expr
 from lcp.model.start import consistent_start
 from lcp.result import SolverStats
 
-__all__ = ["kinematic_event_driven"]
+__all__ = ["kinematic_event_driven", "normalising_method"]
+
+_NORMALISING: dict = {}
+
+
+def normalising_method(system, method: str):
+    """SciPy's stepper ``method`` (a name of ``solve_ivp``) as an OdeSolver class that divides the
+    unit quaternions of y[:n_q] by their norms after every accepted step, for the event method's
+    phases of a system with kinematics (their right-hand sides evaluate everything at the
+    normalised quaternions, so the stepper's derivative at the step's end is unchanged). LSODA
+    keeps its state in Fortran: it is returned as it is (the phase ends renormalise)."""
+    starts = tuple(system.unit_quaternions)
+    if not starts or method == "LSODA":
+        return method
+    key = (starts, method)
+    cls = _NORMALISING.get(key)
+    if cls is None:
+        import scipy.integrate as si
+
+        base = getattr(si, method)
+
+        def _step_impl(self):
+            ok, msg = base._step_impl(self)
+            if ok:
+                for i in starts:
+                    p = self.y[i:i + 4]
+                    p /= np.sqrt(p @ p)
+            return ok, msg
+
+        cls = _NORMALISING[key] = type(f"Normalising{method}", (base,), {"_step_impl": _step_impl})
+    return cls
 
 
 def _refuse(system) -> None:

@@ -14,6 +14,7 @@ import casadi as ca
 import numpy as np
 
 from lcp.events.forcing import time_forcing
+from lcp.model.kinematics import normalize_quaternions, normalized_expr
 
 __all__ = [
     "EPS",
@@ -59,6 +60,8 @@ def accel_function(system) -> ca.Function:
     (u = H(t, q) v + b(t, q), b = (dg/dt, ds/dt)), the derivative of b along the motion.
     """
     fn = ACCEL_FUNCTIONS.get(system)
+    if fn is None and getattr(system, "has_kinematics", False):
+        fn = ACCEL_FUNCTIONS[system] = _kinematic_accel_function(system)
     if fn is None:
         t, q, v = system.t_sym, system.q_sym, system.v_sym
         c = system.constraints_expr
@@ -78,6 +81,48 @@ def accel_function(system) -> ca.Function:
                          [system.mass_expr, system.force_expr, G, zeta, H, Hdv, system.gap_expr])
         ACCEL_FUNCTIONS[system] = fn
     return fn
+
+
+def _kinematic_accel_function(system) -> ca.Function:
+    """:func:`accel_function` for a System with Newton-Euler kinematics qdot = T(t, q) v
+    (:mod:`lcp.model.kinematics`): G and H map v (dphi/dq T, dg/dq T, as the System gives them),
+    and the drift terms differentiate along the motion with qdot = T v (jtimes in the direction
+    T v, not v). Every output is evaluated at q with its unit quaternions normalised (the formulas
+    of R(p) hold on the sphere only; the integrators also renormalise the state itself)."""
+    t, q, v = system.t_sym, system.q_sym, system.v_sym
+    T = system.kinematics_expr
+    qdot = ca.mtimes(T, v)
+    c = system.constraints_expr
+    G = ca.mtimes(ca.jacobian(c, q), T)
+    phi_t = ca.jacobian(c, t)
+    Gv = ca.mtimes(G, v)
+    zeta = ca.jtimes(Gv, q, qdot) + ca.jacobian(Gv, t) + ca.jtimes(phi_t, q, qdot) + ca.jacobian(phi_t, t)
+    H = system.H_expr
+    u = ca.mtimes(H, v)
+    if system.contacts_depend_on_t:
+        u = u + system.contact_rate_expr
+        Hdv = ca.jtimes(u, q, qdot) + ca.jacobian(u, t)
+    else:
+        Hdv = ca.jtimes(u, q, qdot)
+    qn = normalized_expr(system, q)
+    outs = [ca.substitute(x, q, qn) for x in (system.mass_expr, system.force_expr, G, zeta, H, Hdv,
+                                              system.gap_expr)]
+    return ca.Function("event_accel_data_kinematic", [t, q, v], outs)
+
+
+def qdot_function(system) -> ca.Function:
+    """(t, q, v) -> T(t, q^) v, q^ with the unit quaternions normalised; None without kinematics."""
+    if not getattr(system, "has_kinematics", False):
+        return None
+    fn = QDOT_FUNCTIONS.get(system)
+    if fn is None:
+        t, q, v = system.t_sym, system.q_sym, system.v_sym
+        rate = ca.substitute(ca.mtimes(system.kinematics_expr, v), q, normalized_expr(system, q))
+        fn = QDOT_FUNCTIONS[system] = ca.Function("event_qdot", [t, q, v], [rate])
+    return fn
+
+
+QDOT_FUNCTIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 class StateData:
@@ -130,6 +175,38 @@ class ContactKinematics:
             return self.H
         return self.sys.contact_jacobian(q, t)
 
+    #: coordinates n_q and the rate of q (None: qdot = v); set by :meth:`init_kinematics`
+    nq = None
+    kinematic = False
+    _qdot = None
+
+    def init_kinematics(self, system) -> None:
+        """Newton-Euler kinematics (qdot = T(t, q) v, :mod:`lcp.model.kinematics`): n_q coordinates
+        and T(t, q) v by CasADi; without them n_q = n and qdot = v."""
+        self.nq = system.n_q
+        self.kinematic = bool(getattr(system, "has_kinematics", False))
+        self._qdot = qdot_function(system)
+
+    def qdot(self, t, q, v) -> np.ndarray:
+        """qdot = T(t, q) v (v itself without kinematics)."""
+        if self._qdot is None:
+            return v
+        return np.array(self._qdot(t, q, v), dtype=float).ravel()
+
+    def advance(self, t, q, dq) -> np.ndarray:
+        """q moved by a v-space correction dq: q + T(q) dq, quaternions renormalised (q + dq
+        without kinematics)."""
+        if self._qdot is None:
+            return q + dq
+        out = q + self.qdot(t, q, dq)
+        return normalize_quaternions(self.sys, out)
+
+    def normalize(self, q) -> np.ndarray:
+        """q with its unit quaternions divided by their norms (in place; q itself without any)."""
+        if self._qdot is not None:
+            normalize_quaternions(self.sys, q)
+        return q
+
     @property
     def moving(self) -> bool:
         """Whether a contact moves with time (a gap or tangent of t: a moving table, a cam, a belt)."""
@@ -171,6 +248,7 @@ class SystemModel(ContactKinematics):
     def __init__(self, system, general: bool = False):
         self.sys = system
         self.n, self.m, self.nb = system.n, system.n_contacts, system.n_bilateral
+        self.init_kinematics(system)
         self.all_contacts = tuple(range(self.m))
         #: the piecewise-affine time dependence of the force, or None
         self.forcing = None if general or system.is_constant else time_forcing(system)

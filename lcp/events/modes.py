@@ -334,7 +334,7 @@ class ModeSelector:
         if self.model.polynomial:
             d1 = self.model.data(t + dt, q, v)  # the same at every state
         else:
-            q1 = q + dt * v + 0.5 * dt * dt * qdd
+            q1 = self.model.advance(t, q, dt * v + 0.5 * dt * dt * qdd)  # q + T dx (kinematics)
             v1 = v + dt * qdd
             d1 = self.model.data(t + dt, q1, v1)
         groups, _ = self.solve_modes(d1, closed, slide, allowed={s.modes for s in group})

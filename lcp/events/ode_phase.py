@@ -10,6 +10,7 @@ import numpy as np
 
 from lcp.contact.problem import ContactProblem
 from lcp.events.event_location import event_functions, first_terminal_event
+from lcp.events.kinematic_ode import normalising_method
 from lcp.events.indeterminate import admissibility_rows, branch_forces
 from lcp.events.model import mass_projection
 from lcp.events.modes import AccelProblem
@@ -99,14 +100,16 @@ class OdePhase(SmoothPhase):
                 yd = yd + (min(t, self.t_left) - self.t0) * self.c1
             out = (yd, yd[2 * n:2 * n + m], yd[2 * n + m:])
         else:
-            q, v = y[:n], y[n:2 * n]
-            data = self.model.data(min(t, self.t_left), q, v)
+            nq = self.model.nq
+            q, v = y[:nq], y[nq:nq + n]
+            tt = min(t, self.t_left)
+            data = self.model.data(tt, q, v)
             qdd, N, f = self.accel(data)
             if self.indeterminate:
                 qdd = self.constrained(data, qdd)
             Nm, fm = np.zeros(m), np.zeros(m)
             Nm[self.idx], fm[self.idx] = N, f
-            out = (np.concatenate([v, qdd, Nm, fm]), Nm, fm)
+            out = (np.concatenate([self.model.qdot(tt, q, v), qdd, Nm, fm]), Nm, fm)
         self._cache_key, self._cache = key, out
         return out
 
@@ -137,16 +140,17 @@ class OdePhase(SmoothPhase):
         forces jump at t_stop: the phase sees their left limit there."""
         if breakpoint:
             self.t_left = float(np.nextafter(t_stop, -np.inf))
-        n = self.model.n
+        n, nq = self.model.n, self.model.nq
         y0 = np.concatenate([self.q0, self.v0, self.P0])
         evs, meta = event_functions(self, self.t0, y0, self.options.tol * self.scales.get("F", 0.0))
         o = self.options
-        atol = np.concatenate([np.full(n, o.atol * self.scales["L"]), np.full(n, o.atol * self.scales["V"]),
+        atol = np.concatenate([np.full(nq, o.atol * self.scales["L"]), np.full(n, o.atol * self.scales["V"]),
                                np.full(self.P0.size, o.atol * self.scales["P"])])
         # imported on the first non-polynomial phase only (keeps `import lcp` cheap)
         from scipy.integrate import solve_ivp
 
-        sol = solve_ivp(self._rhs, (self.t0, t_stop), y0, method=o.ode_method, rtol=o.rtol, atol=atol,
+        method = o.ode_method if not self.model.kinematic else normalising_method(self.model.sys, o.ode_method)
+        sol = solve_ivp(self._rhs, (self.t0, t_stop), y0, method=method, rtol=o.rtol, atol=atol,
                         events=evs, dense_output=True)
         self.nfev = sol.nfev
         self.sol = sol
@@ -155,6 +159,7 @@ class OdePhase(SmoothPhase):
         self.y1 = sol.y[:, -1]
         if sol.status == 1:
             self.t1, self.y1, kind, j = first_terminal_event(sol, meta)
+            self.model.normalize(self.y1[:nq])
             if kind == "force-limit":
                 kind, j = self.binding(self.t1, self.y1)
             return self.t1, kind, j
@@ -165,8 +170,8 @@ class OdePhase(SmoothPhase):
         """Force margin of the phase's modes at (t, y) (:meth:`SmoothPhase.margin`), cached."""
         key = (t, y.tobytes())
         if key != getattr(self, "_margin_key", None):
-            n = self.model.n
-            data = self.model.data(min(t, self.t_left), y[:n], y[n:2 * n])
+            n, nq = self.model.n, self.model.nq
+            data = self.model.data(min(t, self.t_left), y[:nq], y[nq:nq + n])
             self._margin_key, self._margin = key, self.margin(data)
         return self._margin
 
@@ -174,8 +179,8 @@ class OdePhase(SmoothPhase):
         """(kind, contact) of what ends a phase of redundant contacts at (t, y): a contact whose
         normal force must vanish there (``"lift-off"``: tipping), else the friction bound or
         sliding direction with the least slack, both judged on the least-norm admissible forces."""
-        n = self.model.n
-        data = self.model.data(min(t, self.t_left), y[:n], y[n:2 * n])
+        n, nq = self.model.n, self.model.nq
+        data = self.model.data(min(t, self.t_left), y[:nq], y[nq:nq + n])
         acc = AccelProblem(data, self.idx, self.slide, self.mu)
         check = acc.check_modes(self.modes)
         bf = branch_forces(acc.pb, check, acc.branch_modes(self.modes))
@@ -188,19 +193,22 @@ class OdePhase(SmoothPhase):
 
     def end_acceleration(self):
         """Acceleration at the end of the phase."""
-        n = self.model.n
-        return self.evaluate(self.t1, self.y1)[0][n:2 * n].copy()
+        n, nq = self.model.n, self.model.nq
+        return self.evaluate(self.t1, self.y1)[0][nq:nq + n].copy()
 
     def end_state(self):
-        n = self.model.n
+        n, nq = self.model.n, self.model.nq
         y = self.y1
-        return y[:n].copy(), y[n:2 * n].copy(), y[2 * n:].copy()
+        return y[:nq].copy(), y[nq:nq + n].copy(), y[nq + n:].copy()
 
     def output(self, t, out):
         """Write (q, v, cumulative impulses) at the times t into the columns of ``out``; return (N, f)."""
         m = self.model.m
         Y = self.sol.sol(t) if t.size else np.zeros((out.shape[0], 0))
         out[:] = Y
+        if self.model.kinematic:
+            for i in range(t.size):
+                self.model.normalize(out[:self.model.nq, i])
         N = np.zeros((t.size, m))
         f = np.zeros((t.size, m))
         for i in range(t.size):

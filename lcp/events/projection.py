@@ -3,7 +3,9 @@
 A phase ends with the constraints of its modes satisfied up to integration drift and rounding. At
 an event the state is corrected onto g_j = 0 for the closed contacts and the bilateral constraints,
 and the velocity onto the closed contacts' normal (and sticking contacts' tangential) velocities
-and the bilateral velocity constraints, each by the smallest correction in the mass metric.
+and the bilateral velocity constraints, each by the smallest correction in the mass metric. For a system with Newton-Euler kinematics
+(qdot = T(q) v) the corrections are v-space vectors dx (the Jacobians map v) and move q by T(q) dx,
+its unit quaternions renormalised after.
 """
 from __future__ import annotations
 
@@ -45,7 +47,8 @@ class StateProjector:
                 J, r = np.vstack(rows), np.concatenate(res)
                 if not np.any(r):
                     break
-                q = q - mass_projection(A, J, r)
+                # in v-space: q moves by T(q) dx (Newton-Euler kinematics), quaternions renormalised
+                q = self.model.advance(t, q, -mass_projection(A, J, r))
         rows, res = [], []
         if nb:
             _, G, phi_t = (np.array(x, dtype=float) for x in self.sys.constraints_fn(t, q))

@@ -55,6 +55,7 @@ from lcp.contact.problem import MODE_NAMES, OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, S
 from lcp.result import SolverStats
 from lcp.events.accumulation import BounceSequence
 from lcp.events.event_location import approach_gap, first_terminal_event, too_many_events
+from lcp.events.kinematic_ode import normalising_method
 from lcp.events.model import EPS, coordinate_rows, mass_projection
 from lcp.events.options import CASCADE_ROUNDS, EVENT_STATUS_MESSAGES, cascade_round
 from lcp.events.records import Event, EventResult, Impact, Impulse, Phase
@@ -76,6 +77,12 @@ PAINLEVE_MARGIN = 1e-6
 _EXPLICIT = ("DOP853", "RK45", "RK23")
 #: a slide from rest keeps its initial direction over this fraction of the scene's time scale
 FROZEN_START = 1e-6
+#: a rigid body's slide from rest keeps its decided direction until it slides at this fraction of
+#: the velocity scale (:meth:`SpatialPhase._run_kinematic_from_rest`)
+FROZEN_SPEED = 1e-6
+#: right-hand side evaluations allowed in one phase of a system with kinematics before it ends
+#: with status -2 (a phase that cannot be integrated at its tolerances is said, not run for ever)
+MAX_PHASE_EVALUATIONS = 200_000
 
 
 class Inconsistent(Exception):
@@ -125,6 +132,11 @@ class SpatialPhase:
         for i in self.slide:
             tr = model.trows[self.idx[i]]
             U = H[tr] @ v0 if b is None else H[tr] @ v0 + b[tr]
+            if model.kinematic and math.hypot(*U.tolist()) <= integ.vel_tol:
+                # at rest to the zero test (a rigid body's corner after a stick: rounding-level U
+                # that no coordinate snap zeroes): a slide from rest along the decided direction,
+                # not along the direction of rounding
+                U = np.zeros_like(U)
             s0.append(float(U @ self.d0[i]))
         self.s0 = np.array(s0)
         # A slide from rest starts at s = 0 with s' = 0 at a slip (the force on its bound), and
@@ -149,8 +161,8 @@ class SpatialPhase:
         if key == self._key:
             return self._cache
         model = self.model
-        n, m = model.n, model.m
-        q, v = y[:n], y[n:2 * n]
+        n, m, nq = model.n, model.m, model.nq
+        q, v = y[:nq], y[nq:nq + n]
         ns = len(self.slide)
         s = y[y.size - ns:] if ns else y[:0]
         fr = model.frame(min(t, self.t_left), q, v)
@@ -180,11 +192,17 @@ class SpatialPhase:
             tr = model.trows[self.idx[i]]
             aT = fr.H[tr] @ qdd + fr.Hdv[tr]
             sdot[k_] = float(dirs[i] @ aT)
-        out = (np.concatenate([v, qdd, Nm, fm, sdot]), Nm, fm)
+        out = (np.concatenate([model.qdot(min(t, self.t_left), q, v), qdd, Nm, fm, sdot]), Nm, fm)
         self._key, self._cache = key, out
         return out
 
     def _rhs(self, t, y):
+        if self.model.kinematic:
+            self.n_rhs = getattr(self, "n_rhs", 0) + 1
+            if self.n_rhs > MAX_PHASE_EVALUATIONS:
+                raise FloatingPointError(f"the phase with modes {self.names()} needed more than "
+                                         f"{MAX_PHASE_EVALUATIONS} evaluations by t = {t:.17g} (its step size "
+                                         "collapsed: a slide the integrator cannot follow at its tolerances)")
         return self.evaluate(t, y)[0]
 
     def _events(self, y0):
@@ -221,8 +239,8 @@ class SpatialPhase:
     def normal_mass(self, t, y, i):
         """H_N,j S (H_N,j' - mu_j H_T,j' d_j) / (|H_N,j S H_N,j'| + mu_j |H_N,j S H_T,j' d_j|) of sliding
         contact i: 1 without friction coupling, 0 at the Painleve singularity (N_j -> inf)."""
-        model, n = self.model, self.model.n
-        q, v = y[:n], y[n:2 * n]
+        model, n, nq = self.model, self.model.n, self.model.nq
+        q, v = y[:nq], y[nq:nq + n]
         fr = model.frame(min(t, self.t_left), q, v)
         j = self.idx[i]
         tr = model.trows[j]
@@ -242,12 +260,12 @@ class SpatialPhase:
         cf = straight_slide(self, self.o.tol * self.integ.scales["F"], PAINLEVE_MARGIN)
         if cf is not None:
             return self._closed_form(cf, t_stop)
-        n = self.model.n
+        n, nq = self.model.n, self.model.nq
         y0 = np.concatenate([self.q0, self.v0, self.P0, self.s0])
         evs, meta = self._events(y0)
         o, sc = self.o, self.integ.scales
         a = self.integ.atol
-        atol = np.concatenate([np.full(n, a * sc["L"]), np.full(n, a * sc["V"]),
+        atol = np.concatenate([np.full(nq, a * sc["L"]), np.full(n, a * sc["V"]),
                                np.full(self.P0.size, a * sc["P"]), np.full(self.s0.size, a * sc["V"])])
         method, rtol = o.ode_method, self.integ.rtol
         self.segments = []
@@ -258,6 +276,8 @@ class SpatialPhase:
             # jumps at U = 0 (no Newton iteration of an implicit one converges there). The first
             # FROZEN_START of the scene's time scale slides along the decided direction; Radau
             # continues with U/|U|.
+            if self.model.kinematic:
+                return self._run_kinematic_from_rest(t_stop, y0, method, rtol, atol, evs, meta)
             t_fr = min(t_stop, self.t0 + FROZEN_START * self.integ.scales["L"] / self.integ.scales["V"])
             self.frozen = True
             out = self._solve(t_start, t_fr, y0, method, rtol, atol, evs, meta)
@@ -268,6 +288,37 @@ class SpatialPhase:
             method, rtol = "Radau", max(rtol, 1000 * EPS)
             self.integrator = f"{o.ode_method}+Radau"
         return self._solve(t_start, t_stop, y0, method, rtol, atol, evs, meta)
+
+    def _run_kinematic_from_rest(self, t_stop, y0, method, rtol, atol, evs, meta):
+        """A slide from rest of a system with Newton-Euler kinematics (a rigid body's corner that
+        slips): at a slip the tangential acceleration is zero (the stick force reaches its bound
+        continuously), so |U| grows like t^2 and U/|U| is set by rounding at first. The decided
+        direction is held until the fastest such contact slides at FROZEN_SPEED of the velocity
+        scale (an event), then the phase continues with U/|U| by the same explicit method (the
+        transverse rate mu N / (m |U|) falls as |U| grows, and an explicit step grows with it)."""
+        model, thr = self.model, FROZEN_SPEED * self.integ.scales["V"]
+        rows = [model.trows[self.idx[i]] for k_, i in enumerate(self.slide) if self.s0[k_] == 0.0]
+        nq, n = model.nq, model.n
+
+        def speed(t, y):
+            fr_v = model.local_velocity(min(t, self.t_left), y[:nq], y[nq:nq + n])
+            return thr - max(math.hypot(*fr_v[tr].tolist()) for tr in rows)
+
+        speed.terminal, speed.direction = True, -1
+        self.frozen = True
+        out = self._solve(self.t0, t_stop, y0, method, rtol, atol, evs + [speed], meta + [("unfreeze", -1)])
+        self.frozen = False
+        if out is None or out[1] != "unfreeze":
+            return out
+        self.integrator = f"{self.o.ode_method}+{self.o.ode_method}"
+        # the sliding speeds restart from |U|: while the direction was held, s followed d0 . U,
+        # which lags |U| by the angle between them (the stop is located on s)
+        y1 = self.y1.copy()
+        u = model.local_velocity(min(out[0], self.t_left), y1[:nq], y1[nq:nq + n])
+        base = y1.size - len(self.slide)
+        for k_, i in enumerate(self.slide):
+            y1[base + k_] = math.copysign(math.hypot(*u[model.trows[self.idx[i]]].tolist()), y1[base + k_])
+        return self._solve(out[0], t_stop, y1, method, rtol, atol, evs, meta)
 
     def _closed_form(self, cf, t_stop):
         """A straight slide (:mod:`lcp.events.spatial_closed_form`): the quadratic to t_stop or to
@@ -285,6 +336,8 @@ class SpatialPhase:
     def _solve(self, ta, tb, y0, method, rtol, atol, evs, meta):
         from scipy.integrate import solve_ivp
 
+        if self.model.kinematic:  # unit quaternions renormalised after every accepted step
+            method = normalising_method(self.model.sys, method)
         sol = solve_ivp(self._rhs, (ta, tb), y0, method=method, rtol=rtol, atol=atol, events=evs,
                         dense_output=True)
         self.nfev += sol.nfev
@@ -295,6 +348,7 @@ class SpatialPhase:
         self.y1 = sol.y[:, -1]
         if sol.status == 1:
             self.t1, self.y1, kind, j = first_terminal_event(sol, meta)
+            self.model.normalize(self.y1[:self.model.nq])
             return self.t1, kind, j
         self.t1 = tb
         return None
@@ -303,17 +357,17 @@ class SpatialPhase:
         """max_j | |s_j| - |U_j| | at the end of the phase (the extra states' consistency)."""
         if not self.slide:
             return 0.0
-        model, n = self.model, self.model.n
+        model, n, nq = self.model, self.model.n, self.model.nq
         y = self.y1
-        u = model.local_velocity(self.t1, y[:n], y[n:2 * n])
+        u = model.local_velocity(self.t1, y[:nq], y[nq:nq + n])
         s = y[y.size - len(self.slide):]
         return max(abs(abs(float(s[k_])) - float(np.linalg.norm(u[model.trows[self.idx[i]]])))
                    for k_, i in enumerate(self.slide))
 
     def end_state(self):
-        n = self.model.n
+        n, nq = self.model.n, self.model.nq
         y = self.y1
-        return y[:n].copy(), y[n:2 * n].copy(), y[2 * n:2 * n + self.model.H_rows].copy()
+        return y[:nq].copy(), y[nq:nq + n].copy(), y[nq + n:nq + n + self.model.H_rows].copy()
 
     def output(self, t, out):
         """Write (q, v, cumulative forces) at the times t into ``out``; return (N, f) there."""
@@ -327,6 +381,9 @@ class SpatialPhase:
             if sel.size:
                 Y[:, sel] = sol.sol(t[sel])
         out[:] = Y[:r]
+        if model.kinematic:
+            for i in range(t.size):
+                model.normalize(out[:model.nq, i])
         N = np.zeros((t.size, model.m))
         f = np.zeros((t.size, model.H_rows - model.m))
         if self.closed is not None:
@@ -357,6 +414,7 @@ class SpatialIntegrator:
         self.max_drift = 0.0
         self.bounces, self.accumulations = BounceSequence(), []
         self.penetrated = False
+        self.nonunique = 0  # phases of redundant contacts (least-norm forces)
 
     # ------------------------------------------------------------------ decisions
     def record_impulse(self, t, contacts, P, kind, reason):
@@ -484,7 +542,8 @@ class SpatialIntegrator:
             J, r = np.vstack(rows), np.concatenate(res)
             if not np.any(r):
                 break
-            q = q - mass_projection(sys_.mass(q, t), J, r)
+            # v-space correction: q moves by T(q) dx under Newton-Euler kinematics (renormalised)
+            q = model.advance(t, q, -mass_projection(sys_.mass(q, t), J, r))
         if model.constant and gap_rows:
             for i, val in coordinate_rows(model.HN[gap_rows], -model.gap0[gap_rows]):
                 q[i] = val
@@ -507,6 +566,27 @@ class SpatialIntegrator:
                 for i, val in coordinate_rows(model.H[vr], np.zeros(len(vr))):
                     v[i] = val
         return q, v
+
+    def _redundant(self, t, q, idx) -> bool:
+        """Whether a rigid body's closed contacts ``idx`` have redundant normal rows (four corners of
+        a face): their phase then has the least-norm forces (:meth:`SpatialModel.phase_accel`)."""
+        if not (self.model.kinematic and len(idx) > 1):
+            return False
+        return int(np.linalg.matrix_rank(self.model.jac(q, t)[list(idx)])) < len(idx)
+
+    def _redundant_note(self, t, q, idx) -> str:
+        """Where the closed contacts of a chattering stop have redundant normal rows (a rigid box
+        on four corners of a face): say so, their forces being the least-norm ones."""
+        if len(idx) < 2:
+            return ""
+        Hn = self.model.jac(q, t)[list(idx)]
+        rank = int(np.linalg.matrix_rank(Hn))
+        if rank == len(idx):
+            return ""
+        names = ", ".join(repr(self.sys.contacts[j].name) for j in idx)
+        return (f". The closed contacts {names} are redundant (their {len(idx)} normal rows have rank {rank}): "
+                "their phases take the least-norm forces, and chattering between their modes may come from "
+                "that choice (method='moreau-jean' resolves such contacts by impulses).")
 
     # ------------------------------------------------------------------ the loop
     def run(self, q0, v0):
@@ -550,7 +630,9 @@ class SpatialIntegrator:
                 break
             run_phases.append(ph)
             self.max_drift = max(self.max_drift, ph.speed_drift())
-            self.phases.append(Phase(float(ph.t0), float(ph.t1), ph.names(), ph.integrator, int(ph.nfev)))
+            unique = not self._redundant(t, q, idx)
+            self.nonunique += not unique
+            self.phases.append(Phase(float(ph.t0), float(ph.t1), ph.names(), ph.integrator, int(ph.nfev), unique))
             for name in ph.names():
                 self.stats.mode_counts[name] += 1
             if ev is None:
@@ -586,7 +668,7 @@ class SpatialIntegrator:
             t = te
             stop_message = too_many_events(len(self.events), short, t, o.max_events, EVENT_STATUS_MESSAGES[-4])
             if stop_message:
-                status, message = -4, stop_message
+                status, message = -4, stop_message + self._redundant_note(t, q, idx)
                 break
         self.stats.steps = len(run_phases)
         self.stats.free_steps = sum(1 for ph in run_phases if not ph.idx)
@@ -632,17 +714,21 @@ def spatial_event_driven(system, q0, v0, t_end, opts, given, scene=None) -> Even
         message = f"{message} {start_note}"
     for note in integ.notes:
         message = f"{message} {note}"
+    if integ.nonunique:
+        message = (f"{message} Contact forces are not unique in {integ.nonunique} phase(s) (redundant "
+                   "contacts): the least-norm forces are reported.")
     if status < 0:
         t_out = t_out[t_out <= t_fail]
         if scene is not None:
             message = f"{message} (scene '{scene.name}')"
     n, m, R = system.n, system.n_contacts, system.n_contact_rows
+    nq = system.n_q  # rows: q (n_q), v (n), cumulative forces (R)
     N_out = t_out.size
-    Y = np.empty((2 * n + R, N_out))
+    Y = np.empty((nq + n + R, N_out))
     FN, FT = np.zeros((N_out, m)), np.zeros((N_out, R - m))
     MD = np.full((N_out, m), -1, dtype=np.int8)
-    Y[:2 * n] = np.nan
-    Y[2 * n:] = 0.0
+    Y[:nq + n] = np.nan
+    Y[nq + n:] = 0.0
     for k_, ph in enumerate(phases):
         last = k_ == len(phases) - 1
         a = int(np.searchsorted(t_out, ph.t0, "left"))
@@ -652,13 +738,14 @@ def spatial_event_driven(system, q0, v0, t_end, opts, given, scene=None) -> Even
             MD[a:b] = ph.full_modes
     for imp in integ.impulses:
         after = int(np.searchsorted(t_out, imp.t, "right"))
-        Y[2 * n + imp.contact, after:] += imp.P_N
+        Y[nq + n + imp.contact, after:] += imp.P_N
         tr = integ.model.trows[imp.contact]
-        Y[2 * n + tr, after:] += np.atleast_1d(imp.P_T)[:, None]
-    Q, V = np.ascontiguousarray(Y[:n].T), np.ascontiguousarray(Y[n:2 * n].T)
-    dP = np.diff(Y[2 * n:], axis=1).T
+        Y[nq + n + tr, after:] += np.atleast_1d(imp.P_T)[:, None]
+    Q, V = np.ascontiguousarray(Y[:nq].T), np.ascontiguousarray(Y[nq:nq + n].T)
+    dP = np.diff(Y[nq + n:], axis=1).T
     return EventResult(t=t_out, q=Q, v=V, p_N=dP[:, :m], p_T=dP[:, m:], modes=MD[:-1] if N_out else MD,
                        status=status, message=message, stats=integ.stats, method="event",
                        solver="disk", t_events=[ev.t for ev in integ.events], force_N=FN, force_T=FT,
                        events=integ.events, impulses=integ.impulses, phases=integ.phases,
-                       impacts=integ.impact_list, accumulations=integ.accumulations, nonunique_forces=0)
+                       impacts=integ.impact_list, accumulations=integ.accumulations,
+                       nonunique_forces=integ.nonunique)

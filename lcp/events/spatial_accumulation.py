@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from lcp.contact.problem import STICK
-from lcp.events.accumulation import TailPhase, tail_impulse
+from lcp.events.accumulation import TailPhase, kinematic_accumulation, tail_impulse
 from lcp.events.records import Accumulation, Event, Impulse
 
 __all__ = ["watch_bounces"]
@@ -46,6 +46,8 @@ def watch_bounces(integ, t, q, v, P, idx, modes, flight):
     seq.push(t, at, q, v, (tuple(idx), tuple(modes)))
     if not seq.geometric():
         return None
+    if integ.model.kinematic:
+        return kinematic_accumulation(integ.notes, t)
     if integ.model.moving:
         # no jump on a moving obstacle (the series is a fixed obstacle's): resolved one by one, as
         # the planar integrator does (lcp.events.integrator.Integrator.watch_bounces)
@@ -59,8 +61,8 @@ def watch_bounces(integ, t, q, v, P, idx, modes, flight):
 
 def _flight_acceleration(flight):
     """The flight's acceleration at its end, and whether it was constant over the flight."""
-    model, n = flight.model, flight.model.n
-    qdd = flight.evaluate(flight.t1, flight.y1)[0][n:2 * n]
+    model, n, nq = flight.model, flight.model.n, flight.model.nq
+    qdd = flight.evaluate(flight.t1, flight.y1)[0][nq:nq + n]
     constant = bool(model.constant and model.affine_force and not model.state_force and not flight.slide)
     return qdd, constant
 

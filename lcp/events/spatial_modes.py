@@ -75,6 +75,7 @@ class SpatialModel(ContactKinematics):
         self.sys = system
         n, m = system.n, system.n_contacts
         self.n, self.m, self.nb = n, m, system.n_bilateral
+        self.init_kinematics(system)
         self.dims = system.tangent_dims.copy()
         off = system.tangent_offsets
         #: rows of H holding contact j's tangent directions
@@ -165,11 +166,16 @@ class SpatialModel(ContactKinematics):
         M = Hr @ SD
         rhs = -(Hr @ fr.qdd_free + fr.Hdv[rows])
         singular = False
-        try:
-            x = np.linalg.solve(M, rhs)
-        except np.linalg.LinAlgError:
-            x = np.linalg.lstsq(M, rhs, rcond=None)[0]
-            singular = True
+        if self.kinematic and len(idx) > 1:
+            # a rigid body's redundant contacts (four corners of a face): the least-norm forces
+            x, _, rank, _ = np.linalg.lstsq(M, rhs, rcond=1e-10)
+            singular = rank < M.shape[0]
+        else:
+            try:
+                x = np.linalg.solve(M, rhs)
+            except np.linalg.LinAlgError:
+                x = np.linalg.lstsq(M, rhs, rcond=None)[0]
+                singular = True
         qdd = fr.qdd_free + SD @ x
         if self.constant:
             # a flat contact at rest stays exactly at rest (a coordinate fixed by one row)
