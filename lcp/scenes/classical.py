@@ -45,8 +45,10 @@ from lcp.scenes.slider_crank import SliderCrankReference, slider_crank
 from lcp.scenes.bowl_rod import BowlReference, RodImpactsReference, bowl, impacting_rod
 from lcp.scenes.slider_crank_clearance import slider_crank_clearance
 from lcp.scenes.woodpecker import woodpecker
+from lcp.scenes.bead_column import bead_column
 
 __all__ = [
+    "bead_column",
     "BouncingBallExact",
     "BowlReference",
     "RodImpactsReference",
