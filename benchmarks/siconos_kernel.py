@@ -47,9 +47,12 @@ impacts that land a step apart, so only positions are compared. For a rigid body
 each code's state at the horizon (centre height, the body axis closest to vertical, max |v|, lowest
 corner gap).
 
-Adding a case is one entry of :data:`CASES` (planar contacts, or one free body with corners on
-z = 0; other spatial scenes need the generator to emit ``FrictionContact(3)`` relations of their
-own, not written yet). ``--csv NAME`` names the table (the box's recorded run:
+A scene whose contacts are all spatial (tangent of two rows, no kinematics) takes the same two
+routes with 3-row relations (gap, s1, s2), ``NewtonImpactFrictionNSL(e, 0, mu, 3)`` and
+``FrictionContact(3)``; planar and spatial contacts are not mixed (one FrictionContact problem).
+
+Adding a case is one entry of :data:`CASES` (all contacts planar, or all spatial, or one free body
+with corners on z = 0). ``--csv NAME`` names the table (the box's recorded run:
 ``--cases "tumbling box" --out benchmarks/recorded --csv siconos_kernel_box.csv``).
 """
 from __future__ import annotations
@@ -96,6 +99,8 @@ CASES = {
                                    "Flores's slider-crank, c = 1 mm, four corners, A(q)"),
     "woodpecker": Case(lambda: classical.woodpecker(t_end=0.3), 2e-5, 0.3,
                        "Siconos's tutorial data, constant system, three contacts"),
+    "spatial Jean-Pratt": Case(lambda: lcp.scenes.jean_pratt_spatial(v0=(1.0, 0.5), t_end=0.3), 1e-3, 0.3,
+                               "Jean-Pratt block launched obliquely, spatial contact: FrictionContact(3)"),
     "tumbling box": Case(lambda: lcp.scenes.tumbling_box(t_end=2.0), 1e-3, 2.0,
                          "unit cube on 8 spatial corners, mu = 0.3, e = 0: NewtonEulerDS + NewtonEuler3DR"),
 }
@@ -153,17 +158,20 @@ def siconos_spec(system, q0, v0, h: float, t_end: float, workdir: Path) -> dict:
         raise ValueError("time-dependent mass or forces are not exported to Siconos")
     plugins, contacts = {}, []
     for j, c in enumerate(system.contacts):
+        # a planar contact: (gap, tangent) and FrictionContact(2); a spatial one: (gap, s1, s2), FrictionContact(3)
         if c.tangent is not None:
-            if ca.SX(c.tangent).numel() != 1:
-                raise ValueError(f"contact {c.name!r} is spatial: the generator writes FrictionContact(2) only")
+            nt = ca.SX(c.tangent).numel()
             T = ca.jacobian(c.tangent, q)
             tan = c.tangent
         else:
-            T = ca.reshape(ca.SX(c.tangent_jacobian), 1, n)
-            tan = ca.SX(0)
+            nt = ca.SX(c.tangent_jacobian).numel() // n
+            T = ca.reshape(ca.SX(c.tangent_jacobian), nt, n)
+            tan = ca.SX.zeros(nt)
+        if nt not in (1, 2) or (contacts and contacts[0]["dim"] != nt + 1):
+            raise ValueError(f"contact {c.name!r}: all contacts must be planar or all spatial (one FrictionContact)")
         hq = ca.vertcat(c.gap, tan)
         J = ca.vertcat(ca.jacobian(c.gap, q), T)
-        entry = dict(e=float(c.e), mu=float(c.mu))
+        entry = dict(e=float(c.e), mu=float(c.mu), dim=nt + 1)
         if not ca.depends_on(J, q):
             Jn = np.array(ca.DM(ca.evalf(J)))
             b = np.array(ca.DM(ca.evalf(ca.substitute(hq, q, ca.SX.zeros(n))))).ravel()
@@ -192,7 +200,8 @@ def siconos_spec(system, q0, v0, h: float, t_end: float, workdir: Path) -> dict:
         plugins["jacobianFIntqDot"] = ("fint", ca.Function("cas_dfv", [q, v], [ca.densify(C)]))
     lib = _c_plugins(plugins, workdir) if plugins else None
     return dict(n=n, q0=np.asarray(q0, float).tolist(), v0=np.asarray(v0, float).tolist(), h=h, t_end=t_end,
-                theta=0.5, ds=ds, contacts=contacts, lib=lib, solver_tol=1e-12, newton_tol=1e-10)
+                theta=0.5, ds=ds, contacts=contacts, lib=lib, solver_tol=1e-12, newton_tol=1e-10,
+                fc_dim=contacts[0]["dim"] if contacts else 2)
 
 
 def newton_euler_spec(scene, q0, v0, h: float, t_end: float) -> dict:
@@ -236,12 +245,12 @@ def newton_euler_spec(scene, q0, v0, h: float, t_end: float) -> dict:
             if not np.allclose(a, b, rtol=1e-12, atol=1e-12):
                 raise ValueError(f"newton_euler_spec: the scene's {what} is not what NewtonEulerDS / "
                                  f"NewtonEuler3DR on z = 0 compute (max difference {np.max(np.abs(a - b)):.3g})")
-    contacts = [{"kind": "corner", "r": r.tolist(), "e": float(c.e), "mu": float(c.mu)}
+    contacts = [{"kind": "corner", "r": r.tolist(), "e": float(c.e), "mu": float(c.mu), "dim": 3}
                 for r, c in zip(corners, system.contacts, strict=True)]
     ds = {"kind": "newton_euler", "mass": m, "inertia": J.tolist(), "fext": fext.tolist()}
     return {"n": 6, "q0": np.asarray(q0, float).tolist(), "v0": np.asarray(v0, float).tolist(), "h": h,
             "t_end": t_end, "theta": 0.5, "ds": ds, "contacts": contacts, "lib": None, "solver_tol": 1e-12,
-            "newton_tol": 1e-10}
+            "newton_tol": 1e-10, "fc_dim": 3}
 
 
 #: the script the Siconos interpreter runs: spec.json in, result.npz and timings.json out
@@ -300,7 +309,7 @@ def build():
     nsds = sk.NonSmoothDynamicalSystem(0.0, spec["t_end"])
     nsds.insertDynamicalSystem(ds)
     for c in spec["contacts"]:
-        law = sk.NewtonImpactFrictionNSL(c["e"], 0.0, c["mu"], 3 if c["kind"] == "corner" else 2)
+        law = sk.NewtonImpactFrictionNSL(c["e"], 0.0, c["mu"], c["dim"])
         if c["kind"] == "corner":
             rel = Corner(c["r"])
         elif c["kind"] == "linear":
@@ -310,7 +319,7 @@ def build():
         nsds.link(sk.Interaction(law, rel), ds)
     td = sk.TimeDiscretisation(0.0, spec["h"])
     osi = sk.MoreauJeanOSI(spec["theta"])
-    osnspb = sk.FrictionContact(3 if d["kind"] == "newton_euler" else 2)
+    osnspb = sk.FrictionContact(spec["fc_dim"])
     osnspb.numericsSolverOptions().dparam[sn.SICONOS_DPARAM_TOL] = spec["solver_tol"]
     s = sk.TimeStepping(nsds, td, osi, osnspb)
     s.setNewtonTolerance(spec["newton_tol"])
