@@ -14,7 +14,10 @@ by the Python contact step; the per-step time includes the call's set-up); cold:
 compiled-code and numba caches (C generation, gcc, numba compilation, the run) -- its wall time,
 not per step; "cold C": the same with numba's cache warm (a new system on a machine that has run
 the loop once: C generation, gcc, the run). Results are compared with the Python loop's on the common steps (max relative
-difference of q).
+difference of q). Newton-Euler kinematics (qdot = T(q) v): the Dzhanibekov body (no contact), the
+tumbling box (3000 steps, both loops) and the rocking block's resting phase (2000 steps from its state
+at t = 3 s, both loops: two active contacts every step). ``--scenes`` runs some scenes only (the
+csv is then named after them), ``--no-cold`` skips the fresh-interpreter runs.
 
 With Siconos 4.4 in ``/usr/bin/python3`` the point in the bowl is run there too, in a subprocess
 (``LagrangianLinearTIDS``, the gap and Jacobian as a C plugin of ``LagrangianScleronomousR``,
@@ -40,11 +43,14 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-SCENES = ("bowl", "slider_crank", "rocking_block", "spatial_bowl")
+SCENES = ("bowl", "slider_crank", "rocking_block", "spatial_bowl", "dzhanibekov", "tumbling_box",
+          "rocking_block_rest")
 #: compiled steps per scene where the full count would measure something else: the rocking block
 #: comes to rest on both corners after its rocking phase (1.5 s), and steps with two active contacts
 #: are solved by the Python contact step (the kernel solves one active contact)
-STEPS = {"rocking_block": 1500}
+STEPS = {"rocking_block": 1500, "tumbling_box": 3000, "rocking_block_rest": 2000}
+#: Python-loop steps where the scene's interesting part is later than the default count
+PY_STEPS = {"tumbling_box": 3000, "rocking_block_rest": 2000}
 
 
 def scene(name):
@@ -66,6 +72,21 @@ def scene(name):
     if name == "rocking_block":
         sc = rocking_block()
         return sc.system, sc.q0, sc.v0, 1e-3
+    if name == "rocking_block_rest":
+        # the resting phase: the state at t = 3 s of the rocking block (at rest on both corners)
+        sc = rocking_block()
+        q, v = _rest_state()
+        return sc.system, q, v, 1e-3
+    if name == "dzhanibekov":  # Newton-Euler kinematics, unit quaternion, no contact
+        from lcp.scenes.rigid_bodies import dzhanibekov
+
+        sc = dzhanibekov()
+        return sc.system, sc.q0, sc.v0, 1e-3
+    if name == "tumbling_box":  # kinematics, eight spatial corners: falls, tumbles, rests on four corners
+        from lcp.scenes.rigid_bodies import tumbling_box
+
+        sc = tumbling_box()
+        return sc.system, sc.q0, sc.v0, 1e-3
     if name == "spatial_bowl":
         q, v = ca.SX.sym("q", 3), ca.SX.sym("v", 3)
         r = ca.norm_2(q)
@@ -75,6 +96,21 @@ def scene(name):
                    contacts=[Contact(gap=1.0 - r, tangent_jacobian=ca.horzcat(t1, t2).T, mu=0.3)])
         return s, np.array([0.3, 0.0, -math.sqrt(0.91)]), np.array([0.0, 1.0, 0.0]), 1e-3
     raise KeyError(name)
+
+
+_REST = []
+
+
+def _rest_state():
+    """(q, v) of the rocking block at t = 3 s (Python loop, h = 1e-3), computed once."""
+    if not _REST:
+        import lcp
+        from lcp.scenes.classical import rocking_block
+
+        sc = rocking_block()
+        r = lcp.simulate(sc.system, 3.0, h=1e-3, q0=sc.q0, v0=sc.v0, fast=False)
+        _REST.append((r.q[-1].copy(), r.v[-1].copy()))
+    return _REST[0]
 
 
 def run(name, steps, fast, projection="auto"):
@@ -158,27 +194,29 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--no-siconos", action="store_true")
+    ap.add_argument("--scenes", nargs="*", default=list(SCENES), help=f"some of {SCENES}")
+    ap.add_argument("--no-cold", action="store_true", help="skip the fresh-interpreter runs")
     args = ap.parse_args()
-    n_py = 300 if args.quick else 2000
     n_c_all = 3000 if args.quick else 100_000
     rows = []
     print(f"{'scene':14s} {'python us/step':>15s} {'compiled us/step':>17s} {'speed-up':>9s} {'cold s':>7s} "
           f"{'cold C s':>9s} {'max rel dq':>11s}")
-    for name in SCENES:
+    for name in args.scenes:
+        n_py = PY_STEPS.get(name, 300 if args.quick else 2000)
         t_py, ref = run(name, n_py, False)
         run(name, 10, True)  # warm: library and kernel cached
         n_c = min(n_c_all, STEPS.get(name, n_c_all))
         t_c = statistics.median(run(name, n_c, True)[0] for _ in range(3 if n_c > 10_000 else 9))
         _, got = run(name, n_py, True)
         dq = float(np.max(np.abs(got.q - ref.q)) / np.max(np.abs(ref.q)))
-        t_cold = cold(name, n_py)
-        t_cold_c = cold(name, n_py, keep_numba=True)
+        t_cold = math.nan if args.no_cold else cold(name, n_py)
+        t_cold_c = math.nan if args.no_cold else cold(name, n_py, keep_numba=True)
         py, c = t_py / n_py * 1e6, t_c / n_c * 1e6
         print(f"{name:14s} {py:15.1f} {c:17.2f} {py / c:9.0f} {t_cold:7.2f} {t_cold_c:9.2f} {dq:11.2e}")
         rows.append(dict(scene=name, python_us_per_step=f"{py:.2f}", compiled_us_per_step=f"{c:.3f}",
                          speedup=f"{py / c:.0f}", cold_s=f"{t_cold:.2f}", cold_c_only_s=f"{t_cold_c:.2f}",
                          max_rel_dq=f"{dq:.2e}", steps_python=n_py, steps_compiled=n_c))
-    if not args.no_siconos:
+    if not args.no_siconos and "bowl" in args.scenes:
         _, _, _, h = scene("bowl")
         n_s = n_c_all // 10
         per, what = siconos_bowl(h, n_s)
@@ -195,7 +233,8 @@ def main():
                              steps_python="", steps_compiled=n_s))
         else:
             print(f"Siconos: not run ({what})")
-    out = ROOT / "benchmarks" / "recorded" / "general_compiled.csv"
+    out = ROOT / "benchmarks" / "recorded" / ("general_compiled.csv" if list(args.scenes) == list(SCENES)
+                                              else "general_compiled_" + "_".join(args.scenes) + ".csv")
     with open(out, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()

@@ -17,8 +17,15 @@ them what the step needs besides:
 - ``F0``, ``F1``, ``K1``, ``C1``: F(t, q, v) and F, -dF/dq, -dF/dv at (t + h, q, v), for the step
   acceptance of forces that are not affine (:class:`lcp.timestepping.force_check.ForceStepCheck`);
   zero-sized where the forces are affine;
-- ``Tq``: the kinematics map T(q) of q' = T(q) v where the system has one (attribute
-  ``kinematics_expr``, an (nq x n) expression in ``q_sym``), zero-sized for the identity.
+
+A system with Newton-Euler kinematics q' = T(q) v has a second library, :func:`kinematics_library`:
+the position increment of :func:`lcp.model.kinematics.increment_function` ((t, q, w) -> T w and each
+unit quaternion's block B = d(T w)_p/dp, the very Function the Python loop's
+:func:`~lcp.model.kinematics.advance_positions` evaluates), called by the kernel after the contact
+solve with w = v_theta; the kernel does the rest of ``advance_positions`` (compensated sum, the
+exponential map, the normalisation) with NumPy's operations. (The one-Function form
+:func:`~lcp.model.kinematics.position_update_function` is not used: its sums are CasADi's, not the
+Python loop's, and would differ from it by rounding.)
 
 The library is keyed by a hash of the generated C source, the compiler flags and the versions, so
 a new system of an already seen structure and numbers costs no compilation. Without a C compiler
@@ -45,13 +52,13 @@ import numpy as np
 from lcp.numerics import cache
 from lcp.timestepping.assembly import one_step_fn
 
-__all__ = ["CFLAGS", "OUTPUTS", "CompiledFunction", "StepLibrary", "c_compiler", "compile_function", "kinematics_expr",
-           "projection_library", "step_function", "step_library"]
+__all__ = ["CFLAGS", "OUTPUTS", "CompiledFunction", "StepLibrary", "c_compiler", "compile_function",
+           "kinematics_function", "kinematics_library", "projection_library", "step_function", "step_library"]
 
 #: the flags the step's C code is compiled with (part of the cache key)
 CFLAGS = ("-O2", "-fPIC", "-shared")
 #: the results of the generated function, in order
-OUTPUTS = ("vfree", "S", "SHt", "W", "gap", "H", "b0", "b1", "F0", "F1", "K1", "C1", "Tq")
+OUTPUTS = ("vfree", "S", "SHt", "W", "gap", "H", "b0", "b1", "F0", "F1", "K1", "C1")
 
 
 def c_compiler() -> str | None:
@@ -67,17 +74,10 @@ def _compiler_name() -> str:
     return os.environ.get("CC") or "gcc (or cc)"
 
 
-def kinematics_expr(system):
-    """The map T(q) of q' = T(q) v (an nq x n CasADi expression in ``system.q_sym``), or None for
-    the identity (the attribute ``kinematics_expr`` of a System that has one)."""
-    return getattr(system, "kinematics_expr", None)
-
-
 def step_function(system) -> ca.Function:
     """``(t, q, v, h, theta) -> OUTPUTS`` of ``system`` (module docstring), every result dense."""
     n = system.n
-    kin = kinematics_expr(system)
-    nq = n if kin is None else system.q_sym.shape[0]
+    nq = getattr(system, "n_q", n)
     t, h, th = ca.MX.sym("t"), ca.MX.sym("h"), ca.MX.sym("theta")
     q, v = ca.MX.sym("q", nq), ca.MX.sym("v", n)
     vfree, S, _, SHt, W, gap, H = one_step_fn(system)(t, q, v, h, th)
@@ -90,11 +90,7 @@ def step_function(system) -> ca.Function:
     else:
         F0 = system.force_fn(t, q, v)
         _, F1, K1, C1, *_ = system.step_data_fn(t + h, q, v)
-    if kin is None:
-        Tq = ca.MX(0, 1)
-    else:
-        Tq = ca.Function("kinematics", [system.q_sym], [kin])(q)
-    outs = [vfree, S, SHt, W, gap, H, b0, b1, F0, F1, K1, C1, Tq]
+    outs = [vfree, S, SHt, W, gap, H, b0, b1, F0, F1, K1, C1]
     outs = [ca.densify(x) for x in outs]
     return ca.Function("lcp_general_step", [t, q, v, h, th], outs, ["t", "q", "v", "h", "theta"], list(OUTPUTS))
 
@@ -158,6 +154,8 @@ StepLibrary = CompiledFunction
 _LIBRARIES = weakref.WeakKeyDictionary()
 #: system -> its projection's CompiledFunction
 _PROJECTIONS = weakref.WeakKeyDictionary()
+#: system -> its position increment's CompiledFunction
+_KINEMATICS = weakref.WeakKeyDictionary()
 
 
 def compile_function(fn: ca.Function, names=None, stacklevel: int = 3) -> CompiledFunction | None:
@@ -213,4 +211,28 @@ def projection_library(system, projection) -> CompiledFunction | None:
         found = compile_function(projection.function, stacklevel=4)
         if found is not None:
             _PROJECTIONS[system] = found
+    return found
+
+
+def kinematics_function(system) -> ca.Function:
+    """``(t, q, w) -> (rate, B)``: the expressions of :func:`lcp.model.kinematics.increment_function`
+    (rate = T(t, q) w; B the unit quaternions' 4 x 4 blocks side by side, 4 x 4k) as one Function."""
+    from lcp.model.kinematics import increment_function
+
+    fn = increment_function(system)
+    t, q, v = system.t_sym, system.q_sym, system.v_sym
+    outs = fn.call([t, q, v])
+    blocks = ca.horzcat(*outs[1:]) if len(outs) > 1 else ca.SX(4, 0)
+    return ca.Function("lcp_position_increment", [t, q, v], [ca.densify(outs[0]), ca.densify(blocks)],
+                       ["t", "q", "w"], ["rate", "B"])
+
+
+def kinematics_library(system) -> CompiledFunction | None:
+    """The compiled position increment of a system with kinematics (:func:`kinematics_function`),
+    or None without a C compiler (with a :class:`RuntimeWarning`)."""
+    found = _KINEMATICS.get(system)
+    if found is None:
+        found = compile_function(kinematics_function(system), stacklevel=4)
+        if found is not None:
+            _KINEMATICS[system] = found
     return found

@@ -20,8 +20,12 @@ Python loop (:mod:`lcp.timestepping.python_loop`) computes it:
   (:func:`lcp.contact.kernels.local_disk3`), the branch refinement and modes
   (:func:`lcp.contact.spatial_nsgs.refine_dense`), the solver's acceptance test and the stuck
   contact's correction of :class:`~lcp.timestepping.contact_step.ContactStep`;
-- restitution shift, impacts, the Kahan-compensated sums of v and q (q' = T(q) v where the system
-  has a kinematics map), every ``save_every``-th state.
+- restitution shift, impacts, the Kahan-compensated sums of v and q, every ``save_every``-th state;
+- with Newton-Euler kinematics q' = T(q) v: :func:`lcp.model.kinematics.advance_positions` (T w
+  and the quaternions' blocks B from the compiled increment of
+  :func:`lcp.timestepping.codegen.kinematics_library`, then NumPy's operations: the compensated
+  sum, the exponential map, the normalisation) and the activation's sizes |H_N| 1 max|q| by
+  NumPy's pairwise sums.
 
 Every other contact step (several active contacts, spatial contacts, another solver, a closed form
 that fails its test) returns NEEDS_PYTHON with the step's data in the buffers: the Python side
@@ -37,6 +41,7 @@ import numpy as np
 from lcp.contact.kernels import local_disk3
 from lcp.contact.spatial_nsgs import refine_dense, residual_blocked_dense
 from lcp.numerics.jit import njit
+from lcp.timestepping.kinematic_kernels import advance, amax_abs, kinematic_sizes
 
 __all__ = ["DONE", "NEEDS_PYTHON", "NONFINITE", "BAD_DATA", "REJECTED", "BUFFER_FULL", "PROJECTION_FAILED",
            "run_general"]
@@ -421,7 +426,7 @@ def _force_rejected(n, nq, lin, q, v, F, miss, size):
 
 @njit(cache=True)
 def _project(pfunc, pargp, presp, piw, pw, p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p_mu, t, q, v, o_H, r, nb, m,
-             ploaded, ptol, max_evals, ell, h, close_tol, closed, opening, out):
+             ploaded, ptol, max_evals, ell, h, close_tol, closed, opening, kin, out):
     """PositionProjection.project after a step (the Python loop's call of it, with its closed and
     opening masks); the projected q goes to ``p_qo``; out = (ok, evaluations, violation)."""
     n = v.size
@@ -435,8 +440,13 @@ def _project(pfunc, pargp, presp, piw, pw, p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p
     p_t[0] = t
     for a in range(q.size):
         p_q[a] = q[a]
-    for a in range(n):
-        p_L[a] = ell + h * abs(v[a])
+    if kin:  # n_q != n_v: one length for every coordinate (the Python loop's reach)
+        vmax = amax_abs(v) if n else 0.0
+        for a in range(q.size):
+            p_L[a] = ell + h * vmax
+    else:
+        for a in range(n):
+            p_L[a] = ell + h * abs(v[a])
     for j in range(m):
         closed[j] = closed[j] and not opening[j]  # hold: closed and free
         p_w[j] = 1.0 if closed[j] else 0.0
@@ -488,7 +498,8 @@ def _project(pfunc, pargp, presp, piw, pw, p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p
 
 @njit(cache=True)
 def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, o_gap, o_H, o_b0, o_b1,
-                o_F0, o_F1, o_K1, o_C1, o_T, k0, k_end, every, h, th, close_tol, open_tol, res_tol, mu, e,
+                o_F0, o_F1, o_K1, o_C1, kin, kfunc, kargp, kresp, kiw, kw, k_t, k_q, k_w, k_rate, k_B, quats,
+                k0, k_end, every, h, th, close_tol, open_tol, res_tol, mu, e,
                 dims, toff, closed_form, disk_local, q, v, cq, cv, loaded, istate, fstate, lin, Q, V, PN, PT, MD,
                 imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act, forced, fdv, project, pfunc, pargp, presp, piw, pw,
                 p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p_mu, nb, ptol, max_evals, ell, ploaded):
@@ -513,7 +524,7 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
     r = o_H.size // n if n else 0  # contact rows: H is (r, n)
     moving = o_b0.size > 0
     check = o_F0.size > 0
-    kin = o_T.size > 0
+    ksz = np.empty(m)
     dv = np.empty(n)
     wv = np.empty(n)
     vn = np.empty(n)
@@ -599,7 +610,11 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
                     any_loaded = False
                     for j in range(m):
                         any_loaded = any_loaded or loaded[j]
-                    szq = _matvec(np.abs(HN), np.abs(q))
+                    if n == nq:
+                        szq = _matvec(np.abs(HN), np.abs(q))
+                    else:  # Newton-Euler kinematics: the rows' sizes times q's largest entry
+                        kinematic_sizes(o_H, r, n, m, q, ksz)
+                        szq = ksz
                     for j in range(m):
                         aa = a_c * uNm[j]
                         bb = b_c * uNf[j]
@@ -664,19 +679,17 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
             vn[a] = s
         for a in range(n):
             inc[a] = (1 - th) * v[a] + th * vn[a]
-        finite = True
-        for a in range(nq):
-            if kin:
-                x = 0.0
-                for c in range(n):
-                    x += o_T[a + c * nq] * inc[c]
-                x = h * x
-            else:
+        if kin:  # q + h T(q) v_theta, unit quaternions by the exponential map (advance_positions)
+            if not advance(kfunc, kargp, kresp, kiw, kw, k_t, k_q, k_w, k_rate, k_B, quats, tk, q, inc, h, cq, qn,
+                            cqn):
+                return k, NONFINITE
+        else:
+            for a in range(nq):
                 x = h * inc[a]
-            y = x - cq[a]
-            s = q[a] + y
-            cqn[a] = (s - q[a]) - y
-            qn[a] = s
+                y = x - cq[a]
+                s = q[a] + y
+                cqn[a] = (s - q[a]) - y
+                qn[a] = s
         tot = 0.0
         for a in range(nq):
             tot += qn[a]
@@ -693,7 +706,7 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
             cv[a] = cvn[a]
         if project:
             _project(pfunc, pargp, presp, piw, pw, p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p_mu, tk + h, q, v, o_H, r, nb,
-                     m, ploaded, ptol, max_evals, ell, h, close_tol, closed, opening, pout)
+                     m, ploaded, ptol, max_evals, ell, h, close_tol, closed, opening, kin, pout)
             istate[15] += 1
             istate[16] += int(pout[1])
             if pout[0] == 0.0 or not math.isfinite(pout[2]):

@@ -14,7 +14,8 @@ of :mod:`lcp.timestepping`, and :mod:`lcp.result`; never the path choice
 What runs compiled: the step data, the force check, the activation rule, free steps, one active
 planar contact under ``"auto"``/``"enum"`` (closed form, modes, branch refinement), one active disk
 contact under the disk law's ``"auto"``/``"local"`` (local solve, branch refinement, the stuck
-correction), impacts, Kahan sums, the position projection (its Newton update compiled from
+correction), impacts, Kahan sums, the position update of Newton-Euler kinematics qdot = T(q) v
+(unit quaternions by the exponential map, as the Python loop), the position projection (its Newton update compiled from
 :attr:`PositionProjection.function <lcp.timestepping.projection.PositionProjection>`, the
 working-set rule in the kernel), saving. The other contact steps are solved by the Python loop's
 own :class:`~lcp.timestepping.contact_step.ContactStep` on the step's data and handed back (same
@@ -25,6 +26,8 @@ schedules, ``scheme="order2"``, systems without numba or without a C compiler (a
 :class:`RuntimeWarning` names the compiler).
 """
 from __future__ import annotations
+
+import contextlib
 
 import numpy as np
 
@@ -53,7 +56,7 @@ def applicable(system, asm, proj) -> str | None:
     """None where the compiled general loop runs this simulation, else the reason it does not:
     a constant system (the constant paths serve it), numba missing, a control schedule, a position
     projection on moving contacts (``"projection"``: its opening test needs the contacts' rates at
-    the projected state), a kinematics map qdot = T(q) v."""
+    the projected state)."""
     if system.is_constant:
         return "constant"
     if not HAVE_NUMBA:
@@ -62,10 +65,6 @@ def applicable(system, asm, proj) -> str | None:
         return "control"
     if proj is not None and system.contacts_depend_on_t:
         return "projection"
-    if getattr(system, "has_kinematics", False):
-        # qdot = T(q) v: the Python loop moves unit quaternions by the exact exponential map and
-        # renormalises them; the compiled kernel would move q by h T v only
-        return "kinematics"
     return None
 
 
@@ -88,19 +87,23 @@ def _disk_local(solver) -> bool:
 
 
 def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int, every: int, solver,
-                     fallback: bool, proj=None, plib=None):
+                     fallback: bool, proj=None, plib=None, klib=None):
     """Moreau-Jean by the compiled general loop (module docstring); ``lib`` is the system's
     :class:`~lcp.timestepping.codegen.CompiledFunction` of the step, ``proj`` the run's
     :class:`~lcp.timestepping.projection.PositionProjection` or None and ``plib`` its compiled
-    update. Same arguments and result as the Python loop."""
-    with lib.lock:
-        if plib is None:
-            return _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj, plib)
-        with plib.lock:
-            return _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj, plib)
+    update, ``klib`` the compiled position increment of a system with kinematics qdot = T(q) v
+    (:func:`lcp.timestepping.codegen.kinematics_library`; required for such a system). Same
+    arguments and result as the Python loop."""
+    if getattr(system, "has_kinematics", False) and klib is None:
+        raise ValueError("a system with kinematics needs its compiled position increment (klib)")
+    with contextlib.ExitStack() as held:
+        for found in (lib, plib, klib):
+            if found is not None:
+                held.enter_context(found.lock)
+        return _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj, plib, klib)
 
 
-def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj, plib):
+def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj, plib, klib):
     """The body of :func:`run_general_loop`, its libraries' buffers held."""
     if n_steps // every > 50_000_000:
         raise ValueError(f"{n_steps // every} saved states would not fit in memory: raise save_every")
@@ -158,6 +161,15 @@ def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj
         pargs = [np.zeros(1), np.zeros(nq), np.zeros(m), np.zeros(n)]
         pouts = [np.zeros(nq), np.zeros(1), np.zeros(1), np.zeros(1)]
 
+    kin = klib is not None
+    if kin:
+        kargs, kf = klib.args, klib
+        krate, kB = klib.outs["rate"], klib.outs["B"]
+        quats = np.asarray(system.unit_quaternions, dtype=np.int64)
+    else:  # placeholders of the kernel's arguments (never used)
+        kargs, kf = [np.zeros(1), np.zeros(nq), np.zeros(n)], lib
+        krate, kB, quats = np.zeros(nq), np.zeros(0), np.zeros(0, dtype=np.int64)
+
     def flush():
         c = int(istate[12])
         for i in range(c):
@@ -170,7 +182,8 @@ def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj
     while True:
         k, reason = run_general(lib.cfunc, lib.argp, lib.resp, lib.iw, lib.w, a_t, a_q, a_v, o["vfree"], o["S"],
                                 o["SHt"], o["W"], o["gap"], o["H"], o["b0"], o["b1"], o["F0"], o["F1"], o["K1"],
-                                o["C1"], o["Tq"], k, n_steps, every, h, th, CLOSE_ULPS * EPS, OPEN_ULPS * EPS,
+                                o["C1"], kin, kf.cfunc, kf.argp, kf.resp, kf.iw, kf.w, *kargs, krate, kB, quats,
+                                k, n_steps, every, h, th, CLOSE_ULPS * EPS, OPEN_ULPS * EPS,
                                 res_tol, mu, e, tdims, toff, closed_form, disk_local, q, v, cq, cv, loaded, istate,
                                 fstate, lin, Q, V, PN, PT, modes, imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act,
                                 forced, fdv, project, pf.cfunc, pf.argp, pf.resp, pf.iw, pf.w, *pargs, *pouts,

@@ -18,7 +18,8 @@ contacts, which solve the discrete Coulomb problem :class:`~lcp.contact.problem.
 Which contacts take part in a step: :mod:`lcp.timestepping.activation`; what counts as an impact:
 :mod:`lcp.timestepping.outcome`. A system with Newton-Euler kinematics (qdot = T(q) v) moves its
 positions by q+ = q- + h T(q-) v_theta, unit quaternions by the exact exponential map
-(:func:`lcp.model.kinematics.advance_positions`), in the Python loop only (it is never constant).
+(:func:`lcp.model.kinematics.advance_positions`), in the Python loop or, with ``fast``, the compiled
+general loop (the same update, bit for bit: :mod:`lcp.timestepping.general_loop`).
 
 Position projection
 -------------------
@@ -225,13 +226,15 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
 
         why = general_loop.applicable(system, asm, proj)
         if why is None:
-            from lcp.timestepping.codegen import projection_library, step_library
+            from lcp.timestepping.codegen import kinematics_library, projection_library, step_library
 
             lib = step_library(system)  # None (with a RuntimeWarning) without a C compiler
             plib = None if lib is None or proj is None else projection_library(system, proj)
-            if lib is not None and (proj is None or plib is not None):
+            kin = getattr(system, "has_kinematics", False)
+            klib = kinematics_library(system) if lib is not None and kin else None
+            if lib is not None and (proj is None or plib is not None) and (klib is not None or not kin):
                 return general_loop.run_general_loop(system, asm, lib, q0, v0, h, th, n_steps, every, solver,
-                                                     options.fallback, proj, plib)
+                                                     options.fallback, proj, plib, klib)
         elif why == "projection":
             note = general_loop.PROJECTION_NOTE
     result = run_python_loop(system, asm, q0, v0, h, th, n_steps, every, solver, options.fallback, proj)
