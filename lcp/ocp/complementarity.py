@@ -256,7 +256,7 @@ def run_phases(tr, x0, P0, options: HomotopyOptions, cache: dict):
     tuple of :func:`run_homotopy`, the message saying when the fixed-phase solve failed first."""
     x, cost, diag, status, message, history = run_fixed_modes(tr, x0, P0, options, cache)
     if status >= 0:
-        return x, cost, diag, status, message, history
+        return _relaxed_tail(tr, x, cost, diag, status, message, history, P0, options, cache)
     if np.all(np.isfinite(x)) and diag["dynamics"] <= 1e-8 and diag["residual"] <= options.tol:
         start = x  # a nearly optimal start: only the tail of the homotopy
         options = replace(options, sigma0=max(min(options.sigma0, 1e-4), options.sigma_min),
@@ -265,6 +265,28 @@ def run_phases(tr, x0, P0, options: HomotopyOptions, cache: dict):
         start = x0
     x, cost, diag, status, msg, more = run_homotopy(tr, start, P0, options, cache)
     return x, cost, diag, status, f"{msg} (The fixed-phase solve failed first: {message})", history + more
+
+
+#: first relaxation of the tail after a fixed-phase solve (W): small enough to stay near the
+#: phases found, large enough to let a pair whose both members vanish choose its side
+TAIL_SIGMA0 = 1e-6
+
+
+def _relaxed_tail(tr, x, cost, diag, status, message, history, P0, options, cache):
+    """A short homotopy (sigma0 = :data:`TAIL_SIGMA0`) from a fixed-phase solution, kept when it
+    lowers the cost and ends solved. The fixed-phase NLP fixes one member of every pair, also of a
+    pair whose members both vanish at the guess (a slide that ends at rest at a node): its KKT
+    point is then a stationary point of that choice, not necessarily of the MPCC. Measured: the
+    Jean-Pratt minimum time at N = 6, R = 0.5625 (gap law) ends 8.0e-5 above T* after the fixed
+    phases and 1.3e-10 above after the tail."""
+    tail = replace(options, sigma0=max(min(options.sigma0, TAIL_SIGMA0), options.sigma_min),
+                   factor=min(options.factor, 1e-2))
+    xt, ct, dt, st, mt, more = run_homotopy(tr, x, P0.copy(), tail, cache)
+    history = history + more
+    if st >= 0 and np.isfinite(ct) and ct < cost - 1e-9 * max(1.0, abs(cost)):
+        return xt, ct, dt, st, f"{mt} (A relaxed tail from the fixed-phase solve lowered the cost from {cost:.10g}.)", \
+            history
+    return x, cost, diag, status, message, history
 
 
 def _rate_pairs(tr):

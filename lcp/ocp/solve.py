@@ -7,6 +7,7 @@ other :mod:`lcp.ocp` modules below the problem (complementarity, guesses, replay
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -28,14 +29,17 @@ def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
         raise ValueError("give either options or keyword options, not both")
     if not isinstance(options, HomotopyOptions):
         raise ValueError(f"options must be HomotopyOptions, got {type(options).__name__}")
-    if method not in ("homotopy", "phases"):
-        raise ValueError(f"method must be 'homotopy' or 'phases', got {method!r}")
+    if method not in ("auto", "homotopy", "phases"):
+        raise ValueError(f"method must be 'auto', 'homotopy' or 'phases', got {method!r}")
+    if method == "auto":  # free steps: place the first pass's phases exactly (falls back to the homotopy)
+        free = problem.steps == "free" and problem.system.n_contacts and guess is None
+        method = "phases" if free else "homotopy"
     if problem.transcription is None:
         problem.transcription = Transcription(problem)
     t0 = time.perf_counter()
     first_pass = []
     if method == "phases" and guess is None:
-        guess = problem.phase_guess()
+        guess = problem.phase_guess(replace(options, tol=max(options.tol, 1e-4), factor=min(options.factor, 1e-2)))
         first_pass = list(guess.homotopy)
     gs = guess_from(problem, guess)
     P0 = np.concatenate([[0.0], problem.q0, problem.v0])
