@@ -1,7 +1,6 @@
 """The optimal control problem: a controlled System, a horizon, costs and constraints."""
 from __future__ import annotations
 
-import copy
 from collections.abc import Callable
 
 import numpy as np
@@ -12,7 +11,7 @@ from lcp.ocp.guess import multistart, simulate_guess
 from lcp.ocp.model import add_control
 from lcp.ocp.options import HomotopyOptions, positive
 from lcp.ocp.results import OCPGuess, OCPResult, Step
-from lcp.ocp.solve import solve_problem
+from lcp.ocp.solve import first_pass, solve_problem
 from lcp.model.schedule import AffineSchedule
 
 __all__ = ["OCP_HOLDS", "OptimalControlProblem"]
@@ -97,13 +96,11 @@ class OptimalControlProblem:
     contact_law : {"auto", "gap", "velocity"}
         ``"gap"``: complementarity on the gap, 0 <= g(q_{k+1}) perp N_k >= 0, the force only where
         the gap is closed at both ends of the step, with impulses at the nodes (Newton's law and
-        Coulomb's, as the event method's impacts), so that within one horizon a contact can open,
-        fly and close; the default, since it is right whether or not a contact opens (with the
-        homotopy's small default sigma0, :class:`HomotopyOptions`). ``"velocity"``: Moreau-Jean's
-        velocity-level law applied to every contact at every step (every contact stays closed:
-        exact for a block that never leaves the floor, wrong for anything that flies).
-        ``"auto"``: the gap law when a contact starts open (g(q0) > 0), else the velocity law (the
-        default before the gap law was). :mod:`lcp.ocp.transcription` says more.
+        Coulomb's, as the event method's impacts): a contact can open, fly and close; the default.
+        ``"velocity"``: Moreau-Jean's velocity-level law on every contact at every step (each
+        stays closed: exact for a block that never leaves the floor, wrong for anything that flies).
+        ``"auto"``: the gap law when a contact starts open, else the velocity law (the former
+        default). :mod:`lcp.ocp.transcription` says more.
 
     Examples
     --------
@@ -161,9 +158,7 @@ class OptimalControlProblem:
         if not isinstance(theta, (int, float, np.floating)) or not 0.5 <= theta <= 1.0:
             raise ValueError(f"theta must lie in [1/2, 1], got {theta!r}")
         self.theta = float(theta)
-        #: fixed step lengths as fractions of T (None: uniform); set on the first pass of a phase
-        #: solve (:meth:`phase_guess`) to put the nodes of ``node_times`` on its grid
-        self.step_fractions = None
+        self.step_fractions = None  # fixed steps / T (None: uniform): a phase_guess grid
         #: the contact law of the transcription, "gap" or "velocity" ("auto" resolved)
         self.contact_law = _contact_law(system, self.q0, contact_law)
         self.T = positive("T", T)
@@ -255,8 +250,7 @@ class OptimalControlProblem:
             mid-range control (:meth:`guess`), or with ``method="phases"`` :meth:`phase_guess`.
         options : HomotopyOptions, optional
         method : {"auto", "homotopy", "phases"}
-            ``"auto"`` (default): ``"phases"`` with free steps, a contact and no guess (the
-            first pass gives the phases, the free steps place them exactly), else
+            ``"auto"`` (default): ``"phases"`` with free steps, a contact and no guess, else
             ``"homotopy"``. ``"homotopy"``: the Scholtes relaxation homotopy and the polishing solve
             (:mod:`lcp.ocp.complementarity`). ``"phases"``: keep the guess's phase structure (the
             mode of every step: which member of each complementarity pair is zero) and solve the
@@ -296,23 +290,14 @@ class OptimalControlProblem:
         It is the default guess of ``solve(method="phases")``: uniform steps relax quickly, and
         their modes give the sequence of phases that the free-step solve then places exactly. The
         nodes pinned by ``node_times`` are nodes of its grid: uniform between them (fixed, not
-        free, steps: :attr:`step_fractions`), so any pinned window works; with ``free_time`` they
-        must be nodes of the uniform grid (else ValueError).
+        free, steps), so any pinned window works; with ``free_time`` the grid is uniform.
 
         Parameters
         ----------
         options : HomotopyOptions, optional
             Default: ``tol=1e-4, factor=1e-2`` (the modes, not the optimum, are wanted).
         """
-        twin = copy.copy(self)
-        twin.steps, twin.hold, twin.replay_tol, twin.transcription, twin.nlp_solvers = "uniform", "constant", None, None, {}
-        twin.step_fractions = None if self.free_time else _piecewise_uniform(self.N, self.T, self.node_times)
-        if self.free_time:
-            try:
-                twin.node_times = twin._check_node_times(self.node_times)
-            except ValueError as exc:
-                raise ValueError(f"phase_guess needs node_times on the uniform grid: {exc}") from None
-        return twin.solve(options=options or HomotopyOptions(tol=1e-4, factor=1e-2))
+        return first_pass(self, options)
 
     def solve_multistart(self, guesses=None, options: HomotopyOptions | None = None, rtol: float = 1e-6,
                          **option_kw) -> OCPResult:
@@ -353,20 +338,6 @@ def _contact_law(system, q0, contact_law: str) -> str:
         gaps = system.gaps(q0) if system.n_contacts else np.zeros(0)
         return "gap" if np.any(gaps > 1e-12 * max(1.0, float(np.max(np.abs(q0), initial=0.0)))) else "velocity"
     return contact_law
-
-
-def _piecewise_uniform(N: int, T: float, node_times: dict):
-    """Step lengths / T of the grid uniform between the pinned nodes of ``node_times`` (None when
-    the uniform grid already holds them), or ValueError when the pins are not increasing in k."""
-    if all(abs(t - k * T / N) <= 1e-12 * T for k, t in node_times.items()):
-        return None
-    ks = [0] + sorted(node_times) + [N]
-    ts = [0.0] + [node_times[k] for k in sorted(node_times)] + [T]
-    if np.any(np.diff(ts) <= 0):
-        raise ValueError(f"node_times must increase with the node index and lie within (0, T), got {node_times!r}")
-    frac = np.concatenate([np.full(k1 - k0, (t1 - t0) / (k1 - k0)) for k0, k1, t0, t1 in
-                           zip(ks[:-1], ks[1:], ts[:-1], ts[1:])]) / T
-    return frac
 
 
 def _grid(system, theta: float, hold: str, steps: str, step_bounds) -> tuple[str, str, tuple[float, float]]:

@@ -6,6 +6,7 @@ other :mod:`lcp.ocp` modules below the problem (complementarity, guesses, replay
 """
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import replace
 
@@ -18,7 +19,8 @@ from lcp.ocp.replay import replay_check
 from lcp.ocp.results import OCPGuess, OCPResult
 from lcp.ocp.transcription import Transcription
 
-__all__ = ["bound_steps_note", "guess_from", "result_of", "solve_problem", "unbounded_note"]
+__all__ = ["bound_steps_note", "first_pass", "guess_from", "piecewise_uniform", "result_of", "solve_problem",
+           "unbounded_note"]
 
 
 def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
@@ -127,3 +129,30 @@ def result_of(problem, x, cost, diag, status, message, history, solve_time) -> O
                      status=status, message=message, homotopy=history,
                      iterations=sum(s.iterations for s in history), solve_time=solve_time,
                      build_time=problem.build_time, problem=problem)
+
+
+def first_pass(problem, options: HomotopyOptions | None = None) -> OCPResult:
+    """:meth:`OptimalControlProblem.phase_guess <lcp.ocp.problem.OptimalControlProblem.phase_guess>`:
+    the problem's twin on fixed steps, uniform between the nodes pinned by ``node_times``
+    (:func:`piecewise_uniform`, stored as the twin's ``step_fractions``), constant hold, no replay."""
+    twin = copy.copy(problem)
+    twin.steps, twin.hold, twin.replay_tol, twin.transcription, twin.nlp_solvers = "uniform", "constant", None, None, {}
+    # with a free T the pins stay constraints of the uniform twin (its grid scales with T)
+    twin.step_fractions = None if problem.free_time else piecewise_uniform(problem.N, problem.T, problem.node_times)
+    return twin.solve(options=options or HomotopyOptions(tol=1e-4, factor=1e-2))
+
+
+def piecewise_uniform(N: int, T: float, node_times: dict):
+    """Step lengths / T of the grid uniform between the pinned nodes of ``node_times`` (None when
+    the uniform grid already holds them), or ValueError when the pins are not increasing in k."""
+    if all(abs(t - k * T / N) <= 1e-12 * T for k, t in node_times.items()):
+        return None
+    ks = [0] + sorted(node_times) + [N]
+    ts = [0.0] + [node_times[k] for k in sorted(node_times)] + [T]
+    if np.any(np.diff(ts) <= 0):
+        raise ValueError(f"node_times must increase with the node index and lie within (0, T), got {node_times!r}")
+    frac = np.concatenate([np.full(k1 - k0, (t1 - t0) / (k1 - k0)) for k0, k1, t0, t1 in
+                           zip(ks[:-1], ks[1:], ts[:-1], ts[1:])]) / T
+    return frac
+
+
