@@ -103,3 +103,13 @@ def test_the_gap_law_lifts_off_when_asked():
     assert pb.contact_law == "gap"
     assert r.success, r.message
     assert np.max(r.q[:, 1]) >= 0.05 - 1e-9 and r.replay.final_miss <= 1e-6
+
+
+def test_a_solve_that_misses_its_tolerance_says_which_step_and_contact():
+    from tests.test_ocp import rest_problem
+
+    r = rest_problem(10, contact_law="velocity").solve(sigma0=1.0, sigma_min=1e-3, polish=False)
+    assert r.status == -2
+    assert "the Coulomb residual is largest in step" in r.message and "contact 'P'" in r.message
+    k = int(r.message.split("largest in step ")[1].split(" ")[0])
+    assert 0 <= k < 10 and f"(t = {r.t[k]:.6g})" in r.message
