@@ -365,7 +365,7 @@ def diagnose(tr, x) -> dict:
         before, res = res, 0.0
         wd = np.maximum(np.diag(W[k])[:m], 1e-300)
         closed0, closed1 = gaps[k] <= gtol, gaps[k + 1] <= gtol
-        act = closed0 & closed1  # a force on an open contact: its own terms below (and |p| here)
+        act = (pN[k] > 0) | (closed0 & closed1)
         rows = np.concatenate([np.flatnonzero(act), m + np.flatnonzero(act)])
         if act.any():
             cp = ContactProblem(W[k][np.ix_(rows, rows)], qf[k][rows], mu[act])
