@@ -113,3 +113,25 @@ def test_a_solve_that_misses_its_tolerance_says_which_step_and_contact():
     assert "the Coulomb residual is largest in step" in r.message and "contact 'P'" in r.message
     k = int(r.message.split("largest in step ")[1].split(" ")[0])
     assert 0 <= k < 10 and f"(t = {r.t[k]:.6g})" in r.message
+
+
+def test_a_tail_whose_replay_misses_falls_back_to_the_fixed_phase_solution(monkeypatch):
+    # the min-time problem at N = 6, R = 0.5625: the relaxed tail lowers the cost from 0.45466 (the
+    # fixed phases) to T*; made to fail its replay, the solve keeps the fixed-phase solution and says so
+    import dataclasses
+
+    from lcp.ocp import solve as solve_mod
+    from tests.test_ocp_phases import _problem
+
+    real, calls = solve_mod.replay_check, []
+
+    def first_fails(res, tol):
+        rc = real(res, tol)
+        calls.append(res.cost)
+        return dataclasses.replace(rc, final_miss=1.0) if len(calls) == 1 else rc
+
+    monkeypatch.setattr(solve_mod, "replay_check", first_fails)
+    ocp, T = _problem(0.5625, 0.5, 6, "time", steps="free", hold="constant")
+    r = ocp.solve()
+    assert len(calls) == 2 and calls[1] > calls[0]
+    assert r.success and r.T == calls[1] and "failed its replay" in r.message

@@ -290,6 +290,8 @@ def _relaxed_tail(tr, x, cost, diag, status, message, history, P0, options, cach
     xt, ct, dt, st, mt, more = run_homotopy(tr, x, P0.copy(), tail, cache)
     history = history + more
     if st >= 0 and np.isfinite(ct) and ct < cost - 1e-9 * max(1.0, abs(cost)):
+        # the fixed-phase solution stays at hand: if the tail's fails its replay, the solve keeps it
+        dt = {**dt, "before_tail": (x, cost, diag, status, message)}
         return xt, ct, dt, st, f"{mt} (A relaxed tail from the fixed-phase solve lowered the cost from {cost:.10g}.)", \
             history
     return x, cost, diag, status, message, history

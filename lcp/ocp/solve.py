@@ -49,7 +49,20 @@ def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
     run = run_phases if method == "phases" else run_homotopy
     x, cost, diag, status, message, history = run(problem.transcription, x0, P0, options, problem.nlp_solvers)
     history = first_pass + history
-    res = result_of(problem, x, cost, diag, status, message, history, time.perf_counter() - t0)
+    res = _checked(problem, result_of(problem, x, cost, diag, status, message, history, time.perf_counter() - t0),
+                   method)
+    before = diag.get("before_tail")
+    if before is not None and res.status == -3:  # the relaxed tail's solution failed its replay
+        alt = _checked(problem, result_of(problem, *before, history, time.perf_counter() - t0), method)
+        if alt.success:
+            alt.message += (f" (The relaxed tail's solution, cost {cost:.10g}, failed its replay: "
+                            f"{res.message})")
+            return alt
+    return res
+
+
+def _checked(problem, res, method):
+    """The result with its bound-steps note and its replay check (status -3 where it misses)."""
     if method == "phases" and problem.steps == "free":
         res.message += bound_steps_note(problem, res)
     if problem.replay_tol is not None and np.all(np.isfinite(res.q)):
