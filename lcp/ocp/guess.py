@@ -91,12 +91,19 @@ def x0_from_guess(pb, tr, gs: OCPGuess) -> np.ndarray:
             pN, pT = np.maximum(gs.p_N[k], 0.0) / steps[k], gs.p_T[k] / steps[k]  # forces
             bp, bm = np.maximum(pT, 0.0), np.maximum(-pT, 0.0)
             lam = np.abs(uT)
+            if tr.gap_law:  # the node's impulse by Newton's law where the guess lands (a solution's
+                # nodes carry the velocity before it); the step then starts from the velocity after it
+                PN, vk = _landing_impulse(pb.system, gs.q[k], gs.v[k], H, m, e)
+                uN0, uT0 = H[:m] @ vk, H[m:] @ vk
+                vals_i = {"PN": PN, "sI": uN0 + e * np.minimum(H[:m] @ gs.v[k], 0.0)}
+            else:
+                vals_i = {"sI": uN0 + e * np.minimum(uN0, 0.0)}
             vals = {"pN": pN, "bp": bp, "bm": bm, "lam": lam,
                     "wN": (np.maximum(pb.system.gaps(gs.q[k + 1]) / tr.gap_scale, 0.0) if tr.gap_law else
                            np.maximum(uN + e * np.minimum(H[:m] @ gs.v[k], 0.0), 0.0)),
                     "wp": np.maximum(lam + uT, 0.0), "wm": np.maximum(lam - uT, 0.0),
                     "wl": np.maximum(mu * pN - bp - bm, 0.0),
-                    "sU": uN0, "sI": uN0 + e * np.minimum(uN0, 0.0),
+                    "sU": uN0, **vals_i,
                     "Plam": np.abs(uT0), "Pwp": np.abs(uT0) + uT0, "Pwm": np.abs(uT0) - uT0}
             for nm, val in vals.items():
                 if nm not in ix:  # the velocity law has no impulses at the nodes
@@ -105,6 +112,22 @@ def x0_from_guess(pb, tr, gs: OCPGuess) -> np.ndarray:
     if pb.max_cost is not None:
         x0[ix["z"]] = 0.0
     return np.clip(x0, tr.lbx, tr.ubx)
+
+
+def _landing_impulse(system, q, v, H, m, e):
+    """(P_N, v+): the normal impulses of the contacts closed at q and approaching at v that give
+    u_N+ = -e u_N- (Newton's law, frictionless), and the velocity after them; zeros elsewhere."""
+    PN = np.zeros(m)
+    scale = max(1.0, float(np.max(np.abs(q), initial=0.0)))
+    # approaching by more than rounding: a resting contact's u_N of 1e-17 is no landing (an impulse
+    # of that size would flip the phase guess's choice between the impulse and the gap)
+    hit = (system.gaps(q) <= 1e-9 * scale) & (H[:m] @ v < -1e-8 * max(1.0, float(np.max(np.abs(v), initial=0.0))))
+    if not np.any(hit) or system.n_bilateral:
+        return PN, v
+    HN = H[:m][hit]
+    MinvHt = np.linalg.solve(system.mass(q), HN.T)
+    PN[hit] = np.maximum(np.linalg.solve(HN @ MinvHt, -(1.0 + e[hit]) * (HN @ v)), 0.0)
+    return PN, v + MinvHt @ PN[hit]
 
 
 def simulate_guess(pb, u, T: float, solver: str = "auto") -> OCPGuess:

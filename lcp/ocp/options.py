@@ -35,7 +35,11 @@ class HomotopyOptions:
     ----------
     sigma0 : float
         First relaxation parameter (> 0): complementarity pairs satisfy a w <= sigma (a force times
-        a velocity, in W).
+        a velocity, in W). Small by default: under the gap law a relaxed pair lets a contact carry
+        a force N while its gap is open by sigma theta h / N (it "hovers"); from sigma0 = 1 the
+        Jean-Pratt block hovered, lost friction and the homotopy could not bring it back down,
+        while 1e-4 (1e-2 N against 1e-2 m/s) keeps every contact of a guess that starts on its
+        floor there and still relaxes the stick/slide switches.
     factor : float
         sigma is multiplied by this factor (in (0, 1)) after each stage.
     sigma_min : float
@@ -47,7 +51,8 @@ class HomotopyOptions:
         Finish with one solve whose complementarity is exact (the smaller member of each pair fixed
         at zero); kept only if IPOPT converges and the residual does not grow.
     max_iter : int
-        IPOPT iteration limit per stage.
+        IPOPT iteration limit per stage (3000: the first relaxed stage of the move-and-hold
+        problem at N = 40 needs about 1100).
     ipopt_tol : float
         IPOPT's convergence tolerance (``tol`` and ``constr_viol_tol``).
     ipopt_options : dict, optional
@@ -58,14 +63,16 @@ class HomotopyOptions:
     >>> from lcp.ocp import HomotopyOptions
     >>> HomotopyOptions(sigma0=1.0, factor=0.1, sigma_min=1e-6).n_stages
     7
+    >>> HomotopyOptions().sigma0
+    0.0001
     """
 
-    sigma0: float = 1.0
+    sigma0: float = 1e-4
     factor: float = 0.1
     sigma_min: float = 1e-12
     tol: float = 1e-8
     polish: bool = True
-    max_iter: int = 500
+    max_iter: int = 3000
     ipopt_tol: float = 1e-10
     ipopt_options: dict | None = None
 

@@ -1,7 +1,6 @@
 """The optimal control problem: a controlled System, a horizon, costs and constraints."""
 from __future__ import annotations
 
-import copy
 from collections.abc import Callable
 
 import numpy as np
@@ -14,7 +13,7 @@ from lcp.ocp.model import add_control
 from lcp.ocp.options import HomotopyOptions, positive
 from lcp.ocp.pairs import check_pairs
 from lcp.ocp.results import OCPGuess, OCPResult, Step
-from lcp.ocp.solve import solve_problem
+from lcp.ocp.solve import first_pass, solve_problem
 from lcp.ocp.spatial import check_spatial
 from lcp.model.schedule import AffineSchedule
 
@@ -71,7 +70,11 @@ class OptimalControlProblem:
         the cross complementarity that puts every switch on a node (module
         :mod:`lcp.ocp.transcription`).
     step_bounds : (float, float)
-        Bounds of a free step, relative to T / N.
+        Bounds of a free step, relative to T / N. A phase that the first pass found but the
+        optimum lacks can only shrink to the lower bound (the move-and-hold problem on
+        [0.5, 0.7] s, T = 1.3 s, ends 4.7e-4 above its optimum at N = 40, exact at N = 52). A
+        smaller lower bound (1e-3) lets such steps shrink further but lets short steps carry
+        large forces: solutions the replay refuses (misses of 0.3 m measured), so 0.05 stays.
     node_times : dict {k: t}, optional
         Pin node k at time t (free steps; e.g. the ends of a time window of a path constraint).
     stage_cost : callable(Step) -> scalar, optional
@@ -96,11 +99,13 @@ class OptimalControlProblem:
     contact_law : {"auto", "gap", "velocity"}
         ``"gap"``: complementarity on the gap, 0 <= g(q_{k+1}) perp N_k >= 0, the force only where
         the gap is closed at both ends of the step, with impulses at the nodes (Newton's law and
-        Coulomb's, as the event method's impacts), so that within one horizon a contact can open,
-        fly and close. ``"velocity"``: Moreau-Jean's velocity-level law applied to every contact at
-        every step (every contact stays closed: exact for a block that never leaves the floor, wrong
-        for anything that flies). ``"auto"`` (default): the gap law when a contact starts open
-        (g(q0) > 0), else the velocity law. :mod:`lcp.ocp.transcription` says more.
+        Coulomb's, as the event method's impacts): a contact can open, fly and close; the default
+        (None) for planar contacts. ``"velocity"``: Moreau-Jean's velocity-level law on every contact
+        at every step (each stays closed: exact for a block that never leaves the floor, wrong for
+        anything that flies); the default for a system with spatial contacts, whose disk law is
+        written at velocity level only (:mod:`lcp.ocp.spatial`). ``"auto"``: the gap law when a
+        contact starts open, else the velocity law (the former default). :mod:`lcp.ocp.transcription`
+        says more.
     complementarity : list of (callable(Step), callable(Step)), optional
         Path pairs 0 <= a(step) perp b(step) >= 0 at every step, relaxed with the contacts (:mod:`lcp.ocp.pairs`).
 
@@ -127,7 +132,7 @@ class OptimalControlProblem:
                  stage_cost: Callable | None = None, terminal_cost: Callable | None = None,
                  terminal_constraints: Callable | None = None, path_constraints: Callable | None = None,
                  path_equalities: Callable | None = None, max_cost: Callable | None = None, control_rate_weight: float = 0.0,
-                 replay_tol: float | None = 1e-6, contact_law: str = "auto", complementarity=None):
+                 replay_tol: float | None = 1e-6, contact_law: str | None = None, complementarity=None):
         from lcp.scenes.scene import Scene
 
         if isinstance(system, Scene):
@@ -159,6 +164,7 @@ class OptimalControlProblem:
         if not isinstance(theta, (int, float, np.floating)) or not 0.5 <= theta <= 1.0:
             raise ValueError(f"theta must lie in [1/2, 1], got {theta!r}")
         self.theta = float(theta)
+        self.step_fractions = None  # fixed steps / T (None: uniform): a phase_guess grid
         #: the contact law of the transcription, "gap" or "velocity" ("auto" resolved)
         self.contact_law = _contact_law(system, self.q0, contact_law)
         self.T = positive("T", T)
@@ -240,7 +246,7 @@ class OptimalControlProblem:
         return simulate_guess(self, u, self.T if T is None else positive("T", T), solver)
 
     # ------------------------------------------------------------------ solve
-    def solve(self, guess=None, options: HomotopyOptions | None = None, method: str = "homotopy",
+    def solve(self, guess=None, options: HomotopyOptions | None = None, method: str = "auto",
               **option_kw) -> OCPResult:
         """Solve from a guess, then replay the control (:attr:`OCPResult.replay`).
 
@@ -250,8 +256,9 @@ class OptimalControlProblem:
             Initial guess; one on another grid is resampled. By default, the simulation of the
             mid-range control (:meth:`guess`), or with ``method="phases"`` :meth:`phase_guess`.
         options : HomotopyOptions, optional
-        method : {"homotopy", "phases"}
-            ``"homotopy"``: the Scholtes relaxation homotopy and the polishing solve
+        method : {"auto", "homotopy", "phases"}
+            ``"auto"`` (default): ``"phases"`` with free steps, a contact and no guess, else
+            ``"homotopy"``. ``"homotopy"``: the Scholtes relaxation homotopy and the polishing solve
             (:mod:`lcp.ocp.complementarity`). ``"phases"``: keep the guess's phase structure (the
             mode of every step: which member of each complementarity pair is zero) and solve the
             one smooth NLP that remains; with ``steps="free"`` the step lengths, hence the switch
@@ -289,20 +296,15 @@ class OptimalControlProblem:
 
         It is the default guess of ``solve(method="phases")``: uniform steps relax quickly, and
         their modes give the sequence of phases that the free-step solve then places exactly. The
-        nodes fixed by ``node_times`` must be nodes of the uniform grid (else ValueError).
+        nodes pinned by ``node_times`` are nodes of its grid: uniform between them (fixed, not
+        free, steps), so any pinned window works; with ``free_time`` the grid is uniform.
 
         Parameters
         ----------
         options : HomotopyOptions, optional
             Default: ``tol=1e-4, factor=1e-2`` (the modes, not the optimum, are wanted).
         """
-        twin = copy.copy(self)
-        twin.steps, twin.hold, twin.replay_tol, twin.transcription, twin.nlp_solvers = "uniform", "constant", None, None, {}
-        try:
-            twin.node_times = twin._check_node_times(self.node_times)
-        except ValueError as exc:
-            raise ValueError(f"phase_guess needs node_times on the uniform grid: {exc}") from None
-        return twin.solve(options=options or HomotopyOptions(tol=1e-4, factor=1e-2))
+        return first_pass(self, options)
 
     def solve_multistart(self, guesses=None, options: HomotopyOptions | None = None, rtol: float = 1e-6,
                          **option_kw) -> OCPResult:
@@ -338,7 +340,10 @@ def _refuse_unmodelled(system) -> None:
 
 
 def _contact_law(system, q0, contact_law: str) -> str:
-    """The transcription's contact law: "auto" is the gap law when a contact starts open."""
+    """The transcription's contact law: "auto" is the gap law when a contact starts open; None (the
+    default) the gap law, or the velocity law for spatial contacts (lcp.ocp.spatial models no other)."""
+    if contact_law is None:
+        return "velocity" if getattr(system, "is_spatial", False) else "gap"
     if contact_law not in ("auto", "gap", "velocity"):
         raise ValueError(f"contact_law must be 'auto', 'gap' or 'velocity', got {contact_law!r}")
     if contact_law == "auto":

@@ -183,7 +183,7 @@ def replay(result: OCPResult, refine: int = 10, method: str = "moreau-jean", sol
     >>> import lcp
     >>> from studies.optimal_control import rest_to_rest_problem
     >>> res = rest_to_rest_problem(10, "time").solve()
-    >>> replay(res, refine=1).max_error_q < 1e-12
+    >>> replay(res, refine=1).max_error_q < 1e-10  # IPOPT's tolerance: the same steps
     True
     """
     from lcp.simulation import simulate

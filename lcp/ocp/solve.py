@@ -6,7 +6,9 @@ other :mod:`lcp.ocp` modules below the problem (complementarity, guesses, replay
 """
 from __future__ import annotations
 
+import copy
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -18,7 +20,8 @@ from lcp.ocp.results import OCPGuess, OCPResult
 from lcp.ocp.spatial import SpatialTranscription
 from lcp.ocp.transcription import Transcription
 
-__all__ = ["bound_steps_note", "guess_from", "result_of", "solve_problem", "unbounded_note"]
+__all__ = ["bound_steps_note", "first_pass", "guess_from", "piecewise_uniform", "result_of", "solve_problem",
+           "unbounded_note"]
 
 
 def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
@@ -29,14 +32,17 @@ def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
         raise ValueError("give either options or keyword options, not both")
     if not isinstance(options, HomotopyOptions):
         raise ValueError(f"options must be HomotopyOptions, got {type(options).__name__}")
-    if method not in ("homotopy", "phases"):
-        raise ValueError(f"method must be 'homotopy' or 'phases', got {method!r}")
+    if method not in ("auto", "homotopy", "phases"):
+        raise ValueError(f"method must be 'auto', 'homotopy' or 'phases', got {method!r}")
+    if method == "auto":  # free steps: place the first pass's phases exactly (falls back to the homotopy)
+        free = problem.steps == "free" and problem.system.n_contacts and guess is None
+        method = "phases" if free else "homotopy"
     if problem.transcription is None:
         problem.transcription = (SpatialTranscription if problem.system.is_spatial else Transcription)(problem)
     t0 = time.perf_counter()
     first_pass = []
     if method == "phases" and guess is None:
-        guess = problem.phase_guess()
+        guess = problem.phase_guess(replace(options, tol=max(options.tol, 1e-4), factor=min(options.factor, 1e-2)))
         first_pass = list(guess.homotopy)
     gs = guess_from(problem, guess)
     P0 = np.concatenate([[0.0], problem.q0, problem.v0])
@@ -44,7 +50,20 @@ def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
     run = run_phases if method == "phases" else run_homotopy
     x, cost, diag, status, message, history = run(problem.transcription, x0, P0, options, problem.nlp_solvers)
     history = first_pass + history
-    res = result_of(problem, x, cost, diag, status, message, history, time.perf_counter() - t0)
+    res = _checked(problem, result_of(problem, x, cost, diag, status, message, history, time.perf_counter() - t0),
+                   method)
+    before = diag.get("before_tail")
+    if before is not None and res.status == -3:  # the relaxed tail's solution failed its replay
+        alt = _checked(problem, result_of(problem, *before, history, time.perf_counter() - t0), method)
+        if alt.success:
+            alt.message += (f" (The relaxed tail's solution, cost {cost:.10g}, failed its replay: "
+                            f"{res.message})")
+            return alt
+    return res
+
+
+def _checked(problem, res, method):
+    """The result with its bound-steps note and its replay check (status -3 where it misses)."""
     if method == "phases" and problem.steps == "free":
         res.message += bound_steps_note(problem, res)
     if problem.replay_tol is not None and np.all(np.isfinite(res.q)):
@@ -124,3 +143,30 @@ def result_of(problem, x, cost, diag, status, message, history, solve_time) -> O
                      status=status, message=message, homotopy=history,
                      iterations=sum(s.iterations for s in history), solve_time=solve_time,
                      build_time=problem.build_time, problem=problem)
+
+
+def first_pass(problem, options: HomotopyOptions | None = None) -> OCPResult:
+    """:meth:`OptimalControlProblem.phase_guess <lcp.ocp.problem.OptimalControlProblem.phase_guess>`:
+    the problem's twin on fixed steps, uniform between the nodes pinned by ``node_times``
+    (:func:`piecewise_uniform`, stored as the twin's ``step_fractions``), constant hold, no replay."""
+    twin = copy.copy(problem)
+    twin.steps, twin.hold, twin.replay_tol, twin.transcription, twin.nlp_solvers = "uniform", "constant", None, None, {}
+    # with a free T the pins stay constraints of the uniform twin (its grid scales with T)
+    twin.step_fractions = None if problem.free_time else piecewise_uniform(problem.N, problem.T, problem.node_times)
+    return twin.solve(options=options or HomotopyOptions(tol=1e-4, factor=1e-2))
+
+
+def piecewise_uniform(N: int, T: float, node_times: dict):
+    """Step lengths / T of the grid uniform between the pinned nodes of ``node_times`` (None when
+    the uniform grid already holds them), or ValueError when the pins are not increasing in k."""
+    if all(abs(t - k * T / N) <= 1e-12 * T for k, t in node_times.items()):
+        return None
+    ks = [0] + sorted(node_times) + [N]
+    ts = [0.0] + [node_times[k] for k in sorted(node_times)] + [T]
+    if np.any(np.diff(ts) <= 0):
+        raise ValueError(f"node_times must increase with the node index and lie within (0, T), got {node_times!r}")
+    frac = np.concatenate([np.full(k1 - k0, (t1 - t0) / (k1 - k0)) for k0, k1, t0, t1 in
+                           zip(ks[:-1], ks[1:], ts[:-1], ts[1:])]) / T
+    return frac
+
+

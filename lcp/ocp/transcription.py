@@ -202,8 +202,9 @@ class Transcription:
                 pb.T_bounds[1] if pb.free_time else pb.T) / N
             hs = [self._var(f"h{k}", 1, hmin, hmax, key="h") for k in range(N)]
             self._constrain(ca.sum1(ca.vertcat(*hs)) - Tv, 0.0, 0.0)
-        else:
-            hs = [Tv / N] * N
+        else:  # uniform, or the fixed piecewise-uniform grid of a phase guess (pb.step_fractions)
+            fr = pb.step_fractions
+            hs = [Tv / N] * N if fr is None else [Tv * float(f) for f in fr]
         affine = pb.hold == "affine"
         n_u = {"constant": N, "linear": N + 1, "affine": 2 * N}[pb.hold]
         us = [self._var(f"u{k}", nu, pb.u_min, pb.u_max, key="u") for k in range(n_u)]
@@ -214,8 +215,10 @@ class Transcription:
         tk = [ca.SX(0)]
         for k in range(N):
             tk.append(tk[-1] + hs[k])
-        for k, tval in pb.node_times.items():
-            self._constrain(tk[k] - tval, 0.0, 0.0)
+        if pb.steps == "free" or pb.free_time:  # a fixed grid holds its pinned nodes by construction
+            # (a constant row of zeros would leave IPOPT a rank-deficient Jacobian)
+            for k, tval in pb.node_times.items():
+                self._constrain(tk[k] - tval, 0.0, 0.0)
         J = ca.SX(0)
         pair_sizes = {}
         prev = None  # the previous step's (a, w) blocks, for the cross complementarity
@@ -386,7 +389,10 @@ class Transcription:
         pb, ix = self.pb, self.ix
         N, n, m = pb.N, pb.system.n, pb.system.n_contacts
         T = float(x[ix["T"]].ravel()[0]) if pb.free_time else pb.T
-        steps = x[ix["h"]].ravel() if pb.steps == "free" else np.full(N, T / N)
+        if pb.steps == "free":
+            steps = x[ix["h"]].ravel()
+        else:
+            steps = np.full(N, T / N) if pb.step_fractions is None else T * np.asarray(pb.step_fractions)
         q = np.vstack([pb.q0] + [x[i] for i in ix["q"]]).reshape(N + 1, n)
         v = np.vstack([pb.v0] + [x[i] for i in ix["v"]]).reshape(N + 1, n)
         u = np.vstack([x[i] for i in ix["u"]]).reshape(-1, pb.nu)
