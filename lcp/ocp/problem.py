@@ -100,12 +100,9 @@ class OptimalControlProblem:
         ``"gap"``: complementarity on the gap, 0 <= g(q_{k+1}) perp N_k >= 0, the force only where
         the gap is closed at both ends of the step, with impulses at the nodes (Newton's law and
         Coulomb's, as the event method's impacts): a contact can open, fly and close; the default
-        (None) for planar contacts. ``"velocity"``: Moreau-Jean's velocity-level law on every contact
-        at every step (each stays closed: exact for a block that never leaves the floor, wrong for
-        anything that flies); the default for a system with spatial contacts, whose disk law is
-        written at velocity level only (:mod:`lcp.ocp.spatial`). ``"auto"``: the gap law when a
-        contact starts open, else the velocity law (the former default). :mod:`lcp.ocp.transcription`
-        says more.
+        (None) for planar contacts. ``"velocity"``: Moreau-Jean's law on every contact at every step
+        (each stays closed); the default for spatial contacts (:mod:`lcp.ocp.spatial` models no
+        other). ``"auto"``: the gap law when a contact starts open, else the velocity law.
     complementarity : list of (callable(Step), callable(Step)), optional
         Path pairs 0 <= a(step) perp b(step) >= 0 at every step, relaxed with the contacts (:mod:`lcp.ocp.pairs`).
 

@@ -27,6 +27,8 @@ __all__ = ["bound_steps_note", "first_pass", "guess_from", "piecewise_uniform", 
 def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
     """The procedure of :meth:`OptimalControlProblem.solve <lcp.ocp.problem.OptimalControlProblem.solve>`."""
     if options is None:
+        if problem.system.is_spatial:  # the disk transcription's validated start (velocity law: no hovering)
+            option_kw = {"sigma0": 1.0, **option_kw}
         options = HomotopyOptions(**option_kw)
     elif option_kw:
         raise ValueError("give either options or keyword options, not both")
@@ -35,7 +37,8 @@ def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
     if method not in ("auto", "homotopy", "phases"):
         raise ValueError(f"method must be 'auto', 'homotopy' or 'phases', got {method!r}")
     if method == "auto":  # free steps: place the first pass's phases exactly (falls back to the homotopy)
-        free = problem.steps == "free" and problem.system.n_contacts and guess is None
+        free = (problem.steps == "free" and problem.system.n_contacts and guess is None
+                and not problem.system.is_spatial)
         method = "phases" if free else "homotopy"
     if problem.transcription is None:
         problem.transcription = (SpatialTranscription if problem.system.is_spatial else Transcription)(problem)
