@@ -54,6 +54,9 @@ class SolverStats:
     closed_steps : int
         Steps of the order-two scheme (``scheme="order2"``) that held closed contacts as
         constraints of a RATTLE step (:mod:`lcp.timestepping.closed_rattle`).
+    kernel_multi_steps : int
+        Steps with several active contacts solved inside the compiled general loop's kernel
+        (:mod:`lcp.timestepping.multi_kernels`; 0 on every other path).
     """
 
     steps: int = 0
@@ -69,6 +72,7 @@ class SolverStats:
     projections: int = 0
     projection_iterations: int = 0
     closed_steps: int = 0
+    kernel_multi_steps: int = 0
 
 
 class StepImpulses:

@@ -27,7 +27,10 @@ Python loop (:mod:`lcp.timestepping.python_loop`) computes it:
   sum, the exponential map, the normalisation) and the activation's sizes |H_N| 1 max|q| by
   NumPy's pairwise sums.
 
-Every other contact step (several active contacts, spatial contacts, another solver, a closed form
+- two to 40 active disk-law contacts under ``"auto"``: NSGS, its refinement, the acceptance test and
+  the all-stick correction (:mod:`lcp.timestepping.multi_kernels`).
+
+Every other contact step (several planar contacts, another solver, a closed form or NSGS solve
 that fails its test) returns NEEDS_PYTHON with the step's data in the buffers: the Python side
 solves it with the loop's own :class:`~lcp.timestepping.contact_step.ContactStep` and calls back
 with the velocity increment (``forced``), and the kernel finishes that step and goes on.
@@ -42,6 +45,7 @@ from lcp.contact.kernels import local_disk3
 from lcp.contact.spatial_nsgs import refine_dense, residual_blocked_dense
 from lcp.numerics.jit import njit
 from lcp.timestepping.kinematic_kernels import advance, amax_abs, kinematic_sizes
+from lcp.timestepping.multi_kernels import cone_multi_step, record_multi
 
 __all__ = ["DONE", "NEEDS_PYTHON", "NONFINITE", "BAD_DATA", "REJECTED", "BUFFER_FULL", "PROJECTION_FAILED",
            "run_general"]
@@ -500,14 +504,18 @@ def _project(pfunc, pargp, presp, piw, pw, p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p
 def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, o_gap, o_H, o_b0, o_b1,
                 o_F0, o_F1, o_K1, o_C1, kin, kfunc, kargp, kresp, kiw, kw, k_t, k_q, k_w, k_rate, k_B, quats,
                 k0, k_end, every, h, th, close_tol, open_tol, res_tol, mu, e,
-                dims, toff, closed_form, disk_local, q, v, cq, cv, loaded, istate, fstate, lin, Q, V, PN, PT, MD,
+                dims, toff, closed_form, disk_local, cone_multi, max_sweeps, q, v, cq, cv, loaded, istate, fstate,
+                lin, Q, V, PN, PT, MD,
                 imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act, forced, fdv, project, pfunc, pargp, presp, piw, pw,
                 p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p_mu, nb, ptol, max_evals, ell, ploaded):
     """Steps k0 .. k_end - 1 (module docstring); returns (step, reason).
 
     ``istate`` = [all_loaded, free_steps, solver_calls, iterations, max_iterations, open, stick,
     slide+, slide-, slide, ambiguous, first ambiguous step, impacts, active count of a handed step,
-    skip the force check of step k0, projections, projection iterations]; ``fstate`` = [max
+    skip the force check of step k0, projections, projection iterations, the failed projection's
+    evaluations, steps with several contacts solved here]; ``cone_multi``: steps with 2 to
+    ``cone_multi`` active disk-law contacts are solved here (:func:`lcp.timestepping.multi_kernels.cone_multi_step`,
+    at most ``max_sweeps`` NSGS sweeps; 0: none); ``fstate`` = [max
     residual, worst violation after a projection, violation of a failed projection]; ``lin`` the force check's
     linearisation (t, q, v, F, K, C; t NaN: none). When the reason is not DONE the state (q, v,
     sums, loaded) is that at the start of the returned step; for NEEDS_PYTHON the buffers hold its
@@ -540,6 +548,10 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
     opening = np.zeros(m, dtype=np.bool_)
     allm = np.arange(m)
     cap = imp_t.size
+    room = min(max(m, 1), cap)  # impacts one step may record
+    nmax = m + int(np.sum(dims)) if cone_multi else 0
+    pmul = np.empty(nmax)
+    mdmul = np.empty(max(m, 1), dtype=np.int64)
     a_c = h * (1 - th)
     b_c = h * th
     for k in range(k0, k_end):
@@ -549,7 +561,7 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
             for a in range(n):
                 dv[a] = fdv[a]
         else:
-            if istate[12] + 1 > cap:
+            if istate[12] + room > cap:
                 return k, BUFFER_FULL
             a_t[0] = tk
             for a in range(nq):
@@ -668,6 +680,11 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
                         PT[row, toff[j] + a] = out[1 + a]
                     MD[row, j] = md
                 istate[5 + md] += 1
+            elif (2 <= na <= cone_multi
+                  and cone_multi_step(act, na, m, n, r, o_W, o_H, o_SHt, o_b1, moving, v, vfree, dvf, uNm, mu, e,
+                                      dims, toff, res_tol, max_sweeps, istate, fstate, dv, pmul, mdmul)):
+                record_multi(act, na, m, tk, h, row, pmul, mdmul, dims, toff, e, o_gap, uNm, uNf, loaded, ploaded,
+                             project, istate, imp_t, imp_j, imp_p, PN, PT, MD)
             else:
                 istate[13] = na
                 return k, NEEDS_PYTHON

@@ -14,7 +14,10 @@ of :mod:`lcp.timestepping`, and :mod:`lcp.result`; never the path choice
 What runs compiled: the step data, the force check, the activation rule, free steps, one active
 planar contact under ``"auto"``/``"enum"`` (closed form, modes, branch refinement), one active disk
 contact under the disk law's ``"auto"``/``"local"`` (local solve, branch refinement, the stuck
-correction), impacts, Kahan sums, the position update of Newton-Euler kinematics qdot = T(q) v
+correction), two to 40 active disk-law contacts under ``"auto"`` (NSGS, branch refinement, the
+solver's acceptance test, the all-stick correction: :mod:`lcp.timestepping.multi_kernels`; the Python
+loop's results to the solver's tolerance, counted in ``stats.kernel_multi_steps``), impacts, Kahan
+sums, the position update of Newton-Euler kinematics qdot = T(q) v
 (unit quaternions by the exponential map, as the Python loop), the position projection (its Newton update compiled from
 :attr:`PositionProjection.function <lcp.timestepping.projection.PositionProjection>`, the
 working-set rule in the kernel), saving. The other contact steps are solved by the Python loop's
@@ -86,6 +89,20 @@ def _disk_local(solver) -> bool:
     return type(solver) is ConeAutoSolver or (type(solver) is LocalSolver and solver.polish)
 
 
+def _cone_multi(solver) -> tuple[int, int]:
+    """(largest number of active disk-law contacts solved in the kernel, NSGS sweeps): the plain
+    ``"auto"`` disk-law solver's NSGS range (its compiled, polished NSGS without an error target
+    of its own); (0, 0) for any other solver."""
+    from lcp.contact.spatial_solvers import ConeAutoSolver
+
+    if type(solver) is not ConeAutoSolver or solver.error_tol is not None:
+        return 0, 0
+    nsgs = solver.nsgs
+    if not (nsgs.compiled and nsgs.polish) or nsgs.error_tol is not None or nsgs.residual_tol != solver.residual_tol:
+        return 0, 0
+    return int(solver.NSGS_MAX_CONTACTS), int(nsgs.max_sweeps)
+
+
 def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int, every: int, solver,
                      fallback: bool, proj=None, plib=None, klib=None):
     """Moreau-Jean by the compiled general loop (module docstring); ``lib`` is the system's
@@ -125,7 +142,7 @@ def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj
     q, v = np.array(q0, dtype=float), np.array(v0, dtype=float)
     cq, cv = np.zeros(nq), np.zeros(n)
     loaded = np.zeros(m, dtype=np.bool_)
-    istate = np.zeros(18, dtype=np.int64)
+    istate = np.zeros(19, dtype=np.int64)
     fstate = np.zeros(3)
     lin = np.full(1 + nq + 2 * n + 2 * n * n, np.nan)
     imp_t, imp_j = np.zeros(_IMPACT_BUFFER), np.zeros(_IMPACT_BUFFER, dtype=np.int64)
@@ -139,6 +156,7 @@ def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj
     mu, e = np.asarray(system.mu, dtype=float), np.asarray(system.e, dtype=float)
     closed_form = (not spatial) and _closed_form(solver)
     disk_local = spatial and _disk_local(solver)
+    cone_multi, max_sweeps = _cone_multi(solver) if spatial else (0, 0)
     tdims = np.asarray(system.tangent_dims, dtype=np.int64)
     toff = np.asarray(system.tangent_offsets, dtype=np.int64)
     res_tol = float(getattr(solver, "residual_tol", 1e-10))
@@ -184,7 +202,8 @@ def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj
                                 o["SHt"], o["W"], o["gap"], o["H"], o["b0"], o["b1"], o["F0"], o["F1"], o["K1"],
                                 o["C1"], kin, kf.cfunc, kf.argp, kf.resp, kf.iw, kf.w, *kargs, krate, kB, quats,
                                 k, n_steps, every, h, th, CLOSE_ULPS * EPS, OPEN_ULPS * EPS,
-                                res_tol, mu, e, tdims, toff, closed_form, disk_local, q, v, cq, cv, loaded, istate,
+                                res_tol, mu, e, tdims, toff, closed_form, disk_local, cone_multi, max_sweeps, q, v,
+                                cq, cv, loaded, istate,
                                 fstate, lin, Q, V, PN, PT, modes, imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act,
                                 forced, fdv, project, pf.cfunc, pf.argp, pf.resp, pf.iw, pf.w, *pargs, *pouts,
                                 system.n_bilateral, ptol, max_evals, ell, ploaded)
@@ -284,3 +303,4 @@ def _merge_counters(notes, istate, fstate, h):
     if istate[10] and (notes.first_ambiguous is None or notes.first_ambiguous[0] > istate[11]):
         notes.first_ambiguous = (int(istate[11]), int(istate[11]) * h)
     stats.max_residual = max(stats.max_residual, float(fstate[0]))
+    stats.kernel_multi_steps += int(istate[18])
