@@ -193,12 +193,13 @@ def controlled_block(R=REST["R"], u_max=REST["u_max"], v0=0.0):
 
 
 def rest_to_rest_problem(N: int, objective: str = "time", hold: str = "constant",
-                         steps: str = "uniform") -> OptimalControlProblem:
-    """Problem 1 on N control intervals, ``objective`` "time" (T free) or "effort" (T = 1 s)."""
+                         steps: str = "uniform", contact_law: str | None = None) -> OptimalControlProblem:
+    """Problem 1 on N control intervals, ``objective`` "time" (T free) or "effort" (T = 1 s);
+    ``contact_law`` None is the package's default (the study passes :data:`CONTACT_LAW`)."""
     sc, system = controlled_block()
     d = REST["d"]
     common = {"q0": sc.q0, "v0": sc.v0, "hold": hold, "steps": steps, "replay_tol": REPLAY_TOL,
-              "contact_law": CONTACT_LAW,
+              "contact_law": contact_law,
               "terminal_constraints": lambda q, v: ca.vertcat(q[0] - d, v[0])}
     if objective == "time":
         return OptimalControlProblem(system, N, T=0.5, free_time=True, T_bounds=(0.05, 5.0),
@@ -208,7 +209,8 @@ def rest_to_rest_problem(N: int, objective: str = "time", hold: str = "constant"
     raise ValueError(f"objective must be 'time' or 'effort', got {objective!r}")
 
 
-def hold_problem(N: int, hold: str = "constant", steps: str = "uniform") -> OptimalControlProblem:
+def hold_problem(N: int, hold: str = "constant", steps: str = "uniform",
+                 contact_law: str | None = None) -> OptimalControlProblem:
     """Problem 2 on N intervals: with uniform steps N a multiple of 6 (the hold's ends are nodes of
     the uniform grid); with free steps any N >= 6, nodes round(N t_a / T) and round(N t_b / T) pinned
     at t_a and t_b."""
@@ -227,16 +229,16 @@ def hold_problem(N: int, hold: str = "constant", steps: str = "uniform") -> Opti
 
     return OptimalControlProblem(system, N, q0=sc.q0, v0=sc.v0, T=T, stage_cost=effort, hold=hold, steps=steps,
                                  node_times={k_a: t_a, k_b: t_b} if steps == "free" else None,
-                                 path_equalities=at_rest_on_hold, replay_tol=REPLAY_TOL, contact_law=CONTACT_LAW,
+                                 path_equalities=at_rest_on_hold, replay_tol=REPLAY_TOL, contact_law=contact_law,
                                  terminal_constraints=lambda q, v: ca.vertcat(q[0], v[0]))
 
 
-def shock_problem(N: int, R: float = SHOCK["R"]) -> OptimalControlProblem:
+def shock_problem(N: int, R: float = SHOCK["R"], contact_law: str | None = None) -> OptimalControlProblem:
     """Problem 3 on N control intervals: stop by T with the smallest peak normal force."""
     sc, system = controlled_block(R, SHOCK["u_max"], SHOCK["v0"])
     return OptimalControlProblem(system, N, q0=sc.q0, v0=sc.v0, T=SHOCK["T"], max_cost=lambda s: s.N[0],
                                  terminal_constraints=lambda q, v: v[0], replay_tol=REPLAY_TOL,
-                                 control_rate_weight=SHOCK["rate_weight"], contact_law=CONTACT_LAW)
+                                 control_rate_weight=SHOCK["rate_weight"], contact_law=contact_law)
 
 
 def hold_violation(res, rp) -> float:
@@ -627,9 +629,9 @@ def run(out=None, quick: bool = False) -> dict:
     h_fine = 5e-4 if quick else 5e-5
     refs = {"min_time": min_time_bound(), "min_effort": min_effort_bound(), "hold": hold_bound(),
             "shock": peak_bound()}
-    make = {"min_time": lambda N, kw: rest_to_rest_problem(N, "time", **kw),
-            "min_effort": lambda N, kw: rest_to_rest_problem(N, "effort", **kw),
-            "hold": lambda N, kw: hold_problem(N, **kw)}
+    make = {"min_time": lambda N, kw: rest_to_rest_problem(N, "time", contact_law=CONTACT_LAW, **kw),
+            "min_effort": lambda N, kw: rest_to_rest_problem(N, "effort", contact_law=CONTACT_LAW, **kw),
+            "hold": lambda N, kw: hold_problem(N, contact_law=CONTACT_LAW, **kw)}
     rows, keep = [], {}
     for prob, build in make.items():
         for N in (hold_Ns if prob == "hold" else Ns):
@@ -646,13 +648,13 @@ def run(out=None, quick: bool = False) -> dict:
                 if N == (N_fig_hold if prob == "hold" else N_fig):
                     keep[(prob, meth)] = v
     for N in Ns:
-        v = solve_and_verify(shock_problem(N), h_fine)
+        v = solve_and_verify(shock_problem(N, contact_law=CONTACT_LAW), h_fine)
         rows.append(_row("shock", "uniform, constant hold", N, v, refs["shock"], v["result"].peak))
         if N == N_fig:
             keep[("shock", "uniform, constant hold")] = v
     # multi-start on the hold problem, uniform steps (the default guesses: u held at u_min, 0,
     # mid-range, u_max)
-    ms = solve_and_verify(hold_problem(N_fig_hold), h_fine, multistart=True)["result"]
+    ms = solve_and_verify(hold_problem(N_fig_hold, contact_law=CONTACT_LAW), h_fine, multistart=True)["result"]
     files = []
     cols = list(rows[0].keys())
     files.append(write_csv(path / "convergence.csv", cols, [[r[c] for c in cols] for r in rows]))
@@ -664,7 +666,7 @@ def run(out=None, quick: bool = False) -> dict:
     N_sweep = 20 if quick else 40
     for R in SHOCK_SWEEP_R:
         sc = lcp.scenes.jean_pratt(R=R, v0=SHOCK["v0"], **BASE)
-        v = solve_and_verify(shock_problem(N_sweep, R), h_fine)
+        v = solve_and_verify(shock_problem(N_sweep, R, contact_law=CONTACT_LAW), h_fine)
         unc = lcp.simulate(sc, SHOCK["T"], h=h_fine)
         ev = v["event"]
         peak_rep = (max(float(np.max(p.force_N)) for p in ev.pieces) if ev is not None

@@ -39,7 +39,10 @@ class HomotopyOptions:
         a force N while its gap is open by sigma theta h / N (it "hovers"); from sigma0 = 1 the
         Jean-Pratt block hovered, lost friction and the homotopy could not bring it back down,
         while 1e-4 (1e-2 N against 1e-2 m/s) keeps every contact of a guess that starts on its
-        floor there and still relaxes the stick/slide switches.
+        floor there and still relaxes the stick/slide switches. When the options are not given,
+        :meth:`~lcp.ocp.problem.OptimalControlProblem.solve` starts the velocity law (spatial
+        contacts, or ``contact_law="velocity"``) from sigma0 = 1 instead: it has no open contacts to
+        hover, and from 1e-4 it lands on worse local optima.
     factor : float
         sigma is multiplied by this factor (in (0, 1)) after each stage.
     sigma_min : float
