@@ -1,4 +1,4 @@
-"""The event method on moving contacts (issue 25): gaps and tangents that depend on time.
+"""The event method on moving contacts: gaps and tangents that depend on time.
 
 The local velocity of a moving contact is u = H(t, q) v + b(t, q), b = (dg/dt, ds/dt); impacts
 apply Newton's law to it, the acceleration-level problem is written on du/dt (its drift by AD on

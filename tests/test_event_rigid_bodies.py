@@ -1,5 +1,5 @@
 """The event method on rigid bodies in 3D (Newton-Euler kinematics qdot = T(q) v) with contacts at
-material points and bilateral constraints (issue 25): the tumbling box, a ball that slides then
+material points and bilateral constraints: the tumbling box, a ball that slides then
 rolls, a heavy top held at its pivot by three bilateral constraints."""
 from __future__ import annotations
 

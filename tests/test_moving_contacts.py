@@ -1,4 +1,4 @@
-"""Time-dependent gaps and tangents (issue 25): a moving table, a conveyor belt.
+"""Time-dependent gaps and tangents: a moving table, a conveyor belt.
 
 The model gives b(t, q) = (dg/dt, ds/dt); Moreau-Jean's local velocity is u = H v + b. References: the
 moving table written with the table pinned by a rheonomous bilateral constraint (event method), and

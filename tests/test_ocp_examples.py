@@ -1,4 +1,4 @@
-"""studies.ocp_examples: the examples of issue 27, their replay checks and the nosnoc peer."""
+"""studies.ocp_examples: the examples of optimal control through contacts that open and close, their replay checks and the nosnoc peer."""
 import numpy as np
 import pytest
 
