@@ -85,7 +85,7 @@ def step_function(system) -> ca.Function:
         b0, b1 = system.contact_rate_fn(t, q), system.contact_rate_fn(t + h, q)
     else:
         b0 = b1 = ca.MX(0, 1)
-    if system.force_is_affine:
+    if system.force_is_affine or getattr(system, "control_schedule", None) is not None:  # no force check
         F0 = F1 = K1 = C1 = ca.MX(0, 1)
     else:
         F0 = system.force_fn(t, q, v)

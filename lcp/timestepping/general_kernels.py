@@ -507,7 +507,7 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
                 dims, toff, closed_form, disk_local, cone_multi, max_sweeps, q, v, cq, cv, loaded, istate, fstate,
                 lin, Q, V, PN, PT, MD,
                 imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act, forced, fdv, project, pfunc, pargp, presp, piw, pw,
-                p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p_mu, nb, ptol, max_evals, ell, ploaded):
+                p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p_mu, nb, ptol, max_evals, ell, ploaded, ctrl):
     """Steps k0 .. k_end - 1 (module docstring); returns (step, reason).
 
     ``istate`` = [all_loaded, free_steps, solver_calls, iterations, max_iterations, open, stick,
@@ -524,7 +524,9 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
     each step are projected by the compiled update ``pfunc`` (PositionProjection's Function) with
     the working-set rule of :meth:`PositionProjection.project
     <lcp.timestepping.projection.PositionProjection.project>`; ``ploaded`` are the contacts
-    loaded in the step and not bounced off (the Python loop's ``loaded``).
+    loaded in the step and not bounced off (the Python loop's ``loaded``). ``ctrl``: per step k
+    the control correction c_k (B u's exact impulse less its theta-weighted one), added as S c_k to
+    the free velocity increment; no rows: no control schedule.
     """
     n = v.size
     nq = q.size
@@ -596,6 +598,11 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
                     lin[b + n * n + a] = o_C1[a]
             for a in range(n):
                 dvf[a] = o_vf[a] - v[a]
+            if ctrl.shape[0]:  # a control schedule: S c_k (StepAssembly._control_correction)
+                cor = _matvec(_rows(o_S, n, n, np.arange(n)), ctrl[k])
+                for a in range(n):
+                    dvf[a] = dvf[a] + cor[a]
+            for a in range(n):
                 vfree[a] = v[a] + dvf[a]
             # activation (lcp.timestepping.activation.Activation): the same sums in the same order
             na = 0

@@ -25,8 +25,10 @@ own :class:`~lcp.timestepping.contact_step.ContactStep` on the step's data and h
 solver objects, fallbacks and notes). The kernel's products are those NumPy computes, so the
 results are the Python loop's (bit for bit on the tested scenes, to rounding at worst). Not run
 here (the Python loop then runs): a projection of moving contacts (the message says so), control
-schedules, ``scheme="order2"``, systems without numba or without a C compiler (a
-:class:`RuntimeWarning` names the compiler).
+schedules whose control matrix B(t, q) depends on q or whose system has constant matrices (a
+schedule with B(t) runs here: each step's correction of the control's impulse is computed before
+the run, added as S c_k in the kernel), ``scheme="order2"``, systems without numba or without a C
+compiler (a :class:`RuntimeWarning` names the compiler).
 """
 from __future__ import annotations
 
@@ -57,18 +59,47 @@ _IMPACT_BUFFER = 4096
 
 def applicable(system, asm, proj) -> str | None:
     """None where the compiled general loop runs this simulation, else the reason it does not:
-    a constant system (the constant paths serve it), numba missing, a control schedule, a position
+    a constant system (the constant paths serve it), numba missing, a control schedule whose
+    B(t, q) depends on q or on constant matrices (the Python loop's increment is then not the step
+    Function's), a position
     projection on moving contacts (``"projection"``: its opening test needs the contacts' rates at
     the projected state)."""
     if system.is_constant:
         return "constant"
     if not HAVE_NUMBA:
         return "numba"
-    if asm.schedule is not None or getattr(system, "is_controlled", False):
+    if getattr(system, "is_controlled", False) or (asm.schedule is not None and (
+            asm.matrices_constant or not _control_q_free(system))):
         return "control"
     if proj is not None and system.contacts_depend_on_t:
         return "projection"
     return None
+
+
+def _control_q_free(system) -> bool:
+    """Whether the control matrix B(t, q) of a scheduled control does not depend on q (then each
+    step's control correction is computed before the run)."""
+    fn = getattr(system, "control_matrix_fn", None)
+    return fn is not None and fn.sparsity_jac(1, 0).nnz() == 0
+
+
+def _control_rows(system, asm, q0, h, th, n_steps) -> np.ndarray:
+    """Per step k the control correction c_k = B int u - h ((1 - theta) B u(t) + theta B u(t + h))
+    at t = k h, with :meth:`StepAssembly._control_correction
+    <lcp.timestepping.assembly.StepAssembly>`'s arithmetic (B independent of q: evaluated at q0);
+    no rows without a schedule."""
+    n = system.n
+    if asm.schedule is None:
+        return np.zeros((0, n))
+    cf, bf = system.control_force_fn, system.control_matrix_fn
+    out = np.empty((n_steps, n))
+    for k in range(n_steps):
+        t = k * h
+        seen = h * ((1 - th) * np.array(cf(t, q0), dtype=float).ravel()
+                    + th * np.array(cf(t + h, q0), dtype=float).ravel())
+        B = np.array(bf(t, q0), dtype=float).reshape(n, -1)
+        out[k] = B @ asm.schedule.impulse(t, t + h) - seen
+    return out
 
 
 def _closed_form(solver) -> bool:
@@ -196,6 +227,7 @@ def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj
             notes.impacts.append(Impact(float(imp_t[i]), j, names[j], float(imp_p[i, 0]), pT))
         istate[12] = 0
 
+    ctrl = _control_rows(system, asm, q0, h, th, n_steps)
     k, forced = 0, False
     while True:
         k, reason = run_general(lib.cfunc, lib.argp, lib.resp, lib.iw, lib.w, a_t, a_q, a_v, o["vfree"], o["S"],
@@ -206,7 +238,7 @@ def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj
                                 cq, cv, loaded, istate,
                                 fstate, lin, Q, V, PN, PT, modes, imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act,
                                 forced, fdv, project, pf.cfunc, pf.argp, pf.resp, pf.iw, pf.w, *pargs, *pouts,
-                                system.n_bilateral, ptol, max_evals, ell, ploaded)
+                                system.n_bilateral, ptol, max_evals, ell, ploaded, ctrl)
         forced = False
         tk = k * h
         if reason == DONE:
