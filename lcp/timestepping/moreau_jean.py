@@ -78,7 +78,8 @@ class MoreauJeanOptions:
         contact and the closed-form solver (``"auto"`` or ``"enum"``). Same results, no Python
         per step. A system that is not constant runs the compiled general loop
         (:mod:`lcp.timestepping.general_loop`: CasADi's C code of the step, a numba loop) where no
-        control schedule applies, no moving contact is projected and a C compiler is found.
+        control schedule applies (or one whose B(t) does not depend on q), no moving contact is
+        projected and a C compiler is found.
     projection : {"auto", True, False}
         Project the positions onto the constraints after each step (:mod:`lcp.timestepping.projection`).
         ``"auto"``: only where a constraint is nonlinear in q or time-dependent (where the
