@@ -91,14 +91,19 @@ def _control_rows(system, asm, q0, h, th, n_steps) -> np.ndarray:
     n = system.n
     if asm.schedule is None:
         return np.zeros((0, n))
-    cf, bf = system.control_force_fn, system.control_matrix_fn
+    # the same elementwise operations on all steps at once (CasADi's map evaluates each column as
+    # the single call); the products B_k u_k one by one, as the Python loop's
+    t = np.arange(n_steps) * h
+    Q = np.repeat(np.asarray(q0, dtype=float)[:, None], n_steps, axis=1)
+    cf = system.control_force_fn.map(n_steps)
+    seen = h * ((1 - th) * np.array(cf(t[None, :], Q), dtype=float).T
+                + th * np.array(cf((t + h)[None, :], Q), dtype=float).T)
+    Bs = np.array(system.control_matrix_fn.map(n_steps)(t[None, :], Q), dtype=float)
+    Bs = np.ascontiguousarray(Bs.reshape(n, n_steps, -1).transpose(1, 0, 2))
+    imp = asm.schedule.integral(t + h) - asm.schedule.integral(t)
     out = np.empty((n_steps, n))
     for k in range(n_steps):
-        t = k * h
-        seen = h * ((1 - th) * np.array(cf(t, q0), dtype=float).ravel()
-                    + th * np.array(cf(t + h, q0), dtype=float).ravel())
-        B = np.array(bf(t, q0), dtype=float).reshape(n, -1)
-        out[k] = B @ asm.schedule.impulse(t, t + h) - seen
+        out[k] = Bs[k] @ imp[k] - seen[k]
     return out
 
 
