@@ -44,7 +44,7 @@ from lcp.contact.kernels import contact_residual, contact_scale, local_planar, r
 from lcp.numerics.jit import njit
 
 __all__ = ["BRANCH_MAX_SWEEPS", "BRANCH_DIRECT_MAX", "DONE", "NEEDS_PYTHON", "NONFINITE", "BUFFER_FULL",
-           "free_velocity", "run_steps"]
+           "activate", "enum_one", "free_velocity", "run_steps"]
 
 #: Gauss-Seidel sweeps of the branch refinement before the step goes to the exact Python solve
 BRANCH_MAX_SWEEPS = 60
@@ -124,6 +124,49 @@ def _free_dv(mode, fv, h, th, q, v, dvf, rhs, t1, t2):
 free_velocity = _free_dv
 
 
+@njit(cache=True, inline="always")
+def _activate(m, n, Hp, Hi, Hx, aHp, aHi, aHx, gap0, absg0, q, v, vfree, loaded, a_c, b_c, close_tol, open_tol,
+              uNm, uNf, gap, absq, act):
+    """The activation rule of :class:`lcp.timestepping.activation.Activation` on constant contact
+    rows (CSR H and |H|): the same sums in the same order. Fills uNm, uNf, gap and the active
+    indices ``act``; returns their number (the compiled many-contact and spatial loops share it)."""
+    any_open = False
+    for j in range(m):
+        uNm[j] = row_dot(Hp, Hi, Hx, v, j)
+        uNf[j] = row_dot(Hp, Hi, Hx, vfree, j)
+        gap[j] = gap0[j] + row_dot(Hp, Hi, Hx, q, j)
+        if (gap[j] + a_c * uNm[j]) + b_c * uNf[j] > 0.0:
+            any_open = True
+    na = 0
+    if not any_open:
+        for j in range(m):
+            act[na] = j
+            na += 1
+        return na
+    any_loaded = False
+    for j in range(m):
+        any_loaded = any_loaded or loaded[j]
+    for a in range(n):
+        absq[a] = abs(q[a])
+    for j in range(m):
+        aa = a_c * uNm[j]
+        bb = b_c * uNf[j]
+        pred = (gap[j] + aa) + bb
+        size = row_dot(aHp, aHi, aHx, absq, j) + absg0[j]
+        size = ((size + abs(gap[j])) + abs(aa)) + abs(bb)
+        closing = pred <= close_tol * size
+        if any_loaded and loaded[j] and gap[j] + aa <= open_tol * size:
+            closing = True
+        if closing:
+            act[na] = j
+            na += 1
+    return na
+
+
+#: the activation rule on constant rows (the spatial loop, lcp.timestepping.compiled_spatial, shares it)
+activate = _activate
+
+
 @njit(cache=True)
 def _enum1(W00, W01, W10, W11, qN, qT, mu):
     """lcp.contact.problem.planar_enum on floats (rtol 1e-12): (pN, pT, mode, n_distinct)."""
@@ -167,6 +210,10 @@ def _enum1(W00, W01, W10, W11, qN, qT, mu):
     if sm_ok and (abs(pN_m - pN) + abs(mu * pN_m - pT)) > far:
         nd += 1
     return pN, pT, mode, nd
+
+
+#: the one-contact planar closed form (the general loop, lcp.timestepping.general_kernels, shares it)
+enum_one = _enum1
 
 
 @njit(cache=True)
@@ -342,36 +389,8 @@ def run_steps(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_to
         for a in range(n):
             vfree[a] = v[a] + dvf[a]
         # activation (lcp.timestepping.activation.Activation): the same sums in the same order
-        any_open = False
-        for j in range(m):
-            uNm[j] = row_dot(Hp, Hi, Hx, v, j)
-            uNf[j] = row_dot(Hp, Hi, Hx, vfree, j)
-            gap[j] = gap0[j] + row_dot(Hp, Hi, Hx, q, j)
-            if (gap[j] + a_c * uNm[j]) + b_c * uNf[j] > 0.0:
-                any_open = True
-        na = 0
-        if not any_open:
-            for j in range(m):
-                act[na] = j
-                na += 1
-        else:
-            any_loaded = False
-            for j in range(m):
-                any_loaded = any_loaded or loaded[j]
-            for a in range(n):
-                absq[a] = abs(q[a])
-            for j in range(m):
-                aa = a_c * uNm[j]
-                bb = b_c * uNf[j]
-                pred = (gap[j] + aa) + bb
-                size = row_dot(aHp, aHi, aHx, absq, j) + absg0[j]
-                size = ((size + abs(gap[j])) + abs(aa)) + abs(bb)
-                closing = pred <= close_tol * size
-                if any_loaded and loaded[j] and gap[j] + aa <= open_tol * size:
-                    closing = True
-                if closing:
-                    act[na] = j
-                    na += 1
+        na = _activate(m, n, Hp, Hi, Hx, aHp, aHi, aHx, gap0, absg0, q, v, vfree, loaded, a_c, b_c, close_tol,
+                      open_tol, uNm, uNf, gap, absq, act)
         row = (k + 1) // every - 1 if (k + 1) % every == 0 else -1
         # inactive contacts hold zero impulse (the sweeps then see the active set's problem)
         t = 0

@@ -48,6 +48,7 @@ from lcp.timestepping.compiled_kernels import (
     DONE,
     NEEDS_PYTHON,
     NONFINITE,
+    activate,
     free_velocity,
 )
 from lcp.timestepping.compiled_loop import free_velocity_data, operator_arrays
@@ -361,36 +362,8 @@ def run_spatial_steps(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol
         for a in range(n):
             vfree[a] = v[a] + dvf[a]
         # activation (lcp.timestepping.activation.Activation): the same sums in the same order
-        any_open = False
-        for j in range(m):
-            uNm[j] = row_dot(Hp, Hi, Hx, v, j)
-            uNf[j] = row_dot(Hp, Hi, Hx, vfree, j)
-            gap[j] = gap0[j] + row_dot(Hp, Hi, Hx, q, j)
-            if (gap[j] + a_c * uNm[j]) + b_c * uNf[j] > 0.0:
-                any_open = True
-        na = 0
-        if not any_open:
-            for j in range(m):
-                act[na] = j
-                na += 1
-        else:
-            any_loaded = False
-            for j in range(m):
-                any_loaded = any_loaded or loaded[j]
-            for a in range(n):
-                absq[a] = abs(q[a])
-            for j in range(m):
-                aa = a_c * uNm[j]
-                bb = b_c * uNf[j]
-                pred = (gap[j] + aa) + bb
-                size = row_dot(aHp, aHi, aHx, absq, j) + absg0[j]
-                size = ((size + abs(gap[j])) + abs(aa)) + abs(bb)
-                closing = pred <= close_tol * size
-                if any_loaded and loaded[j] and gap[j] + aa <= open_tol * size:
-                    closing = True
-                if closing:
-                    act[na] = j
-                    na += 1
+        na = activate(m, n, Hp, Hi, Hx, aHp, aHi, aHx, gap0, absg0, q, v, vfree, loaded, a_c, b_c, close_tol,
+                      open_tol, uNm, uNf, gap, absq, act)
         row = (k + 1) // every - 1 if (k + 1) % every == 0 else -1
         for a in range(n):
             dv[a] = dvf[a]

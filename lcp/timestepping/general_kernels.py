@@ -44,6 +44,7 @@ import numpy as np
 from lcp.contact.kernels import local_disk3
 from lcp.contact.spatial_nsgs import refine_dense, residual_blocked_dense
 from lcp.numerics.jit import njit
+from lcp.timestepping.compiled_kernels import enum_one
 from lcp.timestepping.kinematic_kernels import advance, amax_abs, kinematic_sizes
 from lcp.timestepping.multi_kernels import cone_multi_step, record_multi
 
@@ -111,51 +112,6 @@ def _cols(o_X, rows, idx):
 
 
 @njit(cache=True)
-def _enum_one(W00, W01, W10, W11, qN, qT, mu):
-    """lcp.contact.planar_closed_form.planar_enum on floats (rtol 1e-12): (pN, pT, mode, n_distinct)."""
-    scale = max(max(abs(qN) / W00, abs(qT) / W11), 1e-300)
-    tol = 1e-12 * scale
-    open_ok = (qN / W00) >= -tol
-    det = W00 * W11 - W01 * W10
-    det_ok = det > 0
-    dets = det if det_ok else 1.0
-    pN_st = (-qN * W11 + qT * W01) / dets
-    pT_st = (-qT * W00 + qN * W10) / dets
-    st_ok = det_ok and (pN_st >= -tol) and (abs(pT_st) <= mu * pN_st + tol)
-    a_p = W00 - mu * W01
-    ok_p = a_p > 0
-    pN_p = -qN / (a_p if ok_p else 1.0)
-    uT_p = (W10 - mu * W11) * pN_p + qT
-    sp_ok = ok_p and (pN_p >= -tol) and ((uT_p / W11) > -tol)
-    a_m = W00 + mu * W01
-    ok_m = a_m > 0
-    pN_m = -qN / (a_m if ok_m else 1.0)
-    uT_m = (W10 + mu * W11) * pN_m + qT
-    sm_ok = ok_m and (pN_m >= -tol) and ((uT_m / W11) < tol)
-    if open_ok:
-        pN, pT, mode = 0.0, 0.0, 0
-    elif st_ok:
-        pN, pT, mode = pN_st, pT_st, 1
-    elif sp_ok:
-        pN, pT, mode = pN_p, -mu * pN_p, 2
-    elif sm_ok:
-        pN, pT, mode = pN_m, mu * pN_m, 3
-    else:
-        return np.nan, np.nan, -1, 0
-    far = 1e-9 * scale
-    nd = 1
-    if open_ok and (abs(0.0 - pN) + abs(0.0 - pT)) > far:
-        nd += 1
-    if st_ok and (abs(pN_st - pN) + abs(pT_st - pT)) > far:
-        nd += 1
-    if sp_ok and (abs(pN_p - pN) + abs(-mu * pN_p - pT)) > far:
-        nd += 1
-    if sm_ok and (abs(pN_m - pN) + abs(mu * pN_m - pT)) > far:
-        nd += 1
-    return pN, pT, mode, nd
-
-
-@njit(cache=True)
 def _error_one(W00, W01, W10, W11, qN, qT, mu, rN, rT):
     """ContactProblem.error of one planar contact (the Siconos-normalised natural-map error)."""
     if not (math.isfinite(rN) and math.isfinite(rT)):
@@ -203,7 +159,7 @@ def _closed_form_step(j, m, n, r, k, tk, h, o_W, o_H, o_SHt, o_b1, moving, v, vf
     W10 = o_W[iT + iN * r]
     W11 = o_W[iT + iT * r]
     muj = mu[j]
-    pN, pT, mode, nd = _enum_one(W00, W01, W10, W11, qN, qT, muj)
+    pN, pT, mode, nd = enum_one(W00, W01, W10, W11, qN, qT, muj)
     if mode < 0:
         return False
     rhoN = 1.0 / W00 if W00 > 0 else 1.0
