@@ -1,7 +1,7 @@
 """The compiled general loop (lcp.timestepping.general_loop) on systems with a control schedule
 whose control matrix B does not depend on q: each step's control correction is computed before the
-run and the results are the Python loop's bit for bit; a B(t, q) that depends on q keeps the Python
-loop."""
+run and the results are the Python loop's bit for bit; a B(t, q) that depends on q runs there too
+(its correction computed each step: tests/test_compiled_control.py)."""
 import casadi as ca
 import numpy as np
 import pytest
@@ -75,11 +75,11 @@ def test_scheduled_control_bit_for_bit(name, e, drag, monkeypatch):
         assert slow.stats.free_steps > 0 and (e == 0.0 or len(slow.impacts) > 0)
 
 
-def test_q_dependent_control_matrix_keeps_python_loop(monkeypatch):
+def test_q_dependent_control_matrix_runs_compiled(monkeypatch):
     system = controlled_bowl(q_dependent=True).with_control(SCHEDULES["constant"])
-    assert general_loop.applicable(system, StepAssembly(system, 1e-3, 0.5), None) == "control"
+    assert general_loop.applicable(system, StepAssembly(system, 1e-3, 0.5), None) is None
     fast, slow, calls = _pair(system, 0.3, [0.0, -1.0], [0.5, 0.0], 1e-3, monkeypatch)
-    assert calls == 0
+    assert calls == 1
     _same(fast, slow)
 
 
@@ -101,14 +101,15 @@ def test_overflow_same_status(monkeypatch):
     _same(fast, slow)
 
 
-def test_constant_matrices_keep_python_loop(monkeypatch):
+def test_constant_matrices_not_run_here(monkeypatch):
     """A scheduled block on a flat floor (constant matrices, a force of t): the Python loop's
-    increment is assembled from the constant matrices, not the step Function: not run here."""
+    increment is assembled from the constant matrices, not the step Function: not run here (the
+    constant compiled loop runs it: tests/test_compiled_control.py)."""
     q, v, u = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1)
     block = System(q, v, ca.SX.eye(2), ca.vertcat(u, -9.81), control=u, control_bounds=(-50, 50),
                    contacts=[Contact(gap=q[1], tangent_jacobian=ca.horzcat(1, 0), mu=0.3)])
     system = block.with_control(ControlSchedule([0.0, 0.13, 0.5], [[2.0], [-3.0]]))
     assert general_loop.applicable(system, StepAssembly(system, 1e-3, 0.5), None) == "control"
     fast, slow, calls = _pair(system, 0.5, [0.0, 0.0], [0.5, 0.0], 1e-3, monkeypatch)
-    assert calls == 0
+    assert calls == 0 and fast.solver == "auto (compiled)"
     _same(fast, slow)

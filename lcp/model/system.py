@@ -328,6 +328,9 @@ class System:
                      constraints=self.constraints_expr if self.n_bilateral else None, t=t, names=self.names,
                      breakpoints=np.concatenate([self.breakpoints, schedule.breakpoints]), **kinematics_options(self))
         out.control_schedule = schedule
+        # the uncontrolled part F0 (u = 0): where it is constant and B too, the constant paths step
+        # it as a constant system and add the control's impulse (lcp.timestepping.assembly)
+        out.control_drift = self
         out.control_matrix_fn = self.control_matrix_fn
         out.control_force_fn = ca.Function("control_force", [t, self.q_sym],
                                            [ca.mtimes(self.control_matrix_expr, schedule.expression(t))])

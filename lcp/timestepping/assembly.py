@@ -86,6 +86,14 @@ class StepAssembly:
             # itself is constant
             self.dv_const = (self.S @ (h * self.F0) if self.constant and self.force_constant
                              and not self.Kq.any() and not self.T.shape[1] else None)
+        # a scheduled control on a constant drift with a constant B (a pushed block, a controlled
+        # chain): the drift's constant arithmetic plus S B int u over the step (see control_increment)
+        self.control_matrix = (_constant_control(system) if self.matrices_constant and self.schedule is not None
+                               else None)
+        if self.control_matrix is not None:
+            drift = system.control_drift
+            self.F0 = drift.force(np.zeros(getattr(drift, "n_q", self.n)), np.zeros(self.n))
+            self.force_constant = not drift.force_depends_on_state
 
     def _init_constant(self, h, th):
         """The constant data of a small system: the system's step data at (0, 0, 0), then S, T,
@@ -250,7 +258,7 @@ class StepAssembly:
             return self.dv_const, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
         if self.matrices_constant:
             h, th = self.h, self.theta
-            if self.constant:  # affine, time-independent: F(t + h) = F(t) in the theta weighting
+            if self.constant or self.control_matrix is not None:  # affine, time-independent (the drift's)
                 Fth = self.F0 if self.force_constant else self.F0 + self.Kq @ q + self.Cv @ v
             else:  # an additive F(t): only the forces are evaluated per step
                 f = self.sys.force_fn
@@ -260,7 +268,9 @@ class StepAssembly:
             dv = self.S @ (h * Fth + h * h * th * self.Kq @ v)
             if self.T.shape[1]:
                 dv = dv + self.T @ (-self.phi_t - self.G @ v)
-            if self.schedule is not None:
+            if self.control_matrix is not None:
+                dv = dv + self.S @ self.control_increment(t)
+            elif self.schedule is not None:
                 dv = dv + self._control_correction(t, q, self.S)
             return dv, self.SHt, self.W, self.gap0 + self.H[: self.m] @ q, self.H
         vfree, S, _, SHt, W, gap, H = self._eval(t, q, v)
@@ -286,6 +296,11 @@ class StepAssembly:
         dv = self._solve(h * Fth + self._hhK @ v)
         return dv, self.SHt, self.W, gap, self.H
 
+    def control_increment(self, t):
+        """B int_t^{t+h} u ds of a constant B (``control_matrix``): the control's exact impulse over
+        the step, added to the drift's free velocity through S (the compiled loop adds the same)."""
+        return self.control_matrix @ self.schedule.impulse(t, t + self.h)
+
     def _control_correction(self, t, q, S):
         """Replace the theta-weighted control force by the control's exact impulse over the step.
 
@@ -300,6 +315,17 @@ class StepAssembly:
                     + th * np.array(cf(t + h, q), dtype=float).ravel())
         B = np.array(self.sys.control_matrix_fn(t, q), dtype=float).reshape(self.n, -1)
         return S @ (B @ self.schedule.impulse(t, t + h) - seen)
+
+
+def _constant_control(system):
+    """B as an (n, nu) array where a scheduled system's drift F0 is constant (constant mass and
+    kinematics, affine time-independent forces: ``control_drift.is_constant``) and B(t, q) does not
+    depend on t or q; else None."""
+    drift = getattr(system, "control_drift", None)
+    fn = getattr(system, "control_matrix_fn", None)
+    if drift is None or fn is None or not drift.is_constant or fn.sparsity_jac(0, 0).nnz() or fn.sparsity_jac(1, 0).nnz():
+        return None
+    return np.array(fn(0.0, np.zeros(fn.size1_in(1))), dtype=float).reshape(system.n, -1)
 
 
 def _sparse_step_data(system, need_mass: bool = True):

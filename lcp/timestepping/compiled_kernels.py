@@ -124,6 +124,21 @@ def _free_dv(mode, fv, h, th, q, v, dvf, rhs, t1, t2):
 free_velocity = _free_dv
 
 
+@njit(cache=True)
+def _control_dv(mode, fv, Bp, Bi, Bx, u, c, t1, t2, dvf):
+    """dvf += S (B u): the impulse u = int u ds of a scheduled control over the step through the
+    constant B and S (StepAssembly.control_increment, then S as :func:`_free_dv` applies it)."""
+    (dv_const, F0, Kp, Ki, Kx, Cp, Ci, Cx, hKp, hKi, hKx, Sp, Si, Sx,
+     Lp, Li, Lx, Ld, Up, Ui, Ux, Ud, perm_r, perm_c, Tp, Ti, Tx, Gp, Gi, Gx, phi_t) = fv
+    _csr_matvec(Bp, Bi, Bx, u, c)
+    if mode == 1:
+        _csr_matvec(Sp, Si, Sx, c, t2)
+    else:
+        _lu_solve(Lp, Li, Lx, Ld, Up, Ui, Ux, Ud, perm_r, perm_c, c, t1, t2)
+    for a in range(dvf.size):
+        dvf[a] = dvf[a] + t2[a]
+
+
 @njit(cache=True, inline="always")
 def _activate(m, n, Hp, Hi, Hx, aHp, aHi, aHx, gap0, absg0, q, v, vfree, loaded, a_c, b_c, close_tol, open_tol,
               uNm, uNf, gap, absq, act):
@@ -339,7 +354,7 @@ def _relative_residual(act, na, qi, r, Wp, Wi, Wx, mu, rho, floor):
 @njit(cache=True)
 def run_steps(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, max_sweeps, use_enum, blockdiag,
          q, v, cq, cv, loaded, r, istate, fstate, Q, V, PN, PT, MD, imp_t, imp_j, imp_p,
-         act, qa, forced, fp, fmd):
+         act, qa, forced, fp, fmd, cB=None, imp=None):
     """Steps k0 .. k_end - 1 (see the module docstring); returns (step, reason).
 
     ``istate`` = [all_loaded, free_steps, solver_calls, iterations, max_iterations, open, stick,
@@ -349,6 +364,8 @@ def run_steps(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_to
     ``act[:na]`` and ``qa[:2 na]`` (blocked: normals then tangents, restitution shift included)
     hold its active set and free local velocity, ``na = istate[13]``. With ``forced``, step k0
     takes the impulses ``fp`` (blocked over all contacts) and modes ``fmd`` instead of solving.
+    ``cB`` (B's CSR arrays) and ``imp`` (per step the impulse of a scheduled control, (steps, nu)):
+    S B imp[k] is added to the free velocity increment (None: no control).
     """
     (Hp, Hi, Hx, aHp, aHi, aHx, absg0, gap0, Cp, Ci, Cx, Wp, Wi, Wx, blocks, rho, mu, e) = ct
     dv_const = fv[0]
@@ -386,6 +403,8 @@ def run_steps(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_to
                 dvf[a] = dv_const[a]
         else:
             _free_dv(mode, fv, h, th, q, v, dvf, rhs, t1, t2)
+        if imp is not None:
+            _control_dv(mode, fv, cB[0], cB[1], cB[2], imp[k], rhs, t1, t2, dvf)
         for a in range(n):
             vfree[a] = v[a] + dvf[a]
         # activation (lcp.timestepping.activation.Activation): the same sums in the same order

@@ -39,7 +39,7 @@ from lcp.timestepping.outcome import ambiguity_note
 from lcp.timestepping.projection import violation_function
 from lcp.result import STATUS_MESSAGES, Impact, SimulationResult, SolverStats
 
-__all__ = ["AUTO_MAX_SWEEPS", "BRANCH_MAX_SWEEPS", "applicable", "free_velocity_data", "moreau_jean_loop",
+__all__ = ["AUTO_MAX_SWEEPS", "BRANCH_MAX_SWEEPS", "applicable", "control_arrays", "free_velocity_data", "moreau_jean_loop",
            "operator_arrays"]
 
 #: NSGS sweeps of ``"auto"`` in the compiled step before the step goes to the Python solver
@@ -49,13 +49,16 @@ AUTO_MAX_SWEEPS = 500
 
 def applicable(asm, solver, options) -> bool:
     """Whether the compiled loop runs this simulation: numba installed; a constant planar system
-    (affine time-independent forces, no control schedule) with at least two contacts; the solver
-    ``"auto"`` or ``"nsgs"`` (as a name or as a plain instance) without an ``error_tol``."""
+    (affine time-independent forces, no control schedule) with at least two contacts, or a
+    controlled constant one (a control schedule on a constant drift with a constant B:
+    ``asm.control_matrix``) with at least one; the solver ``"auto"`` or ``"nsgs"`` (as a name or as
+    a plain instance) without an ``error_tol``."""
     from lcp.contact.solvers import AutoSolver, NsgsSolver
 
     sys_ = asm.sys
-    if not (HAVE_NUMBA and sys_.n_contacts >= 2 and not sys_.is_spatial and sys_.is_constant
-            and asm.matrices_constant and asm.schedule is None):
+    controlled = getattr(asm, "control_matrix", None) is not None
+    if not (HAVE_NUMBA and sys_.n_contacts >= (1 if controlled else 2) and not sys_.is_spatial
+            and asm.matrices_constant and (controlled or (sys_.is_constant and asm.schedule is None))):
         return False
     if type(solver) is AutoSolver:
         return solver.iterative.error_tol is None
@@ -236,6 +239,19 @@ def operator_arrays(asm):
     return _csr(asm.H), _csc(asm.SHt), _csr(asm.W)
 
 
+def control_arrays(asm, n_steps):
+    """(B's CSR arrays, the control's impulse over each step k, (n_steps, nu)) of a controlled
+    constant system (``asm.control_matrix``), or (None, None): the impulses are
+    ``StepAssembly.control_increment``'s, elementwise on all steps at once (the same bits)."""
+    B = getattr(asm, "control_matrix", None)
+    if B is None:
+        return None, None
+    t = np.arange(n_steps) * float(asm.h)
+    sch = asm.schedule
+    imp = np.ascontiguousarray(sch.integral(t + float(asm.h)) - sch.integral(t), dtype=float)
+    return _csr(B), imp
+
+
 def _pack_new(asm):
     m = asm.m
     mode, fv = free_velocity_data(asm)
@@ -355,11 +371,12 @@ def moreau_jean_loop(asm, q0, v0, n_steps: int, every: int, solver, fallback: bo
     status, message = 0, STATUS_MESSAGES[0]
     py = _PythonStep(asm, solver, fallback)
     handed, first_hand, n_fb, first_fb = 0, None, 0, None
+    cB, imp = control_arrays(asm, n_steps)
     k, forced = 0, False
     while True:
         k, reason = kernel(k, n_steps, every, mode, fv, ct, h, th, close_tol, open_tol, res_tol, max_sweeps,
                            use_enum, blockdiag, q, v, cq, cv, loaded, r, istate, fstate, Q, V, PN, PT, MD, imp_t, imp_j, imp_p,
-                           act, qa, forced, fp, fmd)
+                           act, qa, forced, fp, fmd, cB, imp)
         forced = False
         if reason == DONE:
             break

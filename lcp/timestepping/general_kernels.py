@@ -45,6 +45,7 @@ from lcp.contact.kernels import local_disk3
 from lcp.contact.spatial_nsgs import refine_dense, residual_blocked_dense
 from lcp.numerics.jit import njit
 from lcp.timestepping.compiled_kernels import enum_one
+from lcp.timestepping.compiled_control import control_vector
 from lcp.timestepping.kinematic_kernels import advance, amax_abs, kinematic_sizes
 from lcp.timestepping.multi_kernels import cone_multi_step, record_multi
 
@@ -463,7 +464,9 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
                 dims, toff, closed_form, disk_local, cone_multi, max_sweeps, q, v, cq, cv, loaded, istate, fstate,
                 lin, Q, V, PN, PT, MD,
                 imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act, forced, fdv, project, pfunc, pargp, presp, piw, pw,
-                p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p_mu, nb, ptol, max_evals, ell, ploaded, ctrl):
+                p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p_mu, nb, ptol, max_evals, ell, ploaded, ctrl,
+                cfn=None, cargp=None, cresp=None, ciw=None, cw=None, c_t=None, c_q=None, c_B=None, c_f0=None,
+                c_f1=None, cimp=None):
     """Steps k0 .. k_end - 1 (module docstring); returns (step, reason).
 
     ``istate`` = [all_loaded, free_steps, solver_calls, iterations, max_iterations, open, stick,
@@ -482,7 +485,10 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
     <lcp.timestepping.projection.PositionProjection.project>`; ``ploaded`` are the contacts
     loaded in the step and not bounced off (the Python loop's ``loaded``). ``ctrl``: per step k
     the control correction c_k (B u's exact impulse less its theta-weighted one), added as S c_k to
-    the free velocity increment; no rows: no control schedule.
+    the free velocity increment; no rows: no control schedule. ``cfn`` ... ``cimp``: a control
+    whose B(t, q) depends on q, c_k computed each step from the compiled
+    :func:`lcp.timestepping.compiled_control.control_function` on its buffers and the step's impulse
+    ``cimp[k]`` (:func:`~lcp.timestepping.compiled_control.control_vector`); None: no such control.
     """
     n = v.size
     nq = q.size
@@ -556,6 +562,13 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
                 dvf[a] = o_vf[a] - v[a]
             if ctrl.shape[0]:  # a control schedule: S c_k (StepAssembly._control_correction)
                 cor = _matvec(_rows(o_S, n, n, np.arange(n)), ctrl[k])
+                for a in range(n):
+                    dvf[a] = dvf[a] + cor[a]
+            elif cimp is not None:  # the same with B(t, q): c_k at this step's q
+                if not control_vector(cfn, cargp, cresp, ciw, cw, c_t, c_q, c_B, c_f0, c_f1, cimp[k], tk, q, h, th,
+                                      wv):
+                    return k, BAD_DATA
+                cor = _matvec(_rows(o_S, n, n, np.arange(n)), wv)
                 for a in range(n):
                     dvf[a] = dvf[a] + cor[a]
             for a in range(n):

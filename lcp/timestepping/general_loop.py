@@ -40,6 +40,7 @@ from lcp.contact.problem import MODE_NAMES
 from lcp.numerics.jit import HAVE_NUMBA
 from lcp.result import STATUS_MESSAGES, Impact
 from lcp.timestepping.activation import CLOSE_ULPS, EPS, OPEN_ULPS
+from lcp.timestepping.compiled_control import control_library, step_impulses
 from lcp.timestepping.contact_step import ContactStep
 from lcp.timestepping.force_check import ForceStepCheck, StepRejected, nonfinite_cause
 from lcp.timestepping.general_kernels import (BAD_DATA, BUFFER_FULL, DONE, NEEDS_PYTHON, NONFINITE,
@@ -68,8 +69,7 @@ def applicable(system, asm, proj) -> str | None:
         return "constant"
     if not HAVE_NUMBA:
         return "numba"
-    if getattr(system, "is_controlled", False) or (asm.schedule is not None and (
-            asm.matrices_constant or not _control_q_free(system))):
+    if getattr(system, "is_controlled", False) or (asm.schedule is not None and asm.matrices_constant):
         return "control"
     if proj is not None and system.contacts_depend_on_t:
         return "projection"
@@ -149,14 +149,18 @@ def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int
     arguments and result as the Python loop."""
     if getattr(system, "has_kinematics", False) and klib is None:
         raise ValueError("a system with kinematics needs its compiled position increment (klib)")
+    # a control whose B(t, q) depends on q: its C function, called by the kernel each step
+    clib = control_library(system) if asm.schedule is not None and not _control_q_free(system) else None
+    if clib is None and asm.schedule is not None and not _control_q_free(system):
+        raise RuntimeError("the control B(t, q) of this system could not be compiled: run it with fast=False")
     with contextlib.ExitStack() as held:
-        for found in (lib, plib, klib):
+        for found in (lib, plib, klib, clib):
             if found is not None:
                 held.enter_context(found.lock)
-        return _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj, plib, klib)
+        return _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj, plib, klib, clib)
 
 
-def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj, plib, klib):
+def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj, plib, klib, clib=None):
     """The body of :func:`run_general_loop`, its libraries' buffers held."""
     if n_steps // every > 50_000_000:
         raise ValueError(f"{n_steps // every} saved states would not fit in memory: raise save_every")
@@ -232,7 +236,12 @@ def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj
             notes.impacts.append(Impact(float(imp_t[i]), j, names[j], float(imp_p[i, 0]), pT))
         istate[12] = 0
 
-    ctrl = _control_rows(system, asm, q0, h, th, n_steps)
+    ctrl = _control_rows(system, asm, q0, h, th, n_steps) if clib is None else np.zeros((0, n))
+    cargs = () if clib is None else (clib.cfunc, clib.argp, clib.resp, clib.iw, clib.w, *clib.args[:2],
+                                     clib.outs["B"], clib.outs["f0"], clib.outs["f1"],
+                                     step_impulses(asm.schedule, h, n_steps))
+    if clib is not None:
+        clib.args[2][0] = h
     k, forced = 0, False
     while True:
         k, reason = run_general(lib.cfunc, lib.argp, lib.resp, lib.iw, lib.w, a_t, a_q, a_v, o["vfree"], o["S"],
@@ -243,7 +252,7 @@ def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj
                                 cq, cv, loaded, istate,
                                 fstate, lin, Q, V, PN, PT, modes, imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act,
                                 forced, fdv, project, pf.cfunc, pf.argp, pf.resp, pf.iw, pf.w, *pargs, *pouts,
-                                system.n_bilateral, ptol, max_evals, ell, ploaded, ctrl)
+                                system.n_bilateral, ptol, max_evals, ell, ploaded, ctrl, *cargs)
         forced = False
         tk = k * h
         if reason == DONE:

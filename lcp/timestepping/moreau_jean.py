@@ -214,7 +214,9 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
 
         if compiled_spatial.applicable(asm, solver, options):
             return compiled_spatial.moreau_jean_spatial(asm, q0, v0, n_steps, every, solver, options.fallback)
-    if options.fast and proj is None and not spatial and system.n_contacts >= 2 and system.is_constant:
+    controlled = getattr(asm, "control_matrix", None) is not None  # a control on a constant drift, constant B
+    if options.fast and proj is None and not spatial and (
+            (system.n_contacts >= 2 and system.is_constant) or (controlled and system.n_contacts >= 1)):
         # imported here: numba loads only where the compiled loop may run
         from lcp.timestepping import compiled_loop
 
@@ -238,10 +240,26 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
                                                      options.fallback, proj, plib, klib)
         elif why == "projection":
             note = general_loop.PROJECTION_NOTE
+        elif why == "control" and asm.schedule is not None:
+            note = _control_note(asm, spatial)
     result = run_python_loop(system, asm, q0, v0, h, th, n_steps, every, solver, options.fallback, proj)
     if note:
         result.message += note
     return result
+
+
+def _control_note(asm, spatial) -> str:
+    """Why a scheduled control on a system with constant matrices keeps the Python loop (appended
+    to the message of a ``fast`` run)."""
+    if asm.control_matrix is None:
+        why = ("a control schedule on constant matrices runs compiled only where the drift F0 is constant "
+               "and B does not depend on t or q")
+    elif spatial:
+        why = "the compiled loops do not take a control schedule on spatial contacts"
+    else:
+        why = ("the compiled loop of a controlled constant system needs a contact, the solver 'auto' or "
+               "'nsgs' without error_tol, and no projection")
+    return f" (Python loop: {why})"
 
 
 def _n_steps(t_end, h) -> int:
