@@ -9,13 +9,13 @@ added as S c to the free velocity. Where B does not depend on q every c_k is kno
 (:func:`lcp.timestepping.general_loop` computes them); where it does, c_k needs the step's q. This
 module holds what the compiled general loop needs then: :func:`control_function` (t, q, h) -> (B(t,
 q), B u(t), B u(t + h)) of the very Functions the Python loop evaluates (``control_matrix_fn``,
-``control_force_fn``), :func:`control_library` (it compiled to C, :mod:`lcp.timestepping.codegen`),
+``control_force_fn``), :func:`control_library` (it compiled to C, :mod:`lcp.timestepping.codegen`) and
 :func:`step_impulses` (int u ds over every step, the Python loop's elementwise arithmetic on all
-steps at once) and :func:`control_vector` (the numba piece the kernel calls each step: c_k from the
-compiled function's results with NumPy's operations, so the Python loop's bits).
+steps at once); the kernel's piece, c_k from the compiled function's results, is
+:func:`lcp.timestepping.control_kernels.control_vector`.
 
-Imports CasADi, NumPy, numba (:mod:`lcp.numerics.jit`) and the code generator; never the loops, the
-path choice or anything above :mod:`lcp.timestepping`.
+Imports CasADi, NumPy and the code generator; never the kernels, the loops, the path choice or
+anything above :mod:`lcp.timestepping`.
 """
 from __future__ import annotations
 
@@ -24,10 +24,9 @@ import weakref
 import casadi as ca
 import numpy as np
 
-from lcp.numerics.jit import njit
 from lcp.timestepping.codegen import CompiledFunction, compile_function
 
-__all__ = ["control_function", "control_library", "control_vector", "depends_on_q", "step_impulses"]
+__all__ = ["control_function", "control_library", "depends_on_q", "step_impulses"]
 
 #: system -> its control's CompiledFunction (weak keys: the library lives with its System)
 _LIBRARIES = weakref.WeakKeyDictionary()
@@ -67,39 +66,3 @@ def step_impulses(schedule, h: float, n_steps: int) -> np.ndarray:
     ``impulse(t, t + h)`` (integral(t + h) - integral(t)), elementwise on all steps at once."""
     t = np.arange(n_steps) * h
     return np.ascontiguousarray(schedule.integral(t + h) - schedule.integral(t), dtype=float)
-
-
-@njit(cache=True)
-def control_vector(cfunc, argp, resp, iw, w, c_t, c_q, c_B, c_f0, c_f1, imp, tk, q, h, th, out):
-    """c = B(t, q) imp - h ((1 - theta) f0 + theta f1) at t = ``tk`` into ``out`` (n), the compiled
-    :func:`control_function` evaluated on its buffers; False where its call fails.
-
-    B imp is NumPy's product of a C-ordered B (BLAS's gemv, which numba calls too; a single row
-    summed in order, as BLAS's dot of a short row), the rest elementwise, as
-    :meth:`StepAssembly._control_correction <lcp.timestepping.assembly.StepAssembly>`."""
-    n = out.size
-    nu = imp.size
-    c_t[0] = tk
-    for a in range(q.size):
-        c_q[a] = q[a]
-    if cfunc(argp.ctypes.data, resp.ctypes.data, iw.ctypes.data, w.ctypes.data, 0) != 0:
-        return False
-    B = np.empty((n, nu))
-    for a in range(n):
-        for c in range(nu):
-            B[a, c] = c_B[a + c * n]
-    if n == 1:
-        s = 0.0
-        if nu <= 16:
-            for c in range(nu):
-                s += B[0, c] * imp[c]
-        else:
-            s = np.dot(B[0], imp)
-        bu = np.empty(1)
-        bu[0] = s
-    else:
-        bu = np.dot(B, imp)
-    a_c = 1 - th
-    for a in range(n):
-        out[a] = bu[a] - h * (a_c * c_f0[a] + th * c_f1[a])
-    return True

@@ -42,6 +42,7 @@ import numpy as np
 from lcp.contact.law import SCALE_FLOOR
 from lcp.contact.kernels import contact_residual, contact_scale, local_planar, row_absdot, row_dot
 from lcp.numerics.jit import njit
+from lcp.timestepping.control_kernels import constant_control_dv, dense_mv
 
 __all__ = ["BRANCH_MAX_SWEEPS", "BRANCH_DIRECT_MAX", "DONE", "NEEDS_PYTHON", "NONFINITE", "BUFFER_FULL",
            "activate", "enum_one", "free_velocity", "run_steps"]
@@ -125,12 +126,12 @@ free_velocity = _free_dv
 
 
 @njit(cache=True)
-def _control_dv(mode, fv, Bp, Bi, Bx, u, c, t1, t2, dvf):
-    """dvf += S (B u): the impulse u = int u ds of a scheduled control over the step through the
-    constant B and S (StepAssembly.control_increment, then S as :func:`_free_dv` applies it)."""
+def _sparse_control(mode, fv, B, u, t1, t2, dvf):
+    """dvf += S (B u) for the control's impulse u over the step where S is sparse (its CSR arrays:
+    SciPy's product sums each row in order; or the factors of W_h, to rounding)."""
     (dv_const, F0, Kp, Ki, Kx, Cp, Ci, Cx, hKp, hKi, hKx, Sp, Si, Sx,
      Lp, Li, Lx, Ld, Up, Ui, Ux, Ud, perm_r, perm_c, Tp, Ti, Tx, Gp, Gi, Gx, phi_t) = fv
-    _csr_matvec(Bp, Bi, Bx, u, c)
+    c = dense_mv(B, u)
     if mode == 1:
         _csr_matvec(Sp, Si, Sx, c, t2)
     else:
@@ -364,7 +365,8 @@ def run_steps(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_to
     ``act[:na]`` and ``qa[:2 na]`` (blocked: normals then tangents, restitution shift included)
     hold its active set and free local velocity, ``na = istate[13]``. With ``forced``, step k0
     takes the impulses ``fp`` (blocked over all contacts) and modes ``fmd`` instead of solving.
-    ``cB`` (B's CSR arrays) and ``imp`` (per step the impulse of a scheduled control, (steps, nu)):
+    ``cB`` (B, S, Kq, Cv, h^2 theta Kq, T, G, F0, phi_t of the assembly, dense; S empty where sparse)
+    and ``imp`` (per step the impulse of a scheduled control, (steps, nu)):
     S B imp[k] is added to the free velocity increment (None: no control).
     """
     (Hp, Hi, Hx, aHp, aHi, aHx, absg0, gap0, Cp, Ci, Cx, Wp, Wi, Wx, blocks, rho, mu, e) = ct
@@ -401,10 +403,12 @@ def run_steps(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_to
         if mode == 0:  # constant: copied here (a call that takes fv costs more than the copy)
             for a in range(n):
                 dvf[a] = dv_const[a]
+        elif imp is not None and cB[1].size:  # a control schedule, dense S: the Python loop's products
+            constant_control_dv(cB, imp[k], h, q, v, t1, dvf)
         else:
             _free_dv(mode, fv, h, th, q, v, dvf, rhs, t1, t2)
-        if imp is not None:
-            _control_dv(mode, fv, cB[0], cB[1], cB[2], imp[k], rhs, t1, t2, dvf)
+            if imp is not None:  # a control schedule, sparse S: + S B int u
+                _sparse_control(mode, fv, cB[0], imp[k], t1, t2, dvf)
         for a in range(n):
             vfree[a] = v[a] + dvf[a]
         # activation (lcp.timestepping.activation.Activation): the same sums in the same order

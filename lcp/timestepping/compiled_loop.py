@@ -240,16 +240,31 @@ def operator_arrays(asm):
 
 
 def control_arrays(asm, n_steps):
-    """(B's CSR arrays, the control's impulse over each step k, (n_steps, nu)) of a controlled
-    constant system (``asm.control_matrix``), or (None, None): the impulses are
-    ``StepAssembly.control_increment``'s, elementwise on all steps at once (the same bits)."""
+    """(dense operators, the control's impulse over each step k, (n_steps, nu)) of a controlled
+    constant system (``asm.control_matrix``), or (None, None). The operators are B, S, Kq, Cv,
+    h^2 theta Kq, T, G, F0 and phi_t of the assembly, C-ordered (Kq and Cv empty where the drift's
+    force is constant; all but B empty where S is sparse), for the kernel's NumPy products; the
+    impulses are ``StepAssembly.control_increment``'s, elementwise on all steps at once (the same
+    bits)."""
     B = getattr(asm, "control_matrix", None)
     if B is None:
         return None, None
-    t = np.arange(n_steps) * float(asm.h)
+    h, th = float(asm.h), float(asm.theta)
+    t = np.arange(n_steps) * h
     sch = asm.schedule
-    imp = np.ascontiguousarray(sch.integral(t + float(asm.h)) - sch.integral(t), dtype=float)
-    return _csr(B), imp
+    imp = np.ascontiguousarray(sch.integral(t + h) - sch.integral(t), dtype=float)
+    e2, e1 = np.zeros((0, 0)), np.zeros(0)
+
+    def dense(X):
+        return np.ascontiguousarray(X, dtype=float)
+
+    B = dense(B)
+    if not isinstance(asm.S, np.ndarray):
+        return (B, e2, e2, e2, e2, e2, e2, e1, e1), imp
+    Kq, Cv = (e2, e2) if asm.force_constant else (dense(asm.Kq), dense(asm.Cv))
+    nb = asm.T.shape[1]
+    return (B, dense(asm.S), Kq, Cv, dense(((h * h) * th) * asm.Kq), dense(asm.T) if nb else e2,
+            dense(asm.G) if nb else e2, dense(asm.F0).ravel(), dense(asm.phi_t).ravel() if nb else e1), imp
 
 
 def _pack_new(asm):

@@ -45,7 +45,7 @@ from lcp.contact.kernels import local_disk3
 from lcp.contact.spatial_nsgs import refine_dense, residual_blocked_dense
 from lcp.numerics.jit import njit
 from lcp.timestepping.compiled_kernels import enum_one
-from lcp.timestepping.compiled_control import control_vector
+from lcp.timestepping.control_kernels import control_vector
 from lcp.timestepping.kinematic_kernels import advance, amax_abs, kinematic_sizes
 from lcp.timestepping.multi_kernels import cone_multi_step, record_multi
 
@@ -488,7 +488,7 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
     the free velocity increment; no rows: no control schedule. ``cfn`` ... ``cimp``: a control
     whose B(t, q) depends on q, c_k computed each step from the compiled
     :func:`lcp.timestepping.compiled_control.control_function` on its buffers and the step's impulse
-    ``cimp[k]`` (:func:`~lcp.timestepping.compiled_control.control_vector`); None: no such control.
+    ``cimp[k]`` (:func:`~lcp.timestepping.control_kernels.control_vector`); None: no such control.
     """
     n = v.size
     nq = q.size
