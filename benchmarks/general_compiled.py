@@ -17,7 +17,10 @@ the loop once: C generation, gcc, the run). Results are compared with the Python
 difference of q). Newton-Euler kinematics (qdot = T(q) v): the Dzhanibekov body (no contact), the
 tumbling box (3000 steps, both loops) and the rocking block's resting phase (2000 steps from its state
 at t = 3 s, both loops: two active contacts every step). ``--scenes`` runs some scenes only (the
-csv is then named after them), ``--no-cold`` skips the fresh-interpreter runs.
+csv is then named after them), ``--no-cold`` skips the fresh-interpreter runs. ``--controls`` runs
+the control schedules instead (:data:`CONTROL_SCENES`: B(t, q) depending on q in the compiled
+general loop, controlled constant systems in the constant compiled loop; Python loop 2000 steps,
+compiled 1e5, warm, median of 3; ``benchmarks/recorded/general_compiled_controls.csv``).
 
 With Siconos 4.4 in ``/usr/bin/python3`` the point in the bowl is run there too, in a subprocess
 (``LagrangianLinearTIDS``, the gap and Jacobian as a C plugin of ``LagrangianScleronomousR``,
@@ -190,13 +193,115 @@ def siconos_bowl(h, steps):
     return float(per), f"{k} steps, q(t_end) = ({float(x):.6f}, {float(y):.6f})"
 
 
+#: control schedules (``--controls``): B(t, q) depending on q (compiled general loop) and controlled
+#: constant systems (constant compiled loop); before, all of them ran the Python loop
+CONTROL_SCENES = ("pendulum_push", "rod_thrust", "body_thrusters", "jean_pratt_push", "chain_push")
+
+
+def control_scene(name, t_end):
+    """(system, q0, v0, h, schedule) of a control benchmark: the schedule has 1000 intervals over
+    [0, t_end] (the affine hold for B(q), the constant and linear holds for the constant systems)."""
+    import casadi as ca
+
+    from lcp.model.control import ControlSchedule
+    from lcp.model.rigid_body import bodies_system, free_body
+    from lcp.model.schedule import AffineSchedule
+    from lcp.model.system import Contact, System
+
+    times = np.linspace(0.0, t_end, 1001)
+    wave = np.sin(2 * np.pi * times / 1.3)
+    if name == "pendulum_push":  # a point on a circle (constraint) pushed along (-y, x), a wall at x = 0.3
+        q, v, u = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1)
+        s = System(q, v, ca.SX.eye(2), ca.vertcat(0, -9.81) + ca.vertcat(-q[1], q[0]) * u[0], control=u,
+                   constraints=q[0] ** 2 + q[1] ** 2 - 1.0,
+                   contacts=[Contact(gap=0.3 - q[0], tangent=q[1], mu=0.2, e=0.3)])
+        vals = np.repeat(6.0 * wave[:-1, None], 2, axis=0)
+        return s, np.array([0.0, -1.0]), np.array([2.0, 0.0]), 1e-3, AffineSchedule(times, vals)
+    if name == "rod_thrust":  # a planar rod on its tip, thrust along its axis and a torque
+        q, v, u = ca.SX.sym("q", 3), ca.SX.sym("v", 3), ca.SX.sym("u", 2)
+        B = ca.horzcat(ca.vertcat(ca.cos(q[2]), ca.sin(q[2]), 0), ca.vertcat(0, 0, 1))
+        tip = Contact(gap=q[1] - 0.5 * ca.sin(q[2]), tangent=q[0] - 0.5 * ca.cos(q[2]), mu=0.4, e=0.2)
+        s = System(q, v, ca.diag(ca.SX([1.0, 1.0, 1.0 / 12])), ca.vertcat(0, -9.81, 0) + ca.mtimes(B, u),
+                   control=u, contacts=[tip])
+        vals = np.repeat(np.column_stack([15.0 + 15.0 * wave[:-1], -0.2 * wave[:-1]]), 2, axis=0)
+        return (s, np.array([0.0, 0.5 * np.sin(1.2), 1.2]), np.zeros(3), 1e-3, AffineSchedule(times, vals))
+    if name == "body_thrusters":  # a rigid body (unit quaternion) on a foot, thrusters fixed in the body
+        b = free_body(1.0, np.diag([0.1, 0.15, 0.2]), name="b")
+        u = ca.SX.sym("u", 2)
+        R, ez, ex, r = b.rotation, ca.vertcat(0, 0, 1), ca.vertcat(1, 0, 0), ca.SX([0.0, 0.0, -0.3])
+        force = ca.vertcat(ca.mtimes(R, ez) * u[0] + ca.mtimes(R, ex) * u[1],
+                           ca.cross(r, ez) * u[0] + ca.cross(r, ex) * u[1])
+        P = b.point([0.0, 0.0, -0.3])
+        foot = Contact(gap=P[2], tangent=ca.vertcat(P[0], P[1]), mu=0.3)
+        s = bodies_system([b], [foot], gravity=9.81, force=force, control=u)
+        vals = np.repeat(np.column_stack([9.0 + 4.0 * wave[:-1], 0.05 * wave[:-1]]), 2, axis=0)
+        return (s, np.array([0.0, 0.0, 0.3, 1.0, 0.0, 0.0, 0.0]), np.zeros(6), 1e-3, AffineSchedule(times, vals))
+    if name == "jean_pratt_push":  # Jean-Pratt's block (dense mass matrix), pushed along its line
+        q, v, u = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1)
+        s = System(q, v, ca.SX(np.array([[2.0, -1.0], [-1.0, 2.0]])), ca.vertcat(u[0], -2 * 9.81), control=u,
+                   contacts=[Contact(gap=q[1], tangent=q[0], mu=0.5)])
+        return s, np.zeros(2), np.array([1.0, 0.0]), 1e-3, ControlSchedule(times, 15.0 * wave[:-1])
+    if name == "chain_push":  # lcp.scenes.block_chain(10), its first block pushed
+        import lcp
+
+        sc = lcp.scenes.block_chain(10)
+        u = ca.SX.sym("u", 1)
+        Bm = np.zeros((sc.system.n, 1))
+        Bm[0, 0] = 1.0
+        s = System(sc.system.q_sym, sc.system.v_sym, sc.system.mass_expr,
+                   sc.system.force_expr + ca.mtimes(ca.SX(Bm), u), contacts=sc.system.contacts, control=u)
+        return s, sc.q0, sc.v0, 1e-3, ControlSchedule(times, 40.0 * wave, hold="linear")
+    raise KeyError(name)
+
+
+def run_control(name, steps, fast, horizon):
+    import lcp
+
+    s, q0, v0, h, sched = control_scene(name, horizon)
+    t0 = time.perf_counter()
+    res = lcp.simulate(s, steps * h, h=h, q0=q0, v0=v0, control=sched, fast=fast)
+    return time.perf_counter() - t0, res
+
+
+def controls(quick):
+    """The control section: Python loop (2000 steps) against the compiled loops (1e5 steps, warm,
+    median of 3), the same schedule (over the longer horizon); table and
+    benchmarks/recorded/general_compiled_controls.csv."""
+    n_py, n_c = (300, 3000) if quick else (2000, 100_000)
+    horizon = n_c * 1e-3
+    rows = []
+    print(f"{'control scene':16s} {'path':22s} {'python us/step':>15s} {'compiled us/step':>17s} {'speed-up':>9s} "
+          f"{'max rel dq':>11s} {'bits':>5s}")
+    for name in CONTROL_SCENES:
+        t_py, ref = run_control(name, n_py, False, horizon)
+        _, got = run_control(name, n_py, True, horizon)  # warm: libraries and kernels cached
+        t_c = statistics.median(run_control(name, n_c, True, horizon)[0] for _ in range(3 if n_c > 10_000 else 9))
+        dq = float(np.max(np.abs(got.q - ref.q)) / np.max(np.abs(ref.q)))
+        same = bool(np.array_equal(got.q, ref.q) and np.array_equal(got.v, ref.v))
+        path = "constant loop" if got.solver.endswith("(compiled)") else "general loop"
+        py, c = t_py / n_py * 1e6, t_c / n_c * 1e6
+        print(f"{name:16s} {path:22s} {py:15.1f} {c:17.2f} {py / c:9.0f} {dq:11.2e} {str(same):>5s}")
+        rows.append(dict(scene=name, path=path, python_us_per_step=f"{py:.2f}", compiled_us_per_step=f"{c:.3f}",
+                         speedup=f"{py / c:.0f}", max_rel_dq=f"{dq:.2e}", bit_for_bit=same, steps_python=n_py,
+                         steps_compiled=n_c))
+    out = ROOT / "benchmarks" / "recorded" / "general_compiled_controls.csv"
+    with open(out, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    print(f"wrote {out.relative_to(ROOT)}")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--no-siconos", action="store_true")
     ap.add_argument("--scenes", nargs="*", default=list(SCENES), help=f"some of {SCENES}")
     ap.add_argument("--no-cold", action="store_true", help="skip the fresh-interpreter runs")
+    ap.add_argument("--controls", action="store_true", help=f"the control schedules only: {CONTROL_SCENES}")
     args = ap.parse_args()
+    if args.controls:
+        return controls(args.quick)
     n_c_all = 3000 if args.quick else 100_000
     rows = []
     print(f"{'scene':14s} {'python us/step':>15s} {'compiled us/step':>17s} {'speed-up':>9s} {'cold s':>7s} "

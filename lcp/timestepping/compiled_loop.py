@@ -19,6 +19,12 @@ handed to the Python solver (with the loop's fallbacks: the same one-step proble
 and exact branch refinement) and the compiled loop resumes after it. Every such step is counted
 in ``stats.fallbacks`` and named in the message: no step is silently wrong.
 
+A control schedule on a constant drift with a constant B (``StepAssembly.control_matrix``: a
+pushed block, a controlled chain) runs here too, with one contact or more: the kernel adds S B int u
+over each step (the impulses computed before the run) to the drift's increment, both by NumPy's
+products of the assembly's dense matrices (:mod:`lcp.timestepping.control_kernels`), as the Python
+loop's ``StepAssembly.at``.
+
 Results equal the Python loop's to rounding (the sums run in another order than BLAS's).
 Without numba (:data:`lcp.numerics.jit.HAVE_NUMBA` False) the Python loop runs instead.
 """

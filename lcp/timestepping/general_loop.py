@@ -23,12 +23,14 @@ sums, the position update of Newton-Euler kinematics qdot = T(q) v
 working-set rule in the kernel), saving. The other contact steps are solved by the Python loop's
 own :class:`~lcp.timestepping.contact_step.ContactStep` on the step's data and handed back (same
 solver objects, fallbacks and notes). The kernel's products are those NumPy computes, so the
-results are the Python loop's (bit for bit on the tested scenes, to rounding at worst). Not run
-here (the Python loop then runs): a projection of moving contacts (the message says so), control
-schedules whose control matrix B(t, q) depends on q or whose system has constant matrices (a
-schedule with B(t) runs here: each step's correction of the control's impulse is computed before
-the run, added as S c_k in the kernel), ``scheme="order2"``, systems without numba or without a C
-compiler (a :class:`RuntimeWarning` names the compiler).
+results are the Python loop's (bit for bit on the tested scenes, to rounding at worst). Control
+schedules run here: with B(t) each step's correction of the control's impulse is computed before
+the run, with B(t, q) depending on q the kernel computes it each step from the control's compiled
+C function (:mod:`lcp.timestepping.compiled_control`); either is added as S c_k. Not run here (the
+Python loop then runs): a projection of moving contacts (the message says so), control schedules
+on systems with constant matrices (the constant compiled loop runs those with a constant drift and
+a constant B; else the message says why), ``scheme="order2"``, systems without numba or without a
+C compiler (a :class:`RuntimeWarning` names the compiler).
 """
 from __future__ import annotations
 
@@ -60,9 +62,8 @@ _IMPACT_BUFFER = 4096
 
 def applicable(system, asm, proj) -> str | None:
     """None where the compiled general loop runs this simulation, else the reason it does not:
-    a constant system (the constant paths serve it), numba missing, a control schedule whose
-    B(t, q) depends on q or on constant matrices (the Python loop's increment is then not the step
-    Function's), a position
+    a constant system (the constant paths serve it), numba missing, a control schedule on constant
+    matrices (the Python loop's increment is then not the step Function's), a position
     projection on moving contacts (``"projection"``: its opening test needs the contacts' rates at
     the projected state)."""
     if system.is_constant:

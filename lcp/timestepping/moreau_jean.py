@@ -78,8 +78,10 @@ class MoreauJeanOptions:
         contact and the closed-form solver (``"auto"`` or ``"enum"``). Same results, no Python
         per step. A system that is not constant runs the compiled general loop
         (:mod:`lcp.timestepping.general_loop`: CasADi's C code of the step, a numba loop) where no
-        control schedule applies (or one whose B(t) does not depend on q), no moving contact is
-        projected and a C compiler is found.
+        moving contact is projected and a C compiler is found, with or without a control schedule
+        (B(t) or B(t, q)); a control schedule on a constant drift with a constant B runs the
+        constant compiled loop (:mod:`lcp.timestepping.compiled_loop`, one contact or more). Where a
+        control schedule keeps the Python loop, the message says why.
     projection : {"auto", True, False}
         Project the positions onto the constraints after each step (:mod:`lcp.timestepping.projection`).
         ``"auto"``: only where a constraint is nonlinear in q or time-dependent (where the
