@@ -256,3 +256,39 @@ def test_controlled_long_chain_sparse():
     assert fast.solver == "auto (compiled)"
     close(fast, slow)
     assert slow.p_N[-1, -1] < slow.p_N[-1, -2]  # u1 lifts the last block's load
+
+
+def test_python_loop_note_solver_and_spatial():
+    """A controlled constant system the constant compiled loop does not take (solver "lemke"; a
+    spatial contact): the Python loop, and the message says why; the same numbers as fast=False."""
+    system = jean_pratt_block()
+    sched = schedule("constant", C_ROWS)
+    fast = lcp.simulate(system, 0.2, h=1e-3, q0=[0.0, 0.0], v0=[1.0, 0.0], control=sched, solver="lemke")
+    slow = lcp.simulate(system, 0.2, h=1e-3, q0=[0.0, 0.0], v0=[1.0, 0.0], control=sched, solver="lemke", fast=False)
+    assert fast.message == slow.message + (" (Python loop: the compiled loop of a controlled constant system needs a "
+                                           "contact, the solver 'auto' or 'nsgs' without error_tol, and no projection)")
+    assert np.array_equal(fast.q, slow.q)
+    q, v, u = ca.SX.sym("q", 3), ca.SX.sym("v", 3), ca.SX.sym("u", 1)
+    puck = System(q, v, ca.SX.eye(3), ca.vertcat(u[0], 0, -9.81), control=u, control_bounds=(-9, 9),
+                  contacts=[Contact(gap=q[2], tangent=ca.vertcat(q[0], q[1]), mu=0.3)])
+    res = lcp.simulate(puck, 0.2, h=1e-3, q0=np.zeros(3), v0=[1.0, 0.0, 0.0], control=ControlSchedule([0.0, 0.2], [2.0]))
+    assert res.success and "(Python loop: the compiled loops do not take a control schedule on spatial contacts)" in res.message
+
+
+@pytest.mark.parametrize("K", [1, 3])
+def test_one_piece_schedule(K):
+    """A schedule of one piece is constant in time (the scheduled system is a constant one): the
+    constant compiled loop steps it as any controlled constant system, with Jean-Pratt's block (one
+    contact) and the chain (three), and the Python loop gives the same numbers."""
+    if K == 1:
+        system, q0, v0 = jean_pratt_block(), np.zeros(2), np.array([1.0, 0.0])
+    else:
+        system, sc = block_chain(K)
+        q0, v0 = sc.q0, sc.v0
+    sched = ControlSchedule([0.0, 0.3], [[4.0, 25.0]])
+    assert system.with_control(sched).is_constant
+    fast = lcp.simulate(system, 0.3, h=1e-3, q0=q0, v0=v0, control=sched)
+    slow = lcp.simulate(system, 0.3, h=1e-3, q0=q0, v0=v0, control=sched, fast=False)
+    assert fast.solver == "auto (compiled)"
+    (same if K == 1 else close)(fast, slow)
+    assert np.all(slow.p_N[-10:, -1] == 0) and slow.q[-1, -1] > 0  # u1 = 25 lifted the (last) block off

@@ -91,6 +91,8 @@ class StepAssembly:
         self.control_matrix = (_constant_control(system) if self.matrices_constant and self.schedule is not None
                                else None)
         if self.control_matrix is not None:
+            # a control constant in time (one piece) makes a constant system too: stepped the same way
+            self.dv_const = None
             drift = system.control_drift
             self.F0 = drift.force(np.zeros(getattr(drift, "n_q", self.n)), np.zeros(self.n))
             self.force_constant = not drift.force_depends_on_state

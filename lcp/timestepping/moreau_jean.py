@@ -209,7 +209,8 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
         return run_second_order(system, asm, q0, v0, h, th, n_steps, every, solver, options.fallback, proj,
                                 float(options.projection_tol))
     # the path, chosen once: the compiled paths only where nothing needs Python per step
-    if options.fast and proj is None and solver.name in ("auto", "enum") and compiled.applicable(system):
+    if (options.fast and proj is None and solver.name in ("auto", "enum") and asm.schedule is None
+            and compiled.applicable(system)):
         return run_compiled_step(asm, q0, v0, n_steps, every, solver.name)
     if options.fast and proj is None and spatial and system.is_constant:
         from lcp.timestepping import compiled_spatial  # independent spatial contacts (numba)
@@ -244,6 +245,8 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
             note = general_loop.PROJECTION_NOTE
         elif why == "control" and asm.schedule is not None:
             note = _control_note(asm, spatial)
+    elif options.fast and asm.schedule is not None:  # a control constant in time: a constant system
+        note = _control_note(asm, spatial)
     result = run_python_loop(system, asm, q0, v0, h, th, n_steps, every, solver, options.fallback, proj)
     if note:
         result.message += note
