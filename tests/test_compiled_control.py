@@ -292,3 +292,16 @@ def test_one_piece_schedule(K):
     assert fast.solver == "auto (compiled)"
     (same if K == 1 else close)(fast, slow)
     assert np.all(slow.p_N[-10:, -1] == 0) and slow.q[-1, -1] > 0  # u1 = 25 lifted the (last) block off
+
+
+def test_batch_refuses_a_scheduled_scene():
+    """The batch path (one compiled single-contact kernel for many scenes) has no control: a scene
+    whose system carries a schedule, even one constant in time, is refused, not run without it."""
+    from lcp.batch import simulate_batch
+    from lcp.scenes.scene import Scene
+
+    system = jean_pratt_block().with_control(ControlSchedule([0.0, 0.3], [[4.0, 0.0]]))
+    assert system.is_constant
+    scene = Scene(system, np.zeros(2), np.array([1.0, 0.0]), 0.3, "pushed", {}, None)
+    with pytest.raises(ValueError, match="not a constant single-contact system"):
+        simulate_batch([scene], 0.3, h=1e-3)

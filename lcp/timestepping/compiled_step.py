@@ -39,8 +39,11 @@ CHUNK = 2000
 
 
 def applicable(system) -> bool:
-    """Whether the compiled path applies: constant system, exactly one planar contact."""
-    return bool(system.is_constant and system.n_contacts == 1 and not system.is_spatial)
+    """Whether the compiled path applies: constant system, exactly one planar contact, no control
+    schedule (a schedule of one piece makes a constant system whose control the constant compiled
+    loop adds per step: :mod:`lcp.timestepping.compiled_loop`)."""
+    return bool(system.is_constant and system.n_contacts == 1 and not system.is_spatial
+                and getattr(system, "control_schedule", None) is None)
 
 
 def _layout(n: int, affine: bool):
