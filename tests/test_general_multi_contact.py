@@ -19,6 +19,7 @@ from lcp.contact.problem import ContactProblem
 from lcp.contact.solvers import AutoSolver
 from lcp.model.system import Contact, System
 from lcp.numerics.jit import HAVE_NUMBA
+from lcp.scenes.bowl_rod import impacting_rod
 from lcp.scenes.classical import box_on_corners, rocking_block
 from lcp.scenes.slider_crank_clearance import slider_crank_clearance
 from lcp.timestepping import codegen
@@ -85,6 +86,14 @@ def test_box_on_its_corners_bit_for_bit(kw):
     _same_bits(a, b)
     assert _multi(b) > 500 and a.stats.kernel_multi_steps == _multi(b)
     assert a.stats.python_steps == 0
+
+
+@pytest.mark.parametrize("e", [0.0, 0.5])
+def test_impacting_rod_bit_for_bit(e):
+    # the rod lands on one end, then the other, and slides on both (sweeps converge: same bits)
+    a, b = _both(impacting_rod(e=e), 1.0, 1e-3)
+    _same_bits(a, b)
+    assert a.stats.kernel_multi_steps == _multi(b) > 50 and a.stats.python_steps == 0
 
 
 def test_rocking_block_rocking_phase():
