@@ -44,6 +44,21 @@ def _block(theta0=0.1, mu=2.0, e=0.0, b=0.1, h=0.4, m=1.0, g=9.81):
     return system, np.array([b * c0 - h * s0, b * s0 + h * c0, theta0])
 
 
+def _block_on_belt(acc=1.0, amp=0.0005, omega=20.0, mu=0.5, b=0.1, h=0.4, m=1.0, g=9.81):
+    """The block standing on both corners on a belt that starts from rest with acceleration
+    ``acc`` and shakes vertically by amp sin(omega t): moving contacts (their rates b enter every
+    step's problem). Below mu g and g b / h the block rides on both corners."""
+    q, v, t = ca.SX.sym("q", 3), ca.SX.sym("v", 3), ca.SX.sym("t")
+    c, s = ca.cos(q[2]), ca.sin(q[2])
+    floor = amp * ca.sin(omega * t)
+    corners = [ca.vertcat(q[0] + a * c + h * s, q[1] + a * s - h * c) for a in (-b, b)]
+    contacts = [Contact(gap=p[1] - floor, tangent=p[0] - 0.5 * acc * t * t, mu=mu, name=nm)
+                for p, nm in zip(corners, ("back", "front"))]
+    I = m * (4 * b * b + 4 * h * h) / 12
+    system = System(q, v, ca.diag(ca.vertcat(m, m, I)), ca.vertcat(0, -m * g, 0), contacts=contacts, t=t)
+    return system, np.array([0.0, h, 0.0])
+
+
 def _multi(r) -> int:
     """Steps with two or more active contacts (every step saved)."""
     return int(np.sum(np.sum(r.modes >= 0, axis=1) >= 2))
@@ -121,6 +136,24 @@ def test_rocking_block_with_restitution(e):
     a, b = _both(system, 1.2, 1e-3, q0=q0, v0=np.zeros(3))
     _close(a, b, 1e-12, split=1e-6)
     assert a.stats.python_steps == 0 and a.stats.kernel_multi_steps == _multi(a) > 0
+
+
+def test_block_on_a_moving_shaking_belt():
+    # moving contacts: the belt carries the block along (stuck on both corners) while the floor
+    # shakes; then a belt too fast for friction makes it slip
+    # (without the position projection, which the compiled loop does not do on moving contacts)
+    system, q0 = _block_on_belt()
+    a, b = _both(system, 0.5, 1e-3, q0=q0, v0=np.zeros(3), projection=False)
+    # stuck on both corners, the split of the tangential impulse is rounding: the Python loop's own
+    # moves by up to 2e-4 of the largest p_T when q of its problem changes by one ulp
+    _close(a, b, 1e-12, split=1e-3)
+    assert a.stats.kernel_multi_steps == _multi(a) > 400 and a.stats.python_steps == 0
+    assert abs(b.v[-1, 0] - 0.5) <= 1e-3  # carried at the belt's speed, acc t
+    system, q0 = _block_on_belt(acc=2.2, mu=0.2)
+    a, b = _both(system, 0.3, 1e-3, q0=q0, v0=np.zeros(3), projection=False)
+    _close(a, b, 1e-12, split=1e-6)
+    assert a.stats.kernel_multi_steps == _multi(a) > 200 and a.stats.python_steps == 0
+    assert b.stats.mode_counts["slide-"] > 200
 
 
 def test_slider_crank_with_clearance():
