@@ -183,6 +183,16 @@ def test_block_drawn_as_the_python_loop(theta0, mu, e):
     assert a.stats.kernel_multi_steps == _multi(a) and a.stats.python_steps == 0
 
 
+@pytest.mark.parametrize("scene", [box_on_corners, rocking_block])
+def test_nsgs_by_name(scene):
+    # "nsgs": its sweeps alone (no Newton), the same kernel: the Python loop's bits (its steps with
+    # one active contact are not the closed form's: they go to Python)
+    a, b = _both(scene(), 1.2 if scene is box_on_corners else 3.2, 1e-3, solver="nsgs")
+    _same_bits(a, b)
+    assert a.stats.kernel_multi_steps == _multi(b) > 10
+    assert a.stats.python_steps == int(np.sum(np.sum(b.modes >= 0, axis=1) == 1))
+
+
 def test_a_solver_the_kernel_does_not_take_runs_in_python():
     # an error target of the solver's own: every step with two active contacts goes back to Python
     solver = AutoSolver(error_tol=1e-11)

@@ -17,8 +17,8 @@ contact under the disk law's ``"auto"``/``"local"`` (local solve, branch refinem
 correction), two to 40 active disk-law contacts under ``"auto"`` (NSGS, branch refinement, the
 solver's acceptance test, the all-stick correction: :mod:`lcp.timestepping.multi_kernels`; the Python
 loop's results to the solver's tolerance, counted in ``stats.kernel_multi_steps``), two to 40 active
-planar contacts under ``"auto"`` (the Python solver's NSGS rounds and Newton, its tests, modes and
-branch refinement: :mod:`lcp.timestepping.planar_multi_kernels`; the Python loop's bits where no
+planar contacts under ``"auto"`` or ``"nsgs"`` (the Python solver's NSGS rounds and Newton, its tests,
+modes and branch refinement: :mod:`lcp.timestepping.planar_multi_kernels`; the Python loop's bits where no
 Newton iteration was needed, else to rounding; also counted in ``stats.kernel_multi_steps``; steps
 handed back to Python are counted in ``stats.python_steps``), impacts, Kahan
 sums, the position update of Newton-Euler kinematics qdot = T(q) v
@@ -150,12 +150,19 @@ PLANAR_MULTI_MAX = 40
 def _planar_multi(solver, asm) -> np.ndarray:
     """(largest number of active planar contacts solved in the kernel, NSGS sweeps, Newton iterations,
     rounds) of the plain ``"auto"`` solver (its NewtonSolver: compiled sweeps, no error target of its
-    own, the same residual_tol), on operators that change each step (no warm starts: constant
-    matrices key the Python solver's warm start by active set); zeros otherwise."""
-    from lcp.contact.solvers import AutoSolver, NewtonSolver
+    own, the same residual_tol) or ``"nsgs"`` (compiled, no error target: its sweeps, no Newton, one
+    round), on operators that change each step (no warm starts: constant matrices key the Python
+    solver's warm start by active set); zeros otherwise."""
+    from lcp.contact.solvers import AutoSolver, NewtonSolver, NsgsSolver
 
     off = np.zeros(4, dtype=np.int64)
-    if type(solver) is not AutoSolver or solver.error_tol is not None or asm.matrices_constant:
+    if asm.matrices_constant:
+        return off
+    if type(solver) is NsgsSolver:
+        if not solver.compiled or solver.error_tol is not None:
+            return off
+        return np.array([PLANAR_MULTI_MAX, solver.max_sweeps, 0, 1], dtype=np.int64)
+    if type(solver) is not AutoSolver or solver.error_tol is not None:
         return off
     it = solver.iterative
     if (type(it) is not NewtonSolver or not it.compiled or it.error_tol is not None

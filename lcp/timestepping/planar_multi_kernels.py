@@ -1,8 +1,8 @@
 """numba kernels of the compiled general loop for steps with several active planar contacts.
 
 Holds :func:`planar_multi_step`: the contact solve of one step with two or more active planar
-contacts under ``"auto"``, as :class:`lcp.timestepping.contact_step.ContactStep` with
-:class:`lcp.contact.solvers.AutoSolver` solves it on a system whose W changes from step to step
+contacts under ``"auto"`` (or ``"nsgs"``), as :class:`lcp.timestepping.contact_step.ContactStep`
+with :class:`lcp.contact.solvers.AutoSolver` solves it on a system whose W changes from step to step
 (no warm start): :class:`lcp.contact.solvers.NewtonSolver`'s rounds (NSGS sweeps from zero by the
 compiled sweeps of :func:`lcp.contact.nsgs.nsgs_sweeps`, then semismooth Newton,
 :func:`lcp.contact.newton.newton_solve`'s iteration), the outer loop of
@@ -247,7 +247,7 @@ def _newton_run(W, q, mu, rho, op_p, op_i, op_x, blocks, orho, perm, qi, p, tol,
                 res = res_s
             if res <= tol:
                 break
-        if res > 0.01 * res_failed:
+        if newton_iter == 0 or res > 0.01 * res_failed:  # 0: NsgsSolver (its sweeps alone)
             continue
         p_n, it = _newton(W, q, mu, rho, p, tol, newton_iter, rel_scale)
         its += it
@@ -346,8 +346,9 @@ def planar_multi_step(act, na, m, n, r, o_W, o_H, o_SHt, o_b1, moving, v, vfree,
                       istate, fstate, dv, P, MDo):
     """The contact solve of a step whose active contacts ``act[:na]`` (two or more) are planar,
     under ``"auto"`` (module docstring); ``pm`` = (largest count, NSGS sweeps, Newton iterations,
-    rounds) of the solver. Fills dv (the step's velocity increment), P (the impulses, normals then
-    tangents) and MDo (the modes); False where the Python side must solve the step."""
+    rounds) of the solver (no Newton iterations and one round of its ``max_sweeps``: ``"nsgs"``).
+    Fills dv (the step's velocity increment), P (the impulses, normals then tangents) and MDo (the
+    modes); False where the Python side must solve the step."""
     k = na
     n2 = 2 * k
     idx = np.empty(n2, dtype=np.int64)
