@@ -251,3 +251,74 @@ def test_kernel_solve_is_a_coulomb_solution(seed):
     assert ref.success
     assert np.max(np.abs(pb.velocity(P) - pb.velocity(ref.p))) <= 1e-8 * max(1.0, float(np.max(np.abs(pb.q))))
     np.testing.assert_array_equal(MD, pb.modes(P))
+
+
+def _handed_steps(monkeypatch, scene, t_end):
+    """(data, Python's answer) of each step with two or more active contacts that the compiled
+    general loop hands to the Python contact step with its planar kernel switched off."""
+    from lcp.timestepping import general_loop
+
+    recs = []
+    orig = general_loop.ContactStep.solve
+
+    def solve(self, k, tk, active, v, vfree, dvf, SHt, W, H, uNm, b=None):
+        out = orig(self, k, tk, active, v, vfree, dvf, SHt, W, H, uNm, b)
+        if active.size >= 2:
+            recs.append(((active.copy(), v.copy(), vfree.copy(), dvf.copy(), SHt.copy(), W.copy(), H.copy(),
+                          uNm.copy(), np.asarray(self.mu, dtype=float), np.asarray(self.e, dtype=float)), out))
+        return out
+
+    with monkeypatch.context() as mp:
+        mp.setattr(general_loop, "_planar_multi", lambda solver, asm: np.zeros(4, dtype=np.int64))
+        mp.setattr(general_loop.ContactStep, "solve", solve)
+        lcp.simulate(scene, t_end, h=1e-3)
+    return recs
+
+
+def _kernel(data, fn=None):
+    from lcp.timestepping.planar_multi_kernels import planar_multi_step
+
+    active, v, vfree, dvf, SHt, W, H, uNm, mu, e = data
+    m, n, na = mu.size, v.size, active.size
+    act = np.zeros(m, dtype=np.int64)
+    act[:na] = active
+    istate, fstate = np.zeros(19, dtype=np.int64), np.zeros(3)
+    dv, P, MD = np.empty(n), np.empty(2 * m), np.empty(m, dtype=np.int64)
+    ok = (fn or planar_multi_step)(act, na, m, n, H.shape[0], W.ravel(order="F"), H.ravel(order="F"),
+                                   SHt.ravel(order="F"), np.zeros(0), False, v, vfree, dvf, uNm, mu, e, 1e-10,
+                                   np.array([40, 20, 30, 10]), istate, fstate, dv, P, MD)
+    return ok, dv, P[:2 * na], MD[:na], istate
+
+
+def test_each_step_is_the_python_steps_bits(monkeypatch):
+    recs = _handed_steps(monkeypatch, box_on_corners(), 0.3)
+    assert len(recs) == 300
+    for data, (dv_py, p_py, md_py, _, sol) in recs:
+        ok, dv, p, md, istate = _kernel(data)
+        assert ok and istate[3] == sol.iterations
+        np.testing.assert_array_equal(dv, dv_py)
+        np.testing.assert_array_equal(p, p_py)
+        np.testing.assert_array_equal(md, md_py)
+
+
+def test_newton_steps_near_a_mode_threshold_go_back(monkeypatch):
+    # the resting block's steps take Newton iterations (to rounding: SuperLU there, LAPACK here);
+    # with a margin that puts every mode decision "near its threshold" each of them goes back to
+    # Python, counting nothing, while the box's steps (sweeps alone) stay in the kernel
+    from lcp.timestepping import planar_multi_kernels as pmk
+
+    rest = _handed_steps(monkeypatch, rocking_block(), 4.0)[-5:]
+    box = _handed_steps(monkeypatch, box_on_corners(), 0.01)
+    for data, (dv_py, p_py, md_py, _, sol) in rest:
+        ok, dv, p, md, istate = _kernel(data)
+        assert ok and sol.iterations > 20  # Newton's iteration after the 20 sweeps
+        np.testing.assert_allclose(dv, dv_py, rtol=0, atol=1e-15)
+        np.testing.assert_array_equal(md, md_py)
+    monkeypatch.setattr(pmk, "MODE_MARGIN", 1e300)  # read at run time by the Python reference
+    for data, _ in rest:
+        ok, _, _, _, istate = _kernel(data, pmk.planar_multi_step.py_func)
+        assert not ok and not istate.any()
+    for data, (dv_py, _, _, _, _) in box:
+        ok, dv, _, _, _ = _kernel(data, pmk.planar_multi_step.py_func)
+        assert ok
+        np.testing.assert_array_equal(dv, dv_py)
