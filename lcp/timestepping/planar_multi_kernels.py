@@ -216,8 +216,8 @@ def _sweep_blocked(op_p, op_i, op_x, blocks, orho, perm, qi, mu, p, tol, n_sw, r
 @njit(cache=True)
 def _newton_run(W, q, mu, rho, op_p, op_i, op_x, blocks, orho, perm, qi, p, tol, rel_scale, sweeps, newton_iter,
                 max_rounds):
-    """NewtonSolver._run: rounds of NSGS sweeps (doubling) and Newton; (p, iterations, measure).
-    Also says whether a Newton iteration changed p (the rounding is then not the Python route's)."""
+    """NewtonSolver._run: rounds of NSGS sweeps (doubling) and Newton; (p, iterations, measure,
+    whether a Newton iteration was taken: the rounding is then not the Python route's)."""
     res = np.inf
     its = 0
     slow = 0
@@ -251,11 +251,11 @@ def _newton_run(W, q, mu, rho, op_p, op_i, op_x, blocks, orho, perm, qi, p, tol,
             continue
         p_n, it = _newton(W, q, mu, rho, p, tol, newton_iter, rel_scale)
         its += it
+        # an iteration taken, kept or not, is LAPACK's rounding (its residual steers the rounds)
+        newton_used = newton_used or it > 0
         res_n = _measure(W, q, mu, rho, p_n, rel_scale)
         res_failed = res if res_n > 0.5 * res else np.inf
         if res_n <= res:
-            if it > 0:
-                newton_used = True
             p = p_n
             res = res_n
     return p, its, res, newton_used
