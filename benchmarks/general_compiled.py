@@ -9,8 +9,9 @@ constraints, non-affine forces), Housner's rocking block (two corner contacts, r
 kinematics), a ball in a spherical bowl (one spatial contact). For each: the Python loop
 (``fast=False``) on ``N_py`` steps; the compiled loop warm (library and numba kernel cached, the
 run repeated in-process, median of 3, or of 9 for short runs) on ``N_c`` steps (1e5; the rocking
-block 1500, its rocking phase: at rest on both corners each step has two active contacts, solved
-by the Python contact step; the per-step time includes the call's set-up); cold: a fresh interpreter with empty
+block 1500, its rocking phase: its resting phase, two active contacts each step, is the scene
+``rocking_block_rest`` and ``benchmarks/general_multi_contact.py``; the per-step time includes the
+call's set-up); cold: a fresh interpreter with empty
 compiled-code and numba caches (C generation, gcc, numba compilation, the run) -- its wall time,
 not per step; "cold C": the same with numba's cache warm (a new system on a machine that has run
 the loop once: C generation, gcc, the run). Results are compared with the Python loop's on the common steps (max relative
@@ -49,8 +50,7 @@ sys.path.insert(0, str(ROOT))
 SCENES = ("bowl", "slider_crank", "rocking_block", "spatial_bowl", "dzhanibekov", "tumbling_box",
           "rocking_block_rest")
 #: compiled steps per scene where the full count would measure something else: the rocking block
-#: comes to rest on both corners after its rocking phase (1.5 s), and steps with two active contacts
-#: are solved by the Python contact step (the kernel solves one active contact)
+#: comes to rest on both corners after its rocking phase (1.5 s; the resting phase is its own scene)
 STEPS = {"rocking_block": 1500, "tumbling_box": 3000, "rocking_block_rest": 2000}
 #: Python-loop steps where the scene's interesting part is later than the default count
 PY_STEPS = {"tumbling_box": 3000, "rocking_block_rest": 2000}

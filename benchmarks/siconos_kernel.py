@@ -97,6 +97,8 @@ CASES = {
                           "rod on two end contacts, e = 0.5, mu = 0.3: eight impacts"),
     "slider-crank clearance": Case(lambda: classical.slider_crank_clearance(t_end=0.01), 1e-5, 0.01,
                                    "Flores's slider-crank, c = 1 mm, four corners, A(q)"),
+    "rocking block": Case(lambda: classical.rocking_block(t_end=4.0), 1e-3, 4.0,
+                          "Housner's block on two corners, mu = 2: rocks, then rests on both (two active contacts)"),
     "woodpecker": Case(lambda: classical.woodpecker(t_end=0.3), 2e-5, 0.3,
                        "Siconos's tutorial data, constant system, three contacts"),
     "spatial Jean-Pratt": Case(lambda: lcp.scenes.jean_pratt_spatial(v0=(1.0, 0.5), t_end=0.3), 1e-3, 0.3,

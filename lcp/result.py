@@ -56,7 +56,12 @@ class SolverStats:
         constraints of a RATTLE step (:mod:`lcp.timestepping.closed_rattle`).
     kernel_multi_steps : int
         Steps with several active contacts solved inside the compiled general loop's kernel
-        (:mod:`lcp.timestepping.multi_kernels`; 0 on every other path).
+        (:mod:`lcp.timestepping.multi_kernels`, :mod:`lcp.timestepping.planar_multi_kernels`; 0 on
+        every other path).
+    python_steps : int
+        Contact steps the compiled general loop handed to the Python loop's contact step (a solver
+        or an active set its kernel does not solve, or a kernel solve that failed its test; 0 on
+        every other path).
     """
 
     steps: int = 0
@@ -73,6 +78,7 @@ class SolverStats:
     projection_iterations: int = 0
     closed_steps: int = 0
     kernel_multi_steps: int = 0
+    python_steps: int = 0
 
 
 class StepImpulses:

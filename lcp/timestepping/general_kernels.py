@@ -29,8 +29,11 @@ Python loop (:mod:`lcp.timestepping.python_loop`) computes it:
 
 - two to 40 active disk-law contacts under ``"auto"``: NSGS, its refinement, the acceptance test and
   the all-stick correction (:mod:`lcp.timestepping.multi_kernels`).
+- two to 40 active planar contacts under ``"auto"`` on operators that change each step: the
+  Python solver's NSGS rounds and semismooth Newton, its tests, the modes and the branch
+  refinement (:mod:`lcp.timestepping.planar_multi_kernels`).
 
-Every other contact step (several planar contacts, another solver, a closed form or NSGS solve
+Every other contact step (another solver, more contacts, a closed form, NSGS or Newton solve
 that fails its test) returns NEEDS_PYTHON with the step's data in the buffers: the Python side
 solves it with the loop's own :class:`~lcp.timestepping.contact_step.ContactStep` and calls back
 with the velocity increment (``forced``), and the kernel finishes that step and goes on.
@@ -46,8 +49,10 @@ from lcp.contact.spatial_nsgs import refine_dense, residual_blocked_dense
 from lcp.numerics.jit import njit
 from lcp.timestepping.compiled_kernels import enum_one
 from lcp.timestepping.control_kernels import control_vector
+from lcp.timestepping.step_products import cols as _cols, matvec as _matvec, rows as _rows, seqmv as _seqmv
 from lcp.timestepping.kinematic_kernels import advance, amax_abs, kinematic_sizes
 from lcp.timestepping.multi_kernels import cone_multi_step, record_multi
+from lcp.timestepping.planar_multi_kernels import planar_multi_step
 
 __all__ = ["DONE", "NEEDS_PYTHON", "NONFINITE", "BAD_DATA", "REJECTED", "BUFFER_FULL", "PROJECTION_FAILED",
            "run_general"]
@@ -59,57 +64,6 @@ DONE, NEEDS_PYTHON, NONFINITE, BAD_DATA, REJECTED, BUFFER_FULL, PROJECTION_FAILE
 _COUPLING_FLOOR = 1e-2
 _SCALE_FLOOR = 1e-12
 _EPS = 2.220446049250313e-16
-
-
-@njit(cache=True)
-def _matvec(A, x):
-    """A @ x as NumPy computes it for a C-ordered A: BLAS's dot of the row for one row, BLAS's
-    gemv otherwise (numba calls the same BLAS kernels, so the sums round the same way and the
-    compiled loop reproduces the Python loop's bits)."""
-    if A.shape[0] == 1:
-        out = np.empty(1)
-        if A.shape[1] <= 16:  # BLAS's dot of a short row sums in order (measured): no call
-            s = 0.0
-            for c in range(A.shape[1]):
-                s += A[0, c] * x[c]
-            out[0] = s
-        else:
-            out[0] = np.dot(A[0], x)
-        return out
-    return np.dot(A, x)
-
-
-@njit(cache=True)
-def _rows(o_X, rows, cols, idx):
-    """The rows ``idx`` of the (rows x cols) column-major buffer o_X, C-ordered (X[idx] in NumPy)."""
-    out = np.empty((idx.size, cols))
-    for a in range(idx.size):
-        for c in range(cols):
-            out[a, c] = o_X[idx[a] + c * rows]
-    return out
-
-
-@njit(cache=True)
-def _seqmv(A, x):
-    """A @ x for the F-ordered column slices X[:, idx] of the Python loop (S H' of the active set):
-    NumPy's product of such an array sums each row in order, as this loop does."""
-    out = np.zeros(A.shape[0])
-    for a in range(A.shape[0]):
-        s = 0.0
-        for c in range(A.shape[1]):
-            s += A[a, c] * x[c]
-        out[a] = s
-    return out
-
-
-@njit(cache=True)
-def _cols(o_X, rows, idx):
-    """The columns ``idx`` of the (rows x cols) column-major buffer o_X, C-ordered (X[:, idx])."""
-    out = np.empty((rows, idx.size))
-    for b in range(idx.size):
-        for a in range(rows):
-            out[a, b] = o_X[a + idx[b] * rows]
-    return out
 
 
 @njit(cache=True)
@@ -461,8 +415,8 @@ def _project(pfunc, pargp, presp, piw, pw, p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p
 def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, o_gap, o_H, o_b0, o_b1,
                 o_F0, o_F1, o_K1, o_C1, kin, kfunc, kargp, kresp, kiw, kw, k_t, k_q, k_w, k_rate, k_B, quats,
                 k0, k_end, every, h, th, close_tol, open_tol, res_tol, mu, e,
-                dims, toff, closed_form, disk_local, cone_multi, max_sweeps, q, v, cq, cv, loaded, istate, fstate,
-                lin, Q, V, PN, PT, MD,
+                dims, toff, closed_form, disk_local, cone_multi, max_sweeps, planar_multi, q, v, cq, cv, loaded, istate,
+                fstate, lin, Q, V, PN, PT, MD,
                 imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act, forced, fdv, project, pfunc, pargp, presp, piw, pw,
                 p_t, p_q, p_w, p_L, p_qo, p_r, p_s, p_mu, nb, ptol, max_evals, ell, ploaded, ctrl,
                 cfn=None, cargp=None, cresp=None, ciw=None, cw=None, c_t=None, c_q=None, c_B=None, c_f0=None,
@@ -474,7 +428,9 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
     skip the force check of step k0, projections, projection iterations, the failed projection's
     evaluations, steps with several contacts solved here]; ``cone_multi``: steps with 2 to
     ``cone_multi`` active disk-law contacts are solved here (:func:`lcp.timestepping.multi_kernels.cone_multi_step`,
-    at most ``max_sweeps`` NSGS sweeps; 0: none); ``fstate`` = [max
+    at most ``max_sweeps`` NSGS sweeps; 0: none); ``planar_multi`` = (largest count, sweeps, Newton
+    iterations, rounds): steps with 2 to ``planar_multi[0]`` active planar contacts are solved here
+    (:func:`lcp.timestepping.planar_multi_kernels.planar_multi_step`; 0: none); ``fstate`` = [max
     residual, worst violation after a projection, violation of a failed projection]; ``lin`` the force check's
     linearisation (t, q, v, F, K, C; t NaN: none). When the reason is not DONE the state (q, v,
     sums, loaded) is that at the start of the returned step; for NEEDS_PYTHON the buffers hold its
@@ -513,7 +469,7 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
     allm = np.arange(m)
     cap = imp_t.size
     room = min(max(m, 1), cap)  # impacts one step may record
-    nmax = m + int(np.sum(dims)) if cone_multi else 0
+    nmax = m + int(np.sum(dims)) if (cone_multi or planar_multi[0]) else 0
     pmul = np.empty(nmax)
     mdmul = np.empty(max(m, 1), dtype=np.int64)
     a_c = h * (1 - th)
@@ -656,9 +612,12 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
                         PT[row, toff[j] + a] = out[1 + a]
                     MD[row, j] = md
                 istate[5 + md] += 1
-            elif (2 <= na <= cone_multi
-                  and cone_multi_step(act, na, m, n, r, o_W, o_H, o_SHt, o_b1, moving, v, vfree, dvf, uNm, mu, e,
-                                      dims, toff, res_tol, max_sweeps, istate, fstate, dv, pmul, mdmul)):
+            elif ((2 <= na <= cone_multi
+                   and cone_multi_step(act, na, m, n, r, o_W, o_H, o_SHt, o_b1, moving, v, vfree, dvf, uNm, mu, e,
+                                       dims, toff, res_tol, max_sweeps, istate, fstate, dv, pmul, mdmul))
+                  or (2 <= na <= planar_multi[0]
+                      and planar_multi_step(act, na, m, n, r, o_W, o_H, o_SHt, o_b1, moving, v, vfree, dvf, uNm, mu,
+                                            e, res_tol, planar_multi, istate, fstate, dv, pmul, mdmul))):
                 record_multi(act, na, m, tk, h, row, pmul, mdmul, dims, toff, e, o_gap, uNm, uNf, loaded, ploaded,
                              project, istate, imp_t, imp_j, imp_p, PN, PT, MD)
             else:

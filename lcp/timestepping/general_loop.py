@@ -16,7 +16,11 @@ planar contact under ``"auto"``/``"enum"`` (closed form, modes, branch refinemen
 contact under the disk law's ``"auto"``/``"local"`` (local solve, branch refinement, the stuck
 correction), two to 40 active disk-law contacts under ``"auto"`` (NSGS, branch refinement, the
 solver's acceptance test, the all-stick correction: :mod:`lcp.timestepping.multi_kernels`; the Python
-loop's results to the solver's tolerance, counted in ``stats.kernel_multi_steps``), impacts, Kahan
+loop's results to the solver's tolerance, counted in ``stats.kernel_multi_steps``), two to 40 active
+planar contacts under ``"auto"`` or ``"nsgs"`` (the Python solver's NSGS rounds and Newton, its tests,
+modes and branch refinement: :mod:`lcp.timestepping.planar_multi_kernels`; the Python loop's bits where no
+Newton iteration was needed, else to rounding; also counted in ``stats.kernel_multi_steps``; steps
+handed back to Python are counted in ``stats.python_steps``), impacts, Kahan
 sums, the position update of Newton-Euler kinematics qdot = T(q) v
 (unit quaternions by the exponential map, as the Python loop), the position projection (its Newton update compiled from
 :attr:`PositionProjection.function <lcp.timestepping.projection.PositionProjection>`, the
@@ -140,6 +144,34 @@ def _cone_multi(solver) -> tuple[int, int]:
     return int(solver.NSGS_MAX_CONTACTS), int(nsgs.max_sweeps)
 
 
+#: the most active planar contacts one step solves in the kernel (planar_multi_kernels: dense 2k x 2k)
+PLANAR_MULTI_MAX = 40
+
+
+def _planar_multi(solver, asm) -> np.ndarray:
+    """(largest number of active planar contacts solved in the kernel, NSGS sweeps, Newton iterations,
+    rounds) of the plain ``"auto"`` solver (its NewtonSolver: compiled sweeps, no error target of its
+    own, the same residual_tol) or ``"nsgs"`` (compiled, no error target: its sweeps, no Newton, one
+    round), on operators that change each step (no warm starts: constant matrices key the Python
+    solver's warm start by active set); zeros otherwise."""
+    from lcp.contact.solvers import AutoSolver, NewtonSolver, NsgsSolver
+
+    off = np.zeros(4, dtype=np.int64)
+    if asm.matrices_constant:
+        return off
+    if type(solver) is NsgsSolver:
+        if not solver.compiled or solver.error_tol is not None:
+            return off
+        return np.array([PLANAR_MULTI_MAX, solver.max_sweeps, 0, 1], dtype=np.int64)
+    if type(solver) is not AutoSolver or solver.error_tol is not None:
+        return off
+    it = solver.iterative
+    if (type(it) is not NewtonSolver or not it.compiled or it.error_tol is not None
+            or it.residual_tol != solver.residual_tol):
+        return off
+    return np.array([PLANAR_MULTI_MAX, it.sweeps, it.newton_iter, it.max_rounds], dtype=np.int64)
+
+
 def run_general_loop(system, asm, lib, q0, v0, h: float, th: float, n_steps: int, every: int, solver,
                      fallback: bool, proj=None, plib=None, klib=None):
     """Moreau-Jean by the compiled general loop (module docstring); ``lib`` is the system's
@@ -198,6 +230,7 @@ def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj
     closed_form = (not spatial) and _closed_form(solver)
     disk_local = spatial and _disk_local(solver)
     cone_multi, max_sweeps = _cone_multi(solver) if spatial else (0, 0)
+    planar_multi = np.zeros(4, dtype=np.int64) if spatial else _planar_multi(solver, asm)
     tdims = np.asarray(system.tangent_dims, dtype=np.int64)
     toff = np.asarray(system.tangent_offsets, dtype=np.int64)
     res_tol = float(getattr(solver, "residual_tol", 1e-10))
@@ -249,8 +282,8 @@ def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj
                                 o["SHt"], o["W"], o["gap"], o["H"], o["b0"], o["b1"], o["F0"], o["F1"], o["K1"],
                                 o["C1"], kin, kf.cfunc, kf.argp, kf.resp, kf.iw, kf.w, *kargs, krate, kB, quats,
                                 k, n_steps, every, h, th, CLOSE_ULPS * EPS, OPEN_ULPS * EPS,
-                                res_tol, mu, e, tdims, toff, closed_form, disk_local, cone_multi, max_sweeps, q, v,
-                                cq, cv, loaded, istate,
+                                res_tol, mu, e, tdims, toff, closed_form, disk_local, cone_multi, max_sweeps,
+                                planar_multi, q, v, cq, cv, loaded, istate,
                                 fstate, lin, Q, V, PN, PT, modes, imp_t, imp_j, imp_p, dvf, vfree, uNm, uNf, act,
                                 forced, fdv, project, pf.cfunc, pf.argp, pf.resp, pf.iw, pf.w, *pargs, *pouts,
                                 system.n_bilateral, ptol, max_evals, ell, ploaded, ctrl, *cargs)
@@ -282,6 +315,7 @@ def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj
             break
         assert reason == NEEDS_PYTHON
         na = int(istate[13])
+        stats.python_steps += 1
         active = act[:na].copy()
         b1 = o["b1"] if moving else None
         # C-ordered copies, as the Python loop's operators (NumPy's products round by layout)
