@@ -1,0 +1,107 @@
+"""Default starts of ``OptimalControlProblem.solve()`` under the gap law, and the examples they solve.
+
+A ball (unit mass, e = 0.5) dropped from 1 m at rest, a vertical thrust |u| <= 3 N, T = 0.6 s,
+N = 12: free fall lands at t1 = sqrt(2 / g) = 0.4515 s, inside step 9. Moreau-Jean's guess at
+h = T / N closes the contact one step late and its node 10 lies below the floor; the gap law bounds
+every node's gap below by zero and IPOPT ends infeasible from it once a target height after the
+bounce is asked. The event method's simulation of the same control, sampled at the nodes, does not
+penetrate, and the solve from it (the second default start) succeeds; the event replay checks it.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import lcp
+from lcp.ocp import OptimalControlProblem, effort
+from lcp.ocp import solve as ocp_solve
+from lcp.ocp.guess import event_guess
+
+G = 9.81
+
+
+def ball(e=0.5, umax=3.0):
+    q, v, u = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1)
+    return lcp.System(q, v, ca.DM.eye(2), ca.vertcat(0.0, -G + u[0]),
+                      contacts=[lcp.Contact(gap=q[1], tangent=q[0], mu=0.0, e=e, name="floor")],
+                      control=u, control_bounds=([-umax], [umax]))
+
+
+def bounce(N=12, target=None, y0=1.0, T=0.6):
+    term = None if target is None else (lambda q, v: q[1] - target)
+    return OptimalControlProblem(ball(), N, T=T, q0=[0.0, y0], v0=[0.0, 0.0], stage_cost=effort,
+                                 terminal_constraints=term)
+
+
+def test_the_moreau_jean_guess_penetrates_and_the_event_guess_does_not():
+    pb = bounce()
+    mj = pb.guess(u=0.0)
+    ev = event_guess(pb, mj.u, pb.T)
+    assert ev is not None and ev.source == "event simulation"
+    assert np.min(mj.q[:, 1]) < -1e-3  # Moreau-Jean: a node below the floor after the landing
+    assert np.min(ev.q[:, 1]) >= -1e-12
+    # before the landing (t1 = 0.4515 s) both are free fall, exact at the nodes
+    t = np.linspace(0.0, pb.T, pb.N + 1)
+    before = t < np.sqrt(2.0 / G)
+    np.testing.assert_allclose(ev.q[before, 1], 1.0 - 0.5 * G * t[before] ** 2, atol=1e-12)
+    np.testing.assert_allclose(mj.q[before, 1], 1.0 - 0.5 * G * t[before] ** 2, atol=1e-12)
+    # after it the event guess flies up with -e times the impact velocity
+    k = int(np.flatnonzero(~before)[0])
+    t1, v1 = np.sqrt(2.0 / G), np.sqrt(2.0 * G)
+    dt = t[k] - t1
+    assert ev.q[k, 1] == pytest.approx(0.5 * v1 * dt - 0.5 * G * dt ** 2, abs=1e-9)
+
+
+@settings(max_examples=8, deadline=None)
+@given(y0=st.floats(0.2, 2.0), N=st.integers(4, 20))
+def test_event_guess_nodes_never_penetrate(y0, N):
+    pb = bounce(N=N, y0=y0, T=1.0)
+    ev = event_guess(pb, 0.0, pb.T)
+    assert ev is not None
+    assert np.min(ev.q[:, 1]) >= -1e-12
+    assert ev.q.shape == (N + 1, 2) and ev.u.shape == (N, 1)
+
+
+def test_bounce_to_a_target_height_from_the_defaults():
+    r = bounce(target=0.2).solve()
+    assert r.success, r.message
+    assert abs(r.q[-1, 1] - 0.2) <= 1e-9
+    k = int(np.argmin(r.q[1:-1, 1])) + 1
+    assert abs(r.q[k, 1]) <= 1e-12 and r.q[k - 1, 1] > 0 and r.q[k + 1, 1] > 0  # bounced at node k
+    assert r.replay.method == "event" and r.replay.final_miss <= 1e-9
+    # the message says which start solved it and why the first did not
+    assert "Started from the event-method simulation" in r.message
+    assert "Moreau-Jean simulation of the mid-range control: IPOPT failed" in r.message
+    assert r.iterations == sum(s.iterations for s in r.homotopy)
+
+
+def test_a_problem_solved_from_the_first_start_does_not_simulate_the_second(monkeypatch):
+    def refuse(*args, **kw):
+        raise AssertionError("the event start was simulated although the first start succeeded")
+
+    monkeypatch.setattr(ocp_solve, "event_guess", refuse)
+    r = bounce().solve()
+    assert r.success, r.message
+    assert "Started from" not in r.message
+
+
+def test_a_failure_from_both_starts_names_both_and_where():
+    # the target 0.1 m at N = 12: neither start converges (IPOPT ends infeasible in the first
+    # relaxation from both); the message says so for each start, with the step and the contact
+    r = bounce(target=0.1).solve()
+    assert not r.success
+    assert r.message.count("IPOPT failed during the relaxation homotopy") == 2
+    assert "Started from the event-method simulation" in r.message
+    assert "from the Moreau-Jean simulation of the mid-range control" in r.message
+    assert r.message.count("the Coulomb residual is largest in step") == 2
+    assert "contact 'floor'" in r.message
+
+
+def test_the_velocity_law_has_one_start():
+    pb = OptimalControlProblem(ball(), 6, T=0.6, q0=[0.0, 0.0], v0=[0.0, 0.0], stage_cost=effort,
+                               contact_law="velocity")
+    assert [lab for lab, _ in ocp_solve.default_starts(pb)] == [ocp_solve.MJ_START]
+    assert [lab for lab, _ in ocp_solve.default_starts(bounce())] == [ocp_solve.MJ_START, ocp_solve.EVENT_START]
