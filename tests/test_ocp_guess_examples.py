@@ -78,6 +78,25 @@ def test_bounce_to_a_target_height_from_the_defaults():
     assert r.iterations == sum(s.iterations for s in r.homotopy)
 
 
+def test_bounce_at_N24_needs_the_larger_first_relaxation():
+    # N = 24: IPOPT ends infeasible from both guesses at sigma0 = 1e-4 (and from the event guess at
+    # every sigma0 <= 0.1, measured); the third start, the event guess from sigma0 = 1, solves it
+    r = bounce(N=24, target=0.2).solve()
+    assert r.success, r.message
+    assert "from sigma0 = 1" in r.message and r.homotopy[-2].sigma <= 1e-4
+    assert any(s.sigma == 1.0 for s in r.homotopy)
+    assert abs(r.q[-1, 1] - 0.2) <= 1e-9 and np.min(r.q[1:-1, 1]) <= 1e-12
+    assert r.replay.method == "event" and r.replay.final_miss <= 1e-9
+    # a finer grid puts the landing nearer the free fall's: the cost is below N = 12's
+    assert r.cost < bounce(N=12, target=0.2).solve().cost
+
+
+def test_a_users_sigma0_is_kept_by_every_start():
+    r = bounce(N=24, target=0.2).solve(sigma0=1e-4)
+    assert not r.success
+    assert "from sigma0 = 1" not in r.message and all(s.sigma <= 1e-4 for s in r.homotopy)
+
+
 def test_a_problem_solved_from_the_first_start_does_not_simulate_the_second(monkeypatch):
     def refuse(*args, **kw):
         raise AssertionError("the event start was simulated although the first start succeeded")
@@ -89,19 +108,23 @@ def test_a_problem_solved_from_the_first_start_does_not_simulate_the_second(monk
 
 
 def test_a_failure_from_both_starts_names_both_and_where():
-    # the target 0.1 m at N = 12: neither start converges (IPOPT ends infeasible in the first
-    # relaxation from both); the message says so for each start, with the step and the contact
+    # the target 0.1 m at N = 12 is out of reach: 1 m of fall takes at least sqrt(2 / (g - 3)) =
+    # 0.54 s, so the landing is at node 10 (0.5 s) at the latest, with at least 3.74 m/s (the
+    # thrust front-loaded), and 0.1 s of flight after it ends at 0.12 m or higher. Every start ends
+    # infeasible in its first relaxation; the message says so for each, with the step and the contact
     r = bounce(target=0.1).solve()
     assert not r.success
-    assert r.message.count("IPOPT failed during the relaxation homotopy") == 2
-    assert "Started from the event-method simulation" in r.message
+    assert r.message.count("IPOPT failed during the relaxation homotopy") == 3
+    assert "Started from the event-method simulation of the mid-range control from sigma0 = 1" in r.message
     assert "from the Moreau-Jean simulation of the mid-range control" in r.message
-    assert r.message.count("the Coulomb residual is largest in step") == 2
+    assert r.message.count("the Coulomb residual is largest in step") == 3
     assert "contact 'floor'" in r.message
 
 
 def test_the_velocity_law_has_one_start():
     pb = OptimalControlProblem(ball(), 6, T=0.6, q0=[0.0, 0.0], v0=[0.0, 0.0], stage_cost=effort,
                                contact_law="velocity")
-    assert [lab for lab, _ in ocp_solve.default_starts(pb)] == [ocp_solve.MJ_START]
-    assert [lab for lab, _ in ocp_solve.default_starts(bounce())] == [ocp_solve.MJ_START, ocp_solve.EVENT_START]
+    assert [s[0] for s in ocp_solve.default_starts(pb)] == [ocp_solve.MJ_START]
+    labels = [s[0] for s in ocp_solve.default_starts(bounce())]
+    assert labels == [ocp_solve.MJ_START, ocp_solve.EVENT_START, ocp_solve.EVENT_START + " from sigma0 = 1"]
+    assert [s[0] for s in ocp_solve.default_starts(bounce(), own_sigma0=True)] == labels[:2]
