@@ -128,3 +128,31 @@ def test_the_velocity_law_has_one_start():
     labels = [s[0] for s in ocp_solve.default_starts(bounce())]
     assert labels == [ocp_solve.MJ_START, ocp_solve.EVENT_START, ocp_solve.EVENT_START + " from sigma0 = 1"]
     assert [s[0] for s in ocp_solve.default_starts(bounce(), own_sigma0=True)] == labels[:2]
+
+
+def test_the_ball_example_of_the_study_is_a_checked_success():
+    from studies import ocp_examples as study
+    from studies._ocp_models import EXAMPLES
+
+    ex = EXAMPLES["ball_bounce"]()
+    row, res = study._ours(ex, ex.N_quick)
+    assert row["ours_success"] and row["ours_method"] == "event" and row["ours_miss"] <= 1e-9
+    # the effort of a piecewise-constant control is integrated exactly by the score: J_replay repeats it
+    assert row["ours_J_replay"] == pytest.approx(row["ours_cost"], rel=1e-9)
+    assert res.q[-1, 1] == pytest.approx(0.2, abs=1e-9)
+
+
+@pytest.mark.slow
+def test_the_box_tip_fails_from_every_start_and_says_where():
+    # the box pivots on its bottom-right corner (a contact held closed along a curved gap): no
+    # default start converges (studies.ocp_examples says why); the message names every start,
+    # IPOPT's status and the step and contact of the largest Coulomb residual
+    from studies._ocp_models import EXAMPLES
+
+    r = EXAMPLES["box_tip"]().make(10).solve()
+    assert not r.success
+    assert "Started from the event-method simulation of the mid-range control from sigma0 = 1" in r.message
+    assert "from the Moreau-Jean simulation of the mid-range control" in r.message
+    assert "the Coulomb residual is largest in step" in r.message and "contact '" in r.message
+    names = {c.name for c in r.problem.system.contacts}
+    assert any(f"contact '{nm}'" in r.message for nm in names)
