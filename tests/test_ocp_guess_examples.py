@@ -156,3 +156,35 @@ def test_the_box_tip_fails_from_every_start_and_says_where():
     assert "the Coulomb residual is largest in step" in r.message and "contact '" in r.message
     names = {c.name for c in r.problem.system.contacts}
     assert any(f"contact '{nm}'" in r.message for nm in names)
+
+
+@pytest.mark.parametrize("K", [2, 7])
+def test_the_nosnoc_chain_is_the_studys_chain(K):
+    # nosnoc's Stewart form of the K-block chain (studies._nosnoc_examples) against the System of
+    # studies._ocp_models.block_chain: with every block sliding forward (each in the region v_i > 0,
+    # friction mu m g against it), the same accelerations at random positions, speeds and push
+    peers = pytest.importorskip("studies._nosnoc_examples")
+    if not peers.available():
+        pytest.skip("nosnoc (optional peer) not installed")
+    import nosnoc as ns
+
+    from studies._ocp_models import EXAMPLES, block_chain
+
+    assert ("block_chain7" in EXAMPLES) and ("block_chain7" in peers.PEERS)
+    model, ocp, _ = peers._chain(ns, ca, 4, K=K)
+    ex = block_chain(K)
+    rng = np.random.default_rng(K)
+    x = np.concatenate([ex.q0[0::2] + rng.uniform(-0.2, 0.2, K), rng.uniform(0.1, 1.0, K)])
+    u = rng.uniform(-30, 30)
+    xdot = sum(np.array(ca.Function("f", [model.x, model.u], [F[:, 0]])(x, u)).ravel() for F in model.F)
+    q = np.zeros(2 * K)
+    q[0::2] = x[:K]
+    v = np.zeros(2 * K)
+    v[0::2] = x[K:]
+    sysu = ex.system
+    force = np.array(ca.Function("F", [sysu.t_sym, sysu.q_sym, sysu.v_sym, sysu.control_sym],
+                                 [sysu.force_expr + ca.mtimes(sysu.control_matrix_expr, sysu.control_sym)])(
+        0.0, q, v, [u])).ravel()
+    acc = force[0::2] - 0.3 * G  # unit masses, every block sliding forward: friction mu m g
+    np.testing.assert_allclose(xdot[K:], acc, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(xdot[:K], x[K:], rtol=0, atol=0)
