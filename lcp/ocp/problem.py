@@ -251,7 +251,10 @@ class OptimalControlProblem:
         ----------
         guess : OCPGuess, OCPResult or None
             Initial guess; one on another grid is resampled. By default, the simulation of the
-            mid-range control (:meth:`guess`), or with ``method="phases"`` :meth:`phase_guess`.
+            mid-range control (:meth:`guess`), or with ``method="phases"`` :meth:`phase_guess`;
+            under the gap law, if the solve from it fails, the same control simulated by the event
+            method, then that guess from sigma0 = 1 unless sigma0 is given
+            (:func:`lcp.ocp.solve.default_starts`); ``message`` names the start that was kept.
         options : HomotopyOptions, optional
         method : {"auto", "homotopy", "phases"}
             ``"auto"`` (default): ``"phases"`` with free steps, a contact and no guess, else

@@ -57,7 +57,7 @@ def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
     tried, earlier = [], []  # the failed starts' messages and homotopy stages (kept in the history)
     for label, gs, sigma0 in starts:
         if history is not None:  # a start before this one failed
-            tried.append(f"from the {last}: {message}")
+            tried.append(f"from the {last}: {message.rstrip('.')}")
             earlier += history
         P0 = np.concatenate([[0.0], problem.q0, problem.v0])
         x0 = x0_from_guess(problem, problem.transcription, gs)
