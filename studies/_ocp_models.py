@@ -20,8 +20,8 @@ import lcp
 from lcp.model.system import Contact, System
 from lcp.ocp import OptimalControlProblem, add_control, effort
 
-__all__ = ["EXAMPLES", "Example", "ball_bounce", "block_chain", "block_chain7", "box_tip", "cart_pole", "hopper", "motor", "point_on_plane",
-           "point_stick_slide", "two_discs"]
+__all__ = ["EXAMPLES", "Example", "ball_bounce", "block_chain", "block_chain7", "box_tip", "cart_pole", "hopper",
+           "motor", "point_on_plane", "point_stick_slide", "two_discs"]
 
 G = 9.81
 

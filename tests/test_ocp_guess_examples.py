@@ -171,7 +171,7 @@ def test_the_nosnoc_chain_is_the_studys_chain(K):
     from studies._ocp_models import EXAMPLES, block_chain
 
     assert ("block_chain7" in EXAMPLES) and ("block_chain7" in peers.PEERS)
-    model, ocp, _ = peers._chain(ns, ca, 4, K=K)
+    model = peers._chain(ns, ca, 4, K=K)[0]
     ex = block_chain(K)
     rng = np.random.default_rng(K)
     x = np.concatenate([ex.q0[0::2] + rng.uniform(-0.2, 0.2, K), rng.uniform(0.1, 1.0, K)])

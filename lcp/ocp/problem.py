@@ -250,11 +250,8 @@ class OptimalControlProblem:
         Parameters
         ----------
         guess : OCPGuess, OCPResult or None
-            Initial guess; one on another grid is resampled. By default, the simulation of the
-            mid-range control (:meth:`guess`), or with ``method="phases"`` :meth:`phase_guess`;
-            under the gap law, if the solve from it fails, the same control simulated by the event
-            method, then that guess from sigma0 = 1 unless sigma0 is given
-            (:func:`lcp.ocp.solve.default_starts`); ``message`` names the start that was kept.
+            Initial guess; one on another grid is resampled. By default, the mid-range control's
+            simulations (:func:`lcp.ocp.solve.default_starts`), or with ``method="phases"`` :meth:`phase_guess`.
         options : HomotopyOptions, optional
         method : {"auto", "homotopy", "phases"}
             ``"auto"`` (default): ``"phases"`` with free steps, a contact and no guess, else

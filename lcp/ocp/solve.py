@@ -20,8 +20,8 @@ from lcp.ocp.results import OCPGuess, OCPResult
 from lcp.ocp.spatial import SpatialTranscription
 from lcp.ocp.transcription import Transcription
 
-__all__ = ["bound_steps_note", "default_starts", "first_pass", "guess_from", "piecewise_uniform", "result_of", "solve_problem",
-           "unbounded_note"]
+__all__ = ["bound_steps_note", "default_starts", "first_pass", "guess_from", "piecewise_uniform", "result_of",
+           "solve_problem", "unbounded_note"]
 
 
 def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
@@ -55,6 +55,7 @@ def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
     starts = default_starts(problem, own_sigma0) if guess is None else iter([(None, guess_from(problem, guess), None)])
     run = run_phases if method == "phases" else run_homotopy
     tried, earlier = [], []  # the failed starts' messages and homotopy stages (kept in the history)
+    last, message = None, ""
     for label, gs, sigma0 in starts:
         if history is not None:  # a start before this one failed
             tried.append(f"from the {last}: {message.rstrip('.')}")
