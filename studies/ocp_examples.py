@@ -34,7 +34,11 @@ nodes, and the homotopy ends with a Coulomb residual there (a frictionless point
 floor y = x^2 / 2 at N = 20: impulses up to 1e-3 N s, residual 1.6e-2; on a flat floor solved
 exactly). A transcription matter, not one of the guess.
 The two discs also start on one line with swapped targets: the symmetric problem has no gradient
-that sends one disc around the other, and the solve stops with the discs pressed together.
+that sends one disc around the other, and the solve stops with the discs pressed together. The
+seven-block chain (0.3 m in 1 s, |u| <= 30 N) is solved by neither solver at N = 20: ours ends
+infeasible from every start, nosnoc reports INFEASIBLE after its iteration limit (its control's
+event replay misses its own final state by 0.73); whether the problem is feasible at all is not
+settled here.
 """
 from __future__ import annotations
 
