@@ -25,8 +25,10 @@ study solve takes (building, guesses, multi-start, and its own replay check). Wa
 machine: compare within one run; the load average is printed.
 
 (4) the examples of ``studies/ocp_examples.py`` (a point on a plane through a spatial contact,
-a two-block chain, nosnoc_py's motor and cart-pole with friction, nosnoc_py's hopper and two discs, a
-box tipped over an edge): per example and N, the package's objective, replay miss (and method), success
+two- and seven-block chains (nosnoc_py has no seven-block example: ``studies/_nosnoc_examples.py``
+writes it in the Stewart form of its two-block one), nosnoc_py's motor and cart-pole with friction,
+nosnoc_py's hopper and two discs, a box tipped over an edge, a ball bounced to a height):
+per example and N, the package's objective, replay miss (and method), success
 and time, nosnoc's status, replay miss of its control through the package's event method and time,
 both controls scored by the same continuous cost on a replay (``J_replay``), and the time ratio
 nosnoc / package within the run. Written to ``ocp_vs_nosnoc_examples.csv``. ``--only-examples`` runs

@@ -3,8 +3,9 @@
 The models and options are nosnoc_py's own examples, written in its Filippov (Stewart) form:
 examples/cart_pole_with_friction (RADAU IIA n_s = 2, 2 finite elements per stage, T = 5 s),
 examples/motor_with_friction (n_s = 2, 2 finite elements, comp_tol 1e-6, L2_RELAXED_SCALED step
-equilibration, T = 0.08 s), and the two-block chain of :func:`studies._ocp_models.block_chain` in the
-same form as examples/friction_block (one switching function per block velocity). The hopper and the
+equilibration, T = 0.08 s), and the two- and seven-block chains of
+:func:`studies._ocp_models.block_chain` in the same form as examples/friction_block (one switching
+function per block velocity; nosnoc_py has no seven-block example: it is written here). The hopper and the
 two discs of nosnoc_py use time freezing with a speed-of-time control (a different horizon), the
 point on a plane needs the friction disk and the box is not one of nosnoc's examples: no peer is run
 for them (:data:`PEERS` says why).
@@ -34,6 +35,7 @@ NO_PEER = {
     "hopper": "nosnoc_py's hopper uses time freezing with a speed-of-time control (another horizon); not run",
     "two_discs": "nosnoc_py's discs use time freezing with a speed-of-time control (another horizon); not run",
     "box_tip": "not one of nosnoc's examples",
+    "ball_bounce": "nosnoc_py's restitution needs time freezing (another horizon); not run",
 }
 
 
@@ -122,21 +124,41 @@ def _motor(ns, ca, N):
     return model, ocp, _opts(ns, N, p["T"], comp_tol=1e-6, step_eq="L2_RELAXED_SCALED")
 
 
-def _chain(ns, ca, N):
+def _chain(ns, ca, N, K=2):
+    """The chain of :func:`studies._ocp_models.block_chain` (K unit blocks, springs k = 50 N/m at rest
+    length 1 m, friction 0.3 g per block, the first block pushed, |u| <= 30 N, every block moved
+    0.3 m to rest in 1 s, minimum int u^2 dt) in nosnoc's Stewart form: one switching function per
+    block velocity, the first subsystem carrying the springs and the push (as
+    examples/friction_block)."""
     from studies._ocp_models import G
 
-    x0, x1, v0, v1, u = (ca.SX.sym(s) for s in ("x0", "x1", "v0", "v1", "u"))
+    xs = [ca.SX.sym(f"x{i}") for i in range(K)]
+    vs = [ca.SX.sym(f"v{i}") for i in range(K)]
+    u = ca.SX.sym("u")
     k, c, spacing = 50.0, 0.3 * G, 1.0
-    tension = k * (x1 - x0 - spacing)
-    base = ca.vertcat(v0, v1, u + tension, -tension)
-    F1 = ca.horzcat(base - ca.vertcat(0, 0, c, 0), base + ca.vertcat(0, 0, c, 0))
-    F2 = ca.horzcat(ca.vertcat(0, 0, 0, -c), ca.vertcat(0, 0, 0, c))
-    x = ca.vertcat(x0, x1, v0, v1)
-    S = [np.array([[1], [-1]]), np.array([[1], [-1]])]
-    model = ns.NosnocModel(x=x, F=[F1, F2], S=S, c=[v0, v1], x0=np.array([0.0, 1.0, 0, 0]), u=u)
+    tension = [k * (xs[i + 1] - xs[i] - spacing) for i in range(K - 1)]
+    acc = [(u if i == 0 else 0) + (tension[i] if i < K - 1 else 0) - (tension[i - 1] if i > 0 else 0)
+           for i in range(K)]
+    base = ca.vertcat(*vs, *acc)
+
+    def friction(i, sign):  # the friction of block i in the region of sign(v_i) = -sign
+        e = np.zeros(2 * K)
+        e[K + i] = sign * c
+        return ca.DM(e)
+
+    F = [ca.horzcat(base - friction(0, 1), base + friction(0, 1))]
+    F += [ca.horzcat(-friction(i, 1), friction(i, 1)) for i in range(1, K)]
+    x = ca.vertcat(*xs, *vs)
+    S = [np.array([[1], [-1]]) for _ in range(K)]
+    x0 = np.concatenate([spacing * np.arange(K), np.zeros(K)])
+    model = ns.NosnocModel(x=x, F=F, S=S, c=vs, x0=x0, u=u)
     ocp = ns.NosnocOcp(lbu=np.array([-30.0]), ubu=np.array([30.0]), f_q=u ** 2,
-                       g_terminal=ca.vertcat(x0 - 0.3, x1 - 1.3, v0, v1))
+                       g_terminal=ca.vertcat(*[xs[i] - (x0[i] + 0.3) for i in range(K)], *vs))
     return model, ocp, _opts(ns, N, 1.0, comp_tol=1e-9)
+
+
+def _chain7(ns, ca, N):
+    return _chain(ns, ca, N, K=7)
 
 
 #: example name -> (builder, nosnoc's state -> the example's common coordinates)
@@ -144,6 +166,8 @@ PEERS = {
     "cart_pole": (_cart_pole, lambda x: np.asarray(x)[[0, 1, 2, 3]]),
     "motor": (_motor, lambda x: np.asarray(x)[[0, 2, 1, 3, 4]]),  # (x1, x2, v1, v2, I)
     "block_chain2": (_chain, lambda x: np.asarray(x)[[0, 1, 2, 3]]),
+    # (x0..x6, v0..v6), as block_chain's common coordinates
+    "block_chain7": (_chain7, lambda x: np.asarray(x, dtype=float)),
 }
 
 

@@ -20,8 +20,8 @@ import lcp
 from lcp.model.system import Contact, System
 from lcp.ocp import OptimalControlProblem, add_control, effort
 
-__all__ = ["EXAMPLES", "Example", "block_chain", "box_tip", "cart_pole", "hopper", "motor", "point_on_plane",
-           "point_stick_slide", "two_discs"]
+__all__ = ["EXAMPLES", "Example", "ball_bounce", "block_chain", "block_chain7", "box_tip", "cart_pole", "hopper",
+           "motor", "point_on_plane", "point_stick_slide", "two_discs"]
 
 G = 9.81
 
@@ -125,6 +125,13 @@ def block_chain(K: int = 2, d: float = 0.3, T: float = 1.0, u_max: float = 30.0)
 
     return Example(f"block_chain{K}", f"block chain (K = {K}) moved {d} m", sys, sc.q0, sc.v0, T, make, _effort,
                    _zero, 20, (20, 40, 80), common=lambda q, v: np.concatenate([q[0::2], v[0::2]]))
+
+
+def block_chain7() -> Example:
+    """:func:`block_chain` with seven blocks (seven contacts, fourteen coordinates), at N = 20 and 40."""
+    ex = block_chain(7)
+    ex.N_full = (20, 40)
+    return ex
 
 
 # ----------------------------------------------------------------------------- cart-pole with friction
@@ -346,5 +353,28 @@ def box_tip(w: float = 0.2, hgt: float = 0.4, m: float = 1.0, mu: float = 0.8, T
     return Example("box_tip", "box tipped over an edge", sys, q0, np.zeros(3), T, make, _effort, _zero, 20, (20, 40))
 
 
-EXAMPLES = {"point_on_plane": point_on_plane, "point_stick_slide": point_stick_slide, "block_chain2": block_chain, "motor": motor, "cart_pole": cart_pole,
-            "two_discs": two_discs, "box_tip": box_tip, "hopper": hopper}
+# ----------------------------------------------------------------------------- ball bounced to a height
+def ball_bounce(e: float = 0.5, u_max: float = 3.0, T: float = 0.6, target: float = 0.2) -> Example:
+    """A unit ball (restitution e = 0.5) dropped from 1 m at rest, a vertical thrust |u| <= u_max, at
+    height ``target`` at T after one bounce, minimum int u^2 dt. Free fall lands at sqrt(2 / g) =
+    0.4515 s and would reach 0.2224 m at T; the thrust puts the landing on a node (the gap law's
+    impulse, Newton's law) and the ball on the target. Moreau-Jean's default guess penetrates at the
+    node after the landing; :meth:`~lcp.ocp.OptimalControlProblem.solve`'s second default start,
+    the event method's simulation, does not."""
+    q, v, u = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1)
+    sys = System(q, v, ca.DM.eye(2), ca.vertcat(0.0, -G + u[0]),
+                 contacts=[Contact(gap=q[1], tangent=q[0], mu=0.0, e=e, name="floor")],
+                 control=u, control_bounds=(np.array([-u_max]), np.array([u_max])), names=["x", "y"])
+    q0 = np.array([0.0, 1.0])
+
+    def make(N):
+        return OptimalControlProblem(sys, N, T=T, q0=q0, v0=np.zeros(2), stage_cost=effort,
+                                     terminal_constraints=lambda qq, vv: qq[1] - target)
+
+    return Example("ball_bounce", f"ball bounced to {target} m (e = {e})", sys, q0, np.zeros(2), T, make, _effort,
+                   _zero, 12, (12, 24))
+
+
+EXAMPLES = {"point_on_plane": point_on_plane, "point_stick_slide": point_stick_slide, "block_chain2": block_chain,
+            "block_chain7": block_chain7, "motor": motor, "cart_pole": cart_pole,
+            "two_discs": two_discs, "box_tip": box_tip, "hopper": hopper, "ball_bounce": ball_bounce}

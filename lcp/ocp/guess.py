@@ -6,7 +6,7 @@ import numpy as np
 from lcp.ocp.options import HomotopyOptions
 from lcp.ocp.results import OCPGuess
 
-__all__ = ["multistart", "resample", "simulate_guess", "x0_from_guess"]
+__all__ = ["control_values", "event_guess", "multistart", "resample", "simulate_guess", "x0_from_guess"]
 
 
 def _interp(a, told, tnew):
@@ -135,6 +135,18 @@ def simulate_guess(pb, u, T: float, solver: str = "auto") -> OCPGuess:
     from lcp.simulation import simulate
 
     t = np.linspace(0.0, T, pb.N + 1)
+    un = control_values(pb, u, T)
+    sim = simulate(pb.system, T, h=T / pb.N, theta=pb.theta, solver=solver, q0=pb.q0, v0=pb.v0,
+                   control=pb.schedule(t, un))
+    if not sim.success or len(sim.t) != pb.N + 1:
+        raise ValueError(f"the guess simulation failed: {sim.message}")
+    return OCPGuess(T=T, q=sim.q, v=sim.v, u=un, p_N=sim.p_N, p_T=sim.p_T, source="simulation")
+
+
+def control_values(pb, u, T: float) -> np.ndarray:
+    """The rows of control values of ``u`` (constant, per interval/node, or a function of t) on
+    pb's uniform grid over T, clipped to the control bounds."""
+    t = np.linspace(0.0, T, pb.N + 1)
     rows = pb.control_rows
     if callable(u):
         ts = np.repeat(t, 2)[1:-1] if pb.hold == "affine" else t[:rows]  # affine: both ends of each step
@@ -143,12 +155,29 @@ def simulate_guess(pb, u, T: float, solver: str = "auto") -> OCPGuess:
         ua = np.asarray(u, dtype=float)
         un = (np.repeat(np.broadcast_to(ua, (pb.nu,))[None, :], rows, 0) if ua.size == pb.nu
               else ua.reshape(rows, pb.nu))
-    un = np.clip(un, pb.u_min, pb.u_max)
-    sim = simulate(pb.system, T, h=T / pb.N, theta=pb.theta, solver=solver, q0=pb.q0, v0=pb.v0,
-                   control=pb.schedule(t, un))
-    if not sim.success or len(sim.t) != pb.N + 1:
-        raise ValueError(f"the guess simulation failed: {sim.message}")
-    return OCPGuess(T=T, q=sim.q, v=sim.v, u=un, p_N=sim.p_N, p_T=sim.p_T, source="simulation")
+    return np.clip(un, pb.u_min, pb.u_max)
+
+
+def event_guess(pb, u, T: float) -> OCPGuess | None:
+    """The control's response by the event method sampled at the nodes (None where the event
+    method does not apply or fails).
+
+    Moreau-Jean at h = T / N closes a contact one step late and lets the node after it penetrate
+    (the ball dropped on its floor: its gap at the node after the landing is below zero), which the
+    gap law's bounds g(q_k) >= 0 refuse at the start; the event method's nodes never penetrate.
+    Its impacts fall between nodes, where the transcription has none: the guess is not a
+    solution of the NLP, only a start without penetrations."""
+    from lcp.simulation import simulate
+
+    un = control_values(pb, u, T)
+    t = np.linspace(0.0, T, pb.N + 1)
+    try:
+        sim = simulate(pb.system, T, method="event", control=pb.schedule(t, un), q0=pb.q0, v0=pb.v0, t_eval=t)
+    except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError):
+        return None
+    if not sim.success or len(sim.t) != pb.N + 1 or not np.all(np.isfinite(sim.q)):
+        return None
+    return OCPGuess(T=T, q=sim.q, v=sim.v, u=un, p_N=sim.p_N, p_T=sim.p_T, source="event simulation")
 
 
 def multistart(pb, guesses, options, rtol: float, **option_kw):

@@ -250,8 +250,8 @@ class OptimalControlProblem:
         Parameters
         ----------
         guess : OCPGuess, OCPResult or None
-            Initial guess; one on another grid is resampled. By default, the simulation of the
-            mid-range control (:meth:`guess`), or with ``method="phases"`` :meth:`phase_guess`.
+            Initial guess; one on another grid is resampled. By default, the mid-range control's
+            simulations (:func:`lcp.ocp.solve.default_starts`), or with ``method="phases"`` :meth:`phase_guess`.
         options : HomotopyOptions, optional
         method : {"auto", "homotopy", "phases"}
             ``"auto"`` (default): ``"phases"`` with free steps, a contact and no guess, else
