@@ -132,7 +132,7 @@ def cold(name, steps, keep_numba=False):
     from lcp.numerics import cache
 
     with tempfile.TemporaryDirectory() as tmp:
-        numba_dir = os.environ.get("NUMBA_CACHE_DIR") or str(cache.cache_dir() / "numba")
+        numba_dir = str(cache.numba_cache_dir())
         env = dict(os.environ, LCP_CACHE_DIR=tmp, NUMBA_CACHE_DIR=numba_dir if keep_numba else os.path.join(tmp, "numba"),
                    PYTHONPATH=str(ROOT))
         code = (f"import sys; sys.path.insert(0, {str(ROOT / 'benchmarks')!r}); import general_compiled as g; "

@@ -33,8 +33,34 @@ def test_numba_cache_in_the_cache_folder_unless_the_user_set_it(tmp_path, user_n
         env["NUMBA_CACHE_DIR"] = str(tmp_path / "mine")
     code = "import lcp.numerics.jit, numba; print(numba.config.CACHE_DIR)"
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
-    expected = tmp_path / "mine" if user_numba_dir else tmp_path / "c" / "numba"
+    expected = tmp_path / "mine" if user_numba_dir else tmp_path / "c" / "numba" / cache.kernel_sources_tag()
     assert Path(out.stdout.strip()) == expected
+
+
+def test_numba_folder_changes_with_any_kernel_module(tmp_path):
+    """numba checks only a kernel's own file: the folder's digest must move when a callee's module
+    (another kernel file) or a constant module changes, and not with the rest of the package."""
+    import shutil
+
+    copy = tmp_path / "pkg"
+    for part in ("lcp", "lem"):
+        shutil.copytree(ROOT / part, copy / part, ignore=shutil.ignore_patterns("__pycache__"))
+    code = "from lcp.numerics import cache; print(cache.kernel_sources_tag())"
+
+    def tag():
+        env = dict(os.environ, PYTHONPATH=str(copy))
+        return subprocess.run([sys.executable, "-c", code], env=env, cwd=copy, capture_output=True, text=True,
+                              check=True).stdout.strip()
+
+    base = tag()
+    assert base == cache.kernel_sources_tag()  # same sources, same folder
+    law = copy / "lcp" / "contact" / "law.py"
+    law.write_text(law.read_text() + "\n# changed\n")
+    changed = tag()
+    assert changed != base
+    other = copy / "lcp" / "ocp" / "problem.py"  # not compiled by numba
+    other.write_text(other.read_text() + "\n# changed\n")
+    assert tag() == changed
 
 
 def test_entries_are_built_once_and_rebuilt_when_corrupt(tmp_path):

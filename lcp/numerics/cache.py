@@ -18,8 +18,9 @@ once. Every entry is therefore
 - checked before it is loaded, against the SHA-256 digest recorded beside it when it was built: a
   corrupt entry (a truncated file, which the loader would map and then crash on) is rebuilt.
 
-numba's own cache goes to the ``numba`` subfolder: :func:`configure_numba` sets
-``NUMBA_CACHE_DIR`` there unless the user has set it, and :mod:`lcp.numerics.jit` calls it before it
+numba's own cache goes to the ``numba/<digest>`` subfolder, named by a digest of the kernels'
+sources (:func:`kernel_sources_tag`: numba itself would load a kernel whose callee changed stale):
+:func:`configure_numba` sets ``NUMBA_CACHE_DIR`` there unless the user has set it, and :mod:`lcp.numerics.jit` calls it before it
 imports numba. Imports nothing of the package.
 """
 from __future__ import annotations
@@ -35,7 +36,8 @@ import sysconfig
 import tempfile
 from typing import TypeVar
 
-__all__ = ["ENV_VAR", "cache_dir", "configure_numba", "entry_lock", "write_atomic", "cached_entry"]
+__all__ = ["ENV_VAR", "cache_dir", "configure_numba", "entry_lock", "write_atomic", "cached_entry", "kernel_sources_tag",
+           "numba_cache_dir"]
 
 #: the environment variable that moves the cache
 ENV_VAR = "LCP_CACHE_DIR"
@@ -103,8 +105,44 @@ def _default_dir() -> Path:
     return folder
 
 
+#: where the package's numba kernels live (package-relative folders): every module of these folders
+#: counts for :func:`kernel_sources_tag`, and of ``lem`` the modules that use numba
+_KERNEL_FOLDERS = (("lcp", "contact"), ("lcp", "numerics"), ("lcp", "sweeps"), ("lcp", "timestepping"))
+
+
+@functools.lru_cache(maxsize=1)
+def kernel_sources_tag() -> str:
+    """A digest of the sources the numba kernels are compiled from (16 hex digits).
+
+    numba checks a cached kernel against its own file's time stamp only: a kernel whose callee (a
+    kernel of another module) or whose global constant (inlined at compile time) changed would be
+    loaded stale, silently computing with the old code. The cache therefore lives in a folder named
+    by this digest, which any change to a kernel module changes (reading and hashing the sources
+    costs about 3 ms once per process). Old folders are left for the user to delete.
+    """
+    root = Path(__file__).resolve().parents[2]
+    digest = hashlib.sha256()
+    try:
+        files = [p for parts in _KERNEL_FOLDERS for p in sorted(root.joinpath(*parts).glob("*.py"))]
+        files += [p for p in sorted(root.joinpath("lem").glob("*.py")) if b"njit" in p.read_bytes()]
+        for path in files:
+            digest.update(path.name.encode())
+            digest.update(path.read_bytes())
+    except OSError:  # sources not readable (a zipped install): one folder per process start instead
+        digest.update(str(os.getpid()).encode())
+    return digest.hexdigest()[:16]
+
+
+def numba_cache_dir() -> Path:
+    """numba's cache folder for this process: ``NUMBA_CACHE_DIR`` when set, else
+    ``<cache_dir()>/numba/<kernel_sources_tag()>``."""
+    env = os.environ.get("NUMBA_CACHE_DIR")
+    return Path(env) if env else cache_dir() / "numba" / kernel_sources_tag()
+
+
 def configure_numba() -> None:
-    """Point numba's cache at ``<cache_dir()>/numba`` unless ``NUMBA_CACHE_DIR`` is already set.
+    """Point numba's cache at ``<cache_dir()>/numba/<kernel_sources_tag()>`` unless
+    ``NUMBA_CACHE_DIR`` is already set.
 
     Must run before numba reads its configuration; where numba was imported earlier (by the user or
     another package) its configuration is reloaded so that the kernels decorated afterwards use it.
@@ -112,7 +150,7 @@ def configure_numba() -> None:
     if os.environ.get("NUMBA_CACHE_DIR"):
         return
     try:
-        folder = cache_dir() / "numba"
+        folder = cache_dir() / "numba" / kernel_sources_tag()
         folder.mkdir(parents=True, exist_ok=True)
     except (OSError, ValueError):  # numba's default (__pycache__ beside the sources) then
         return

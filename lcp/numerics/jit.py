@@ -7,7 +7,7 @@ Python reference of a kernel either way. numba is a dependency; the stand-in ser
 cannot be imported (and the reference is tested through ``py_func`` and ``compiled=False``).
 
 numba is first imported by the package here, so numba's cache folder is set here first
-(:func:`lcp.numerics.cache.configure_numba`: ``<LCP_CACHE_DIR>/numba`` unless ``NUMBA_CACHE_DIR``
+(:func:`lcp.numerics.cache.configure_numba`: ``<LCP_CACHE_DIR>/numba/<digest of the kernel sources>`` unless ``NUMBA_CACHE_DIR``
 is set). Imports :mod:`lcp.numerics.cache` only.
 """
 from __future__ import annotations
