@@ -131,7 +131,7 @@ def cold(name, steps, keep_numba=False):
     with tempfile.TemporaryDirectory() as tmp:
         numba_dir = os.environ.get("NUMBA_CACHE_DIR") or str(cache.cache_dir() / "numba")
         env = dict(os.environ, LCP_CACHE_DIR=tmp, NUMBA_CACHE_DIR=numba_dir if keep_numba else os.path.join(tmp, "numba"),
-                   PYTHONPATH=str(ROOT))
+                   PYTHONPATH=str(ROOT), LCP_COMPILE="always")  # the compiled loop's cold cost, short runs too
         code = (f"import sys; sys.path.insert(0, {str(ROOT / 'benchmarks')!r}); import general_compiled as g; "
                 f"t, r = g.run({name!r}, {steps}, True); print(t)")
         out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)

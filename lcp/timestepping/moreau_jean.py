@@ -79,7 +79,9 @@ class MoreauJeanOptions:
         per step. A system that is not constant runs the compiled general loop
         (:mod:`lcp.timestepping.general_loop`: CasADi's C code of the step, a numba loop) where no
         control schedule applies (or one whose B(t) does not depend on q), no moving contact is
-        projected and a C compiler is found.
+        projected and a C compiler is found; a run of fewer than 50,000 steps takes the Python loop
+        while that loop's numba kernel is not compiled on the machine yet, and has it compiled in
+        the background (:mod:`lcp.timestepping.first_compile`; ``LCP_COMPILE=always`` waits for it).
     projection : {"auto", True, False}
         Project the positions onto the constraints after each step (:mod:`lcp.timestepping.projection`).
         ``"auto"``: only where a constraint is nonlinear in q or time-dependent (where the
@@ -251,6 +253,12 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions, asm=None) -> 
         from lcp.timestepping import general_loop
 
         why = general_loop.applicable(system, asm, proj)
+        if why is None:
+            from lcp.timestepping.first_compile import deferred
+
+            # a short run does not wait for the kernel's first compilation (lcp.timestepping.first_compile)
+            note = deferred(n_steps) or ""
+            why = "cold" if note else None
         if why is None:
             from lcp.timestepping.codegen import kinematics_library, projection_library, step_library
 
