@@ -94,14 +94,27 @@ def test_the_policy_is_read_and_checked(monkeypatch):
 
 @pytest.mark.parametrize("state, policy, steps, defer", [
     ("cold", "off", 100, True), ("cold", "off", first_compile.COLD_MAX_STEPS, False),
-    ("cold", "always", 100, False), ("cached", "off", 100, False), ("loaded", "off", 100, False)])
+    ("cold", "always", 100, False), ("cached", "off", 100, True), ("cached", "background", 100, True),
+    ("cached", "off", first_compile.CACHED_MAX_STEPS, False), ("cached", "always", 100, False),
+    ("loaded", "off", 100, False)])
 def test_who_waits(monkeypatch, state, policy, steps, defer):
     monkeypatch.setattr(first_compile, "kernel_state", lambda kernel=None: state)
+    monkeypatch.setattr(first_compile, "_SPENT", [0])
     monkeypatch.setenv(first_compile.ENV_VAR, policy)
     note = first_compile.deferred(steps)
     assert (note is not None) == defer
     if defer:
         assert "Python loop" in note and f"{steps} steps" in note and "LCP_COMPILE=always" in note
+        assert ("not loaded in this process" in note) == (state == "cached")
+
+
+def test_a_process_of_short_runs_loads_the_cached_kernel_in_the_end(monkeypatch):
+    monkeypatch.setattr(first_compile, "kernel_state", lambda kernel=None: "cached")
+    monkeypatch.setattr(first_compile, "_SPENT", [0])
+    monkeypatch.setenv(first_compile.ENV_VAR, "background")
+    runs = [first_compile.deferred(400) is not None for _ in range(10)]
+    k = (first_compile.CACHED_MAX_STEPS - 1) // 400  # runs whose steps stay below the budget
+    assert runs == [True] * k + [False] * (10 - k)
 
 
 @needs_numba
@@ -164,18 +177,23 @@ def test_one_background_compilation_at_a_time(tmp_path, monkeypatch):
 @pytest.mark.skipif(codegen.c_compiler() is None, reason="needs a C compiler")
 def test_the_background_process_fills_numbas_cache(tmp_path):
     """Fresh caches: a short run takes the Python loop and starts the background compilation; once
-    it is done, a fresh interpreter finds the kernel cached and runs the compiled loop."""
+    it is done, a fresh interpreter finds the kernel cached (a short run still takes the Python
+    loop: loading it would take longer) and a long run loads it."""
     env = {k: v for k, v in os.environ.items() if k != first_compile.ENV_VAR}
     env.update(LCP_CACHE_DIR=str(tmp_path / "c"), NUMBA_CACHE_DIR=str(tmp_path / "numba"), PYTHONPATH=str(ROOT))
     code = ("import sys; sys.path.insert(0, sys.argv[1]); from test_first_compile import _bowl; import lcp; "
-            "r = lcp.simulate(_bowl(), 0.05, h=1e-3, q0=[0.0, -1.0], v0=[0.8, 0.0]); print(r.message)")
-    run = [sys.executable, "-c", code, str(ROOT / "tests")]
+            "from lcp.timestepping.first_compile import kernel_state; print(kernel_state()); "
+            "r = lcp.simulate(_bowl(), float(sys.argv[2]), h=1e-3, q0=[0.0, -1.0], v0=[0.8, 0.0]); print(r.message)")
+    run = [sys.executable, "-c", code, str(ROOT / "tests"), "0.05"]
     first = subprocess.run(run, env=env, capture_output=True, text=True, check=True).stdout
-    assert "being compiled in a background process" in first
+    assert first.startswith("cold") and "being compiled in a background process" in first
     marker = tmp_path / "numba" / first_compile.MARKER
     deadline = time.time() + 1200
     while marker.exists() and time.time() < deadline:
         time.sleep(2)
     assert not marker.exists()
     again = subprocess.run(run, env=env, capture_output=True, text=True, check=True).stdout
-    assert "Python loop" not in again
+    assert again.startswith("cached") and "not loaded in this process" in again
+    run[-1] = "4.0"  # 4000 steps: past the budget of short runs
+    long = subprocess.run(run, env=env, capture_output=True, text=True, check=True).stdout
+    assert long.startswith("cached") and "Python loop" not in long

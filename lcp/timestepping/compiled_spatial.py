@@ -72,7 +72,7 @@ def applicable(asm, solver, options) -> bool:
     sys_ = asm.sys
     if not (HAVE_NUMBA and sys_.n_contacts >= 1 and sys_.is_spatial and sys_.is_constant
             and asm.matrices_constant and asm.schedule is None and sys_.n_bilateral == 0
-            and np.all(sys_.tangent_dims == 2)):
+            and sys_.n_tangent == 2 * sys_.n_contacts):  # (one or two tangents each: two each)
         return False
     kind = type(solver)
     if not (kind is ConeAutoSolver or (kind is ConeNsgsSolver and solver.polish)

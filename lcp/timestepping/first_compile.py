@@ -7,7 +7,10 @@ non-constant system takes a fraction of a second in the Python loop. So a run wh
 neither loaded in this process nor found in numba's cache, and which has fewer than
 :data:`COLD_MAX_STEPS` steps, takes the Python loop (the same results: the two loops agree bit for
 bit on the tested scenes), and the kernel is compiled in a background process for the later runs.
-The result's message says so. The environment variable ``LCP_COMPILE`` chooses:
+Loading the kernel from numba's cache costs about a second as well (a fresh interpreter's first
+compiled run of 300 steps: 0.9-1.2 s, the Python loop 0.2 s), so while it is cached but not loaded
+the short runs of a process take the Python loop too, up to :data:`CACHED_MAX_STEPS` steps in all
+(a process that goes on making short runs then loads it). The result's message says so. The environment variable ``LCP_COMPILE`` chooses:
 
 - ``background`` (the default): as above;
 - ``always``: the compiled loop, paying the first compilation now;
@@ -32,7 +35,7 @@ from pathlib import Path
 
 from lcp.numerics import cache
 
-__all__ = ["COLD_MAX_STEPS", "ENV_VAR", "POLICIES", "compile_in_background", "deferred", "kernel_state", "policy"]
+__all__ = ["CACHED_MAX_STEPS", "COLD_MAX_STEPS", "ENV_VAR", "POLICIES", "compile_in_background", "deferred", "kernel_state", "policy"]
 
 #: environment variable choosing whether a run waits for the first compilation (module docstring)
 ENV_VAR = "LCP_COMPILE"
@@ -40,6 +43,9 @@ POLICIES = ("background", "always", "off")
 #: runs with fewer steps take the Python loop while the kernel is not compiled: at 100-300 us per
 #: Python step, 50,000 steps take 5-15 s, less than the compilation (30-80 s measured)
 COLD_MAX_STEPS = 50_000
+#: Python-loop steps a process runs in all while the kernel is cached but not loaded: about a second
+#: of Python steps (0.2-0.3 ms each), the time loading the kernel takes
+CACHED_MAX_STEPS = 3_000
 #: a background compilation older than this is taken for dead (its marker is ignored)
 STALE_SECONDS = 900.0
 #: the marker of a background compilation under way, in the compiled-code cache
@@ -66,6 +72,7 @@ finally:
 
 _LOCK = threading.Lock()
 _STARTED: list = []  # the background process of this process, once
+_SPENT = [0]  # Python-loop steps this process ran while the kernel was cached but not loaded
 
 
 def policy() -> str:
@@ -104,9 +111,21 @@ def kernel_state(kernel=None) -> str:
 def deferred(n_steps: int) -> str | None:
     """None where the compiled general loop runs now; else the note for the message of a run that
     takes the Python loop because the kernel is cold and the run short (starting the background
-    compilation unless ``LCP_COMPILE=off``)."""
+    compilation unless ``LCP_COMPILE=off``), or cached but not loaded and this process's short runs
+    few (module docstring)."""
     how = policy()
-    if how == "always" or n_steps >= COLD_MAX_STEPS or kernel_state() != "cold":
+    if how == "always":
+        return None
+    state = kernel_state()
+    if state == "cached":
+        with _LOCK:
+            if _SPENT[0] + n_steps >= CACHED_MAX_STEPS:
+                return None
+            _SPENT[0] += n_steps
+        return (" (Python loop: the compiled general loop's kernel is compiled on this machine but not loaded in "
+                f"this process; loading it takes about a second, more than this run of {n_steps} steps takes in "
+                f"Python; {ENV_VAR}=always runs the compiled loop now)")
+    if state != "cold" or n_steps >= COLD_MAX_STEPS:
         return None
     if how == "off":
         later = f"a run of at least {COLD_MAX_STEPS} steps compiles it"

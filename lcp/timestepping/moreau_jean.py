@@ -81,7 +81,8 @@ class MoreauJeanOptions:
         control schedule applies (or one whose B(t) does not depend on q), no moving contact is
         projected and a C compiler is found; a run of fewer than 50,000 steps takes the Python loop
         while that loop's numba kernel is not compiled on the machine yet, and has it compiled in
-        the background (:mod:`lcp.timestepping.first_compile`; ``LCP_COMPILE=always`` waits for it).
+        the background (short runs also while it is not loaded, up to 3,000 steps per process:
+        :mod:`lcp.timestepping.first_compile`; ``LCP_COMPILE=always`` runs it now).
     projection : {"auto", True, False}
         Project the positions onto the constraints after each step (:mod:`lcp.timestepping.projection`).
         ``"auto"``: only where a constraint is nonlinear in q or time-dependent (where the
