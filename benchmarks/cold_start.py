@@ -10,9 +10,10 @@ caches (temporary folders), a point in a circular bowl (``benchmarks/general_com
 ``bowl``, h = 1e-3, ``--steps`` steps, 300 by default). Timed, each from the ``simulate`` call:
 (1) ``LCP_COMPILE=always`` (the compiled loop waits for the compilation: the behaviour before);
 (2) the default: the Python loop, the kernel compiled in a background process, whose wall time
-to its end is reported too; (3) a fresh interpreter after it (the kernel loaded from numba's cache,
-the bowl's C code compiled: a new structure); (4) once more (everything cached). Writes
-``first_compile.csv``.
+to its end is reported too; then fresh interpreters: (3) the same short run (the kernel cached
+but not loaded: the Python loop), (4) a run of ``--long`` steps (5,000: the kernel loaded from
+numba's cache, the bowl's C code compiled, a new structure), (5) the same (everything cached),
+(6) the same by the Python loop (``fast=False``). Writes ``first_compile.csv``.
 
 Per parameter set a study builds a new scene and runs it once, so the cost that matters is the
 cold one: scene construction plus a run on that new scene. Measured here, on the Jean-Pratt scene
@@ -91,12 +92,12 @@ from general_compiled import scene
 import lcp
 s, q0, v0, h = scene("bowl")
 t0 = time.perf_counter()
-r = lcp.simulate(s, int(sys.argv[2]) * h, h=h, q0=q0, v0=v0)
+r = lcp.simulate(s, int(sys.argv[2]) * h, h=h, q0=q0, v0=v0, fast=sys.argv[3] == "1")
 print(time.perf_counter() - t0, "Python loop" in r.message, r.status, sep="|")
 """
 
 
-def first_compile(steps: int):
+def first_compile(steps: int, long: int):
     """The rows of ``--first-compile`` (module docstring): (what, seconds, note)."""
     import tempfile
 
@@ -106,13 +107,15 @@ def first_compile(steps: int):
     root = str(Path(__file__).resolve().parents[1])
     rows = []
 
-    def run(env, what):
+    def run(env, what, n=steps, fast=True):
         t0 = time.perf_counter()
-        out = subprocess.run([sys.executable, "-c", _FIRST_RUN, bench, str(steps)], env=env, capture_output=True,
+        out = subprocess.run([sys.executable, "-c", _FIRST_RUN, bench, str(n), "1" if fast else "0"], env=env,
+                             capture_output=True,
                              text=True, check=True).stdout.strip().splitlines()[-1]
         wall = time.perf_counter() - t0
         secs, python, status = out.split("|")
-        note = f"{'Python loop' if python == 'True' else 'compiled loop'}, status {status}; interpreter wall {wall:.2f} s"
+        loop = "Python loop" if python == "True" else "compiled loop" if fast else "Python loop (fast=False)"
+        note = f"{loop}, status {status}; interpreter wall {wall:.2f} s"
         rows.append((what, float(secs), note))
         print(f"{what:62s} {float(secs):9.3f} s  {note}", flush=True)
         return t0
@@ -131,8 +134,10 @@ def first_compile(steps: int):
             time.sleep(0.5)
         rows.append(("background compilation, from the first run's start", time.perf_counter() - t0, "wall time"))
         print(f"{rows[-1][0]:62s} {rows[-1][1]:9.3f} s", flush=True)
-        run(env, "next run, fresh interpreter (kernel cached; the bowl's C code compiled)")
-        run(env, "next run, fresh interpreter (everything cached)")
+        run(env, "next short run, fresh interpreter (kernel cached, not loaded)")
+        run(env, f"{long} steps, fresh interpreter (kernel loaded; the bowl's C code compiled)", long)
+        run(env, f"{long} steps, fresh interpreter (everything cached)", long)
+        run(env, f"{long} steps, fresh interpreter, fast=False", long, False)
     return rows
 
 
@@ -142,11 +147,12 @@ def main(argv=None):
     ap.add_argument("--first-compile", action="store_true",
                     help="the first short run of a non-constant system on fresh caches (module docstring)")
     ap.add_argument("--steps", type=int, default=300, help="steps of that run")
+    ap.add_argument("--long", type=int, default=5000, help="steps of the long runs of --first-compile")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "out"))
     args = ap.parse_args(argv)
     if args.first_compile:
         print(f"first compilation of the general loop's kernel, load {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
-        rows = first_compile(args.steps)
+        rows = first_compile(args.steps, args.long)
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         with open(out / "first_compile.csv", "w", newline="") as fh:

@@ -229,6 +229,10 @@ def consistent_start(system, q0, v0, t0: float = 0.0, rows=None):
             and system.gap_tq_fn is None and system.H_tq_fn is None and system not in _AFFINE):
         _AFFINE[system] = ([f"contact {ct.name!r}" for ct in system.contacts], *rows)
     r, names, J, c = _rows(system, q0, t0)
+    if not nb and min(r.tolist()) >= 0.0:
+        # no constraint and no gap penetrated: every violation is zero, nothing to measure (a NaN
+        # gap, which fails this test, is never a violation either)
+        return q0, v0, qnote
     ell = _length(J, c)
     lim = np.abs(J) @ _reach(system, q0, ell, t0) + np.abs(c)
     viol = _violations(r, nb)
