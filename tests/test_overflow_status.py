@@ -7,7 +7,9 @@ exception from a contact solver handed infinities.
   of spatial contacts against the Python loop (``fast=False``);
 - the activation rule's "every contact closes" test decides NaN predictions in the kernels as the
   Python rule does;
-- a finite state whose entries' sum overflows is not taken for a non-finite one.
+- a finite state whose entries' sum overflows is not taken for a non-finite one;
+- a contact row that the overflow made zero (W = 0) is a solver failure, handled by the fallback in
+  both loops alike, not a ZeroDivisionError.
 """
 from __future__ import annotations
 
@@ -122,3 +124,39 @@ def test_the_compiled_every_contact_closes_test_is_the_python_rule():
             gap[rng.random(m) < 0.1] = np.inf
             u = np.zeros(m)
             assert call(m, gap, u, 0.5e-3, 0.5e-3) == _python_rule(gap), gap
+
+
+def _bowl():
+    """A point in a circular bowl: at |q| ~ 1e297 the norm in its gap overflows and the contact
+    rows become zero (W = 0)."""
+    q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
+    r = ca.norm_2(q)
+    return System(q, v, ca.SX.eye(2), ca.vertcat(0, -9.81),
+                  contacts=[Contact(gap=1.0 - r, tangent_jacobian=ca.horzcat(-q[1], q[0]) / r, mu=0.3)])
+
+
+def test_a_zero_contact_row_is_a_solver_failure_not_an_exception():
+    from lcp.contact.problem import ContactProblem
+    from lcp.contact.solvers import EnumSolver
+
+    sol = EnumSolver().solve(ContactProblem(np.zeros((2, 2)), np.array([-1.0, 0.5]), [0.3]))
+    assert sol.status == -1 and "not positive" in sol.message
+    from lcp.timestepping.compiled_kernels import enum_one  # the kernels' closed form: no case either
+
+    assert enum_one(0.0, 0.0, 0.0, 1.0, -1.0, 0.5, 0.3)[2] == -1 and enum_one(1.0, 0.0, 0.0, 0.0, -1.0, 0.5, 0.3)[2] == -1
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="the compiled general loop needs numba")
+def test_an_overflowing_bowl_runs_the_same_in_both_loops_without_projection():
+    """v0 = 1e300: from step 1 the gap's norm overflows (zero contact rows); the closed form hands
+    those steps to the Python solver, whose fallback takes them, in both loops alike (no
+    ZeroDivisionError from the closed form)."""
+    from lcp.timestepping import codegen
+
+    if codegen.c_compiler() is None:
+        pytest.skip("needs a C compiler")
+    kw = dict(h=1e-3, q0=[0.0, -1.0], v0=[1e300, 0.0], projection=False)
+    fast = lcp.simulate(_bowl(), 0.05, **kw)
+    slow = lcp.simulate(_bowl(), 0.05, fast=False, **kw)
+    assert fast.stats.fallbacks == slow.stats.fallbacks > 0
+    _same(fast, slow)

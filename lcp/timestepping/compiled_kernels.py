@@ -188,7 +188,10 @@ activate = _activate
 
 @njit(cache=True)
 def _enum1(W00, W01, W10, W11, qN, qT, mu):
-    """lcp.contact.problem.planar_enum on floats (rtol 1e-12): (pN, pT, mode, n_distinct)."""
+    """lcp.contact.problem.planar_enum on floats (rtol 1e-12): (pN, pT, mode, n_distinct); no case
+    where a diagonal entry of W is not positive (a degenerate contact row, as EnumSolver)."""
+    if not (W00 > 0.0 and W11 > 0.0):
+        return np.nan, np.nan, -1, 0
     scale = max(max(abs(qN) / W00, abs(qT) / W11), 1e-300)
     tol = 1e-12 * scale
     open_ok = (qN / W00) >= -tol

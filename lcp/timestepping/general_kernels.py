@@ -135,7 +135,8 @@ def _error_one(W00, W01, W10, W11, qN, qT, mu, rN, rT):
 def _closed_form_step(j, m, n, r, k, tk, h, o_W, o_H, o_SHt, o_b1, moving, v, vfree, dvf, uNm, mu, e, res_tol,
                       istate, fstate, dv, w, out):
     """One active planar contact j by the closed form, as ContactStep.solve with EnumSolver: fills
-    dv and out = (pN, pT, mode); False where the Python side must solve the step."""
+    dv and out = (pN, pT, mode); False where the Python side must solve the step (also where a
+    diagonal entry of W is not positive: enum_one finds no case there, as EnumSolver)."""
     iN = j
     iT = m + j
     idx = np.empty(2, dtype=np.int64)
