@@ -108,6 +108,33 @@ def test_who_waits(monkeypatch, state, policy, steps, defer):
         assert ("not loaded in this process" in note) == (state == "cached")
 
 
+def test_systems_the_loops_may_round_differently_never_wait(monkeypatch):
+    monkeypatch.setattr(first_compile, "kernel_state", lambda kernel=None: "cold")
+    monkeypatch.setenv(first_compile.ENV_VAR, "off")
+    assert first_compile.deferred(100, exact=False) is None and first_compile.deferred(100) is not None
+
+
+@needs_numba
+@pytest.mark.skipif(codegen.c_compiler() is None, reason="needs a C compiler")
+def test_two_contacts_run_compiled_however_cold(monkeypatch):
+    from lcp.timestepping import general_loop
+
+    calls = []
+    real = general_loop.run_general_loop
+    monkeypatch.setattr(general_loop, "run_general_loop", lambda *a, **k: calls.append(1) or real(*a, **k))
+    monkeypatch.setattr(first_compile, "kernel_state", lambda kernel=None: "cold")
+    monkeypatch.setenv(first_compile.ENV_VAR, "off")
+    q, v = ca.SX.sym("q", 3), ca.SX.sym("v", 3)  # a point in a spherical bowl, and a wall x <= 0.5
+    r = ca.norm_2(q)
+    t1 = ca.vertcat(-q[1], q[0], 0) / ca.norm_2(q[:2])
+    t2 = ca.cross(q / r, t1)
+    s = System(q, v, ca.SX.eye(3), ca.vertcat(0, 0, -9.81),
+               contacts=[Contact(gap=1.0 - r, tangent_jacobian=ca.horzcat(t1, t2).T, mu=0.3),
+                         Contact(gap=0.5 - q[0], tangent=ca.vertcat(q[1], q[2]), mu=0.3)])
+    res = lcp.simulate(s, 0.02, h=1e-3, q0=[0.3, 0.0, -np.sqrt(0.91)], v0=[0.0, 1.0, 0.0])
+    assert calls == [1] and "Python loop" not in res.message
+
+
 def test_a_process_of_short_runs_loads_the_cached_kernel_in_the_end(monkeypatch):
     monkeypatch.setattr(first_compile, "kernel_state", lambda kernel=None: "cached")
     monkeypatch.setattr(first_compile, "_SPENT", [0])

@@ -79,9 +79,9 @@ class MoreauJeanOptions:
         per step. A system that is not constant runs the compiled general loop
         (:mod:`lcp.timestepping.general_loop`: CasADi's C code of the step, a numba loop) where no
         control schedule applies (or one whose B(t) does not depend on q), no moving contact is
-        projected and a C compiler is found; a run of fewer than 50,000 steps takes the Python loop
-        while that loop's numba kernel is not compiled on the machine yet, and has it compiled in
-        the background (short runs also while it is not loaded, up to 3,000 steps per process:
+        projected and a C compiler is found; a run of fewer than 50,000 steps (at most one contact)
+        takes the Python loop while that loop's numba kernel is not compiled on the machine yet, and
+        has it compiled in the background (short runs also while it is not loaded, up to 3,000 steps per process:
         :mod:`lcp.timestepping.first_compile`; ``LCP_COMPILE=always`` runs it now).
     projection : {"auto", True, False}
         Project the positions onto the constraints after each step (:mod:`lcp.timestepping.projection`).
@@ -257,8 +257,9 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions, asm=None) -> 
         if why is None:
             from lcp.timestepping.first_compile import deferred
 
-            # a short run does not wait for the kernel's first compilation (lcp.timestepping.first_compile)
-            note = deferred(n_steps) or ""
+            # a short run does not wait for the kernel's first compilation (lcp.timestepping.first_compile),
+            # where the Python loop gives the same bits (one contact at most)
+            note = deferred(n_steps, exact=system.n_contacts <= 1) or ""
             why = "cold" if note else None
         if why is None:
             from lcp.timestepping.codegen import kinematics_library, projection_library, step_library
