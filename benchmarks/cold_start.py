@@ -3,6 +3,18 @@
 Run: ``python benchmarks/cold_start.py [--quick] [--out DIR]``. Prints a table and writes
 ``cold_start.csv`` into ``--out`` (default ``benchmarks/out/``, untracked).
 
+``--first-compile`` measures instead what a user's first short run of a non-constant system costs
+on a machine where the compiled general loop's numba kernel was never compiled
+(:mod:`lcp.timestepping.first_compile`): fresh interpreters with empty compiled-code and numba
+caches (temporary folders), a point in a circular bowl (``benchmarks/general_compiled.py``'s
+``bowl``, h = 1e-3, ``--steps`` steps, 300 by default). Timed, each from the ``simulate`` call:
+(1) ``LCP_COMPILE=always`` (the compiled loop waits for the compilation: the behaviour before);
+(2) the default: the Python loop, the kernel compiled in a background process, whose wall time
+to its end is reported too; then fresh interpreters: (3) the same short run (the kernel cached
+but not loaded: the Python loop), (4) a run of ``--long`` steps (5,000: the kernel loaded from
+numba's cache, the bowl's C code compiled, a new structure), (5) the same (everything cached),
+(6) the same by the Python loop (``fast=False``). Writes ``first_compile.csv``.
+
 Per parameter set a study builds a new scene and runs it once, so the cost that matters is the
 cold one: scene construction plus a run on that new scene. Measured here, on the Jean-Pratt scene
 with a new friction coefficient every call (R = 0.5 + 1e-6 i, so nothing can be reused from an
@@ -73,11 +85,83 @@ def import_time(repeats: int) -> tuple[float, float]:
     return statistics.median(inner), statistics.median(bare)
 
 
+_FIRST_RUN = """
+import sys, time
+sys.path.insert(0, sys.argv[1])
+from general_compiled import scene
+import lcp
+s, q0, v0, h = scene("bowl")
+t0 = time.perf_counter()
+r = lcp.simulate(s, int(sys.argv[2]) * h, h=h, q0=q0, v0=v0, fast=sys.argv[3] == "1")
+print(time.perf_counter() - t0, "Python loop" in r.message, r.status, sep="|")
+"""
+
+
+def first_compile(steps: int, long: int):
+    """The rows of ``--first-compile`` (module docstring): (what, seconds, note)."""
+    import tempfile
+
+    from lcp.timestepping.first_compile import ENV_VAR, MARKER
+
+    bench = str(Path(__file__).resolve().parent)
+    root = str(Path(__file__).resolve().parents[1])
+    rows = []
+
+    def run(env, what, n=steps, fast=True):
+        t0 = time.perf_counter()
+        out = subprocess.run([sys.executable, "-c", _FIRST_RUN, bench, str(n), "1" if fast else "0"], env=env,
+                             capture_output=True,
+                             text=True, check=True).stdout.strip().splitlines()[-1]
+        wall = time.perf_counter() - t0
+        secs, python, status = out.split("|")
+        loop = "Python loop" if python == "True" else "compiled loop" if fast else "Python loop (fast=False)"
+        note = f"{loop}, status {status}; interpreter wall {wall:.2f} s"
+        rows.append((what, float(secs), note))
+        print(f"{what:62s} {float(secs):9.3f} s  {note}", flush=True)
+        return t0
+
+    base = {k: v for k, v in os.environ.items() if k not in (ENV_VAR, "NUMBA_CACHE_DIR", "LCP_CACHE_DIR")}
+    with tempfile.TemporaryDirectory() as tmp:
+        env = dict(base, LCP_CACHE_DIR=os.path.join(tmp, "c"), NUMBA_CACHE_DIR=os.path.join(tmp, "numba"),
+                   PYTHONPATH=root, **{ENV_VAR: "always"})
+        run(env, f"first run, {ENV_VAR}=always (waits for the compilation)")
+    with tempfile.TemporaryDirectory() as tmp:
+        env = dict(base, LCP_CACHE_DIR=os.path.join(tmp, "c"), NUMBA_CACHE_DIR=os.path.join(tmp, "numba"),
+                   PYTHONPATH=root)
+        t0 = run(env, "first run, default (Python loop, compiled in the background)")
+        marker = Path(tmp) / "numba" / MARKER
+        while marker.exists():
+            time.sleep(0.5)
+        rows.append(("background compilation, from the first run's start", time.perf_counter() - t0, "wall time"))
+        print(f"{rows[-1][0]:62s} {rows[-1][1]:9.3f} s", flush=True)
+        run(env, "next short run, fresh interpreter (kernel cached, not loaded)")
+        run(env, f"{long} steps, fresh interpreter (kernel loaded; the bowl's C code compiled)", long)
+        run(env, f"{long} steps, fresh interpreter (everything cached)", long)
+        run(env, f"{long} steps, fresh interpreter, fast=False", long, False)
+    return rows
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer rounds")
+    ap.add_argument("--first-compile", action="store_true",
+                    help="the first short run of a non-constant system on fresh caches (module docstring)")
+    ap.add_argument("--steps", type=int, default=300, help="steps of that run")
+    ap.add_argument("--long", type=int, default=5000, help="steps of the long runs of --first-compile")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "out"))
     args = ap.parse_args(argv)
+    if args.first_compile:
+        print(f"first compilation of the general loop's kernel, load {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
+        rows = first_compile(args.steps, args.long)
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        with open(out / "first_compile.csv", "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["what", "seconds", "note", "load_after"])
+            for what, t, note in rows:
+                w.writerow([what, f"{t:.4f}", note, f"{os.getloadavg()[0]:.2f}"])
+        print(f"wrote {out / 'first_compile.csv'} (load {os.getloadavg()[0]:.2f} after)")
+        return
     rounds = 10 if args.quick else 60
     t_eval = np.linspace(0.0, T, 1000)
     load = os.getloadavg()[0]

@@ -26,6 +26,11 @@ settings.register_profile("thorough", max_examples=1000, deadline=None,
                           suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
 
+# the tests of the compiled general loop run it, whether or not its numba kernel was compiled on this
+# machine before (a short run would take the Python loop while it is not: lcp.timestepping.first_compile,
+# tested in test_first_compile.py with the policy set there)
+os.environ.setdefault("LCP_COMPILE", "always")
+
 
 @pytest.fixture
 def tol():

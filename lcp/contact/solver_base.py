@@ -175,13 +175,13 @@ def build_solver(name, law: str, **options) -> OneStepSolver:
     if law not in LAWS:
         raise ValueError(f"unknown law {law!r}; known laws: {sorted(LAWS)}")
     planar = law == "planar"
-    known = sorted(n for n, by_law in REGISTRY.items() if law in by_law)
     if isinstance(name, OneStepSolver) and name.law == law:
         if options:
             raise ValueError(("solver_options" if planar else "solver options")
                              + " cannot be given with a solver instance")
         return name
     if not isinstance(name, str) or law not in REGISTRY.get(name, ()):
+        known = sorted(n for n, by_law in REGISTRY.items() if law in by_law)
         if planar:
             raise ValueError(f"unknown solver {name!r}; known solvers: {known}")
         raise ValueError(f"unknown cone solver {name!r}; known: {known}")

@@ -45,6 +45,9 @@ class EnumSolver(OneStepSolver):
 
     def _solve(self, pb):
         W, q = pb.W, pb.q
+        if not (W[0, 0] > 0 and W[1, 1] > 0):  # a zero (or overflowed) contact row: the cases divide by them
+            return StepSolution(np.full(2, np.nan), -1, "enumeration: a diagonal entry of W is not positive "
+                                f"(W_NN = {float(W[0, 0]):.3g}, W_TT = {float(W[1, 1]):.3g})", 4)
         pN, pT, mode, n_distinct = planar_enum(float(W[0, 0]), float(W[0, 1]), float(W[1, 0]), float(W[1, 1]),
                                                float(q[0]), float(q[1]), float(pb.mu[0]))
         if mode < 0:

@@ -82,6 +82,8 @@ def mass_condition(system, q, t: float = 0.0) -> float:
     constant = system.mass_is_constant and system.kinematics_is_constant
     if constant and system in _CACHE:
         return _CACHE[system]
+    if constant and "_mass_kappa" in system.__dict__:  # found by the state check (a diagonal A)
+        return system._mass_kappa
     n = system.n
     if system.n_bilateral:
         if n > 200:

@@ -56,9 +56,9 @@ def _length(J, c) -> float:
     """The system's length from the rows' constants c and Jacobians J (1.0 where there is none)."""
     if J.size == 0:
         return 1.0
-    norms = _row_absmax(J) if hasattr(J, "indptr") else np.max(np.abs(J), axis=1)
+    norms = _row_absmax(J) if hasattr(J, "indptr") else np.abs(J).max(axis=1)
     ok = (norms > 0) & np.isfinite(norms) & np.isfinite(c)
-    ell = float(np.max(np.abs(c[ok]) / norms[ok], initial=0.0))
+    ell = float((np.abs(c[ok]) / norms[ok]).max(initial=0.0))
     return ell if ell > 0 and math.isfinite(ell) else 1.0
 
 
@@ -69,6 +69,9 @@ def system_length(system, q, t: float = 0.0) -> float:
     _, _, J, c = _rows(system, np.asarray(q, dtype=float), t)
     return _length(J, c)
 
+
+#: the largest m x n gap Jacobian of constant rows kept dense (beyond it CSR: see _affine_rows)
+_DENSE_ROWS_MAX = 40_000
 
 #: (Jacobian, constants, names) of a system whose constraints and gaps are affine and constant
 _AFFINE = weakref.WeakKeyDictionary()
@@ -98,7 +101,7 @@ def _affine_rows(system, t):
     z = np.zeros(n)
     vals, row, col, _ = _nonzeros(system.H_fn, z)
     keep = row < m
-    if n * m <= 40_000:
+    if n * m <= _DENSE_ROWS_MAX:
         J = np.zeros((m, n))
         J[row[keep], col[keep]] = vals[keep]
     else:
@@ -191,8 +194,15 @@ def _mass_correction(A, J, r):
     return AJ @ np.linalg.lstsq(J @ AJ, r, rcond=None)[0]
 
 
-def consistent_start(system, q0, v0, t0: float = 0.0):
+def consistent_start(system, q0, v0, t0: float = 0.0, rows=None):
     """The start (q0, v0) checked, and projected within the tolerance (module docstring).
+
+    Parameters
+    ----------
+    rows : (ndarray, ndarray), optional
+        The contact rows (H_N, g(0)) of a system without bilateral constraints whose contacts do not
+        move, where the caller has them already (the Moreau-Jean assembly of a constant system):
+        they are those of the gaps g(q) = g(0) + H_N q, so no CasADi evaluation is repeated.
 
     Returns
     -------
@@ -215,7 +225,14 @@ def consistent_start(system, q0, v0, t0: float = 0.0):
     if nb + m == 0:
         return q0, v0, qnote
     t0 = float(t0)
+    if (rows is not None and not nb and system.kinematics_is_constant and system.n * m <= _DENSE_ROWS_MAX
+            and system.gap_tq_fn is None and system.H_tq_fn is None and system not in _AFFINE):
+        _AFFINE[system] = ([f"contact {ct.name!r}" for ct in system.contacts], *rows)
     r, names, J, c = _rows(system, q0, t0)
+    if not nb and min(r.tolist()) >= 0.0:
+        # no constraint and no gap penetrated: every violation is zero, nothing to measure (a NaN
+        # gap, which fails this test, is never a violation either)
+        return q0, v0, qnote
     ell = _length(J, c)
     lim = np.abs(J) @ _reach(system, q0, ell, t0) + np.abs(c)
     viol = _violations(r, nb)

@@ -12,16 +12,18 @@ import numpy as np
 
 from lcp.numerics.casadi_eval import evaluate_into
 
-__all__ = ["check_state", "check_contact_rows", "check_free_symbols", "contact_rows_degenerate", "check_dense_mass", "check_sparse_mass", "check_definite", "dense_mass", "mass_ccs_values",
+__all__ = ["check_state", "check_contact_rows", "check_free_symbols", "contact_rows_degenerate", "check_dense_mass", "check_diagonal_mass", "check_sparse_mass", "check_definite", "dense_mass", "mass_ccs_pattern", "mass_ccs_values",
            "null_space", "sparse_mass"]
 
 
-def check_state(system, q0, v0, t0):
-    """The body of :meth:`System.check_state <lcp.model.system.System.check_state>` on float arrays."""
+def check_state(system, q0, v0, t0, mass_nonzeros=None):
+    """The body of :meth:`System.check_state <lcp.model.system.System.check_state>` on float arrays
+    (``mass_nonzeros``: A's nonzeros in CasADi's order where the mass matrix is constant and the
+    caller has them)."""
     for name, x, size in (("q0", q0, getattr(system, "n_q", system.n)), ("v0", v0, system.n)):
         if x.shape != (size,):
             raise ValueError(f"{name} must have shape ({size},), got {x.shape}")
-        if not np.all(np.isfinite(x)):
+        if not np.isfinite(x).all():
             raise ValueError(f"{name} must be finite, got {x}")
     if system.__dict__.get("_mass_checked_constant"):
         return q0, v0
@@ -31,7 +33,9 @@ def check_state(system, q0, v0, t0):
         check_kinematics_at(system, q0, t0)
     if system.n_contacts and not system.contact_rows_checked:
         check_contact_rows(system, q0, t0)  # a constant mass matrix (and constraints) passed the check below once
-    if not system.n_bilateral and system.n > 32 and system.mass_expr.nnz() <= system.n * system.n // 8:
+    if not system.n_bilateral and _structurally_diagonal(system):
+        check_diagonal_mass(system, q0, t0, mass_nonzeros if system.mass_is_constant else None)
+    elif not system.n_bilateral and system.n > 32 and system.mass_expr.nnz() <= system.n * system.n // 8:
         check_sparse_mass(system, q0, t0)
     else:
         check_dense_mass(system, q0, t0)
@@ -55,6 +59,35 @@ def check_dense_mass(system, q0, t0) -> None:
     As = 0.5 * (A + A.T)
     check_definite([As] if A.size else [], As.shape[0],
                     1e-14 * max(1.0, float(np.max(np.sum(np.abs(As), axis=1), initial=0.0))))
+
+def _structurally_diagonal(system) -> bool:
+    """Whether the mass matrix's pattern is its diagonal, every entry present (point masses,
+    independent sliders): then the mass check needs no matrix at all."""
+    sparsity = system.mass_fn.sparsity_out(0)
+    return system.n > 0 and sparsity.nnz() == system.n and sparsity.is_diag()
+
+
+def check_diagonal_mass(system, q0, t0, data=None) -> None:
+    """The test of :meth:`System.check_state <lcp.model.system.System.check_state>` for a mass matrix
+    whose pattern is its diagonal, without bilateral constraints: the eigenvalues are the diagonal
+    entries themselves, so the dense test's verdict (symmetric by structure, every eigenvalue above
+    1e-14 of the largest) is read off them. Each 1 x 1 block has condition number 1, which is kept
+    for :func:`lcp.model.conditioning.mass_condition` where the matrix is constant (its blocks,
+    too, where the sparse check would keep them), so that no later step analyses A again.
+    ``data``: the diagonal already evaluated (a constant A), else it is evaluated at (t0, q0)."""
+    if data is None:
+        data, _, _ = mass_ccs_values(system, q0, t0)
+    if not np.all(np.isfinite(data)):
+        raise ValueError("mass matrix is not finite at q0")
+    low, top = float(data.min()), float(data.max())
+    if low <= 1e-14 * max(1.0, max(-low, top)):
+        raise ValueError("mass matrix is singular or not positive definite (on the constraint manifold) "
+                         f"at q0: eigenvalues {np.sort(data)}")
+    if system.mass_is_constant and system.kinematics_is_constant:
+        system._mass_kappa = 1.0
+        if system.n > 32:  # as check_sparse_mass: the sparse assembly inverts the blocks
+            system.mass_blocks = [(np.arange(system.n).reshape(-1, 1), data.reshape(-1, 1, 1).copy())]
+
 
 def check_sparse_mass(system, q0, t0) -> None:
     """The test of :meth:`System.check_state <lcp.model.system.System.check_state>` for a sparse mass matrix without bilateral constraints,
@@ -114,15 +147,22 @@ def sparse_mass(system, q, t: float = 0.0):
     return csc_matrix((data, row, colind), shape=(system.n, system.n))
 
 
-def mass_ccs_values(system, q, t):
-    """(nonzeros, row indices, column pointers) of A(t, q), CasADi's CCS arrays (int32 indices)."""
+def mass_ccs_pattern(system):
+    """(CasADi's sparsity of A, row indices, column pointers) of the mass matrix (int32 indices),
+    read once per system."""
     sparsity = system.mass_fn.sparsity_out(0)
     if "_mass_ccs" not in system.__dict__:
         colind, row = sparsity.get_ccs()
         system._mass_ccs = (np.array(row, dtype=np.int32), np.array(colind, dtype=np.int32))
+    row, colind = system._mass_ccs
+    return sparsity, row, colind
+
+
+def mass_ccs_values(system, q, t):
+    """(nonzeros, row indices, column pointers) of A(t, q), CasADi's CCS arrays (int32 indices)."""
+    sparsity, row, colind = mass_ccs_pattern(system)
     data = np.empty(sparsity.nnz())
     evaluate_into(system.mass_fn, [np.array([float(t)]), np.asarray(q, dtype=float)], [data])
-    row, colind = system._mass_ccs
     return data, row, colind
 
 

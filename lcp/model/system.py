@@ -395,9 +395,12 @@ class System:
         """1/2 v' A(t, q) v."""
         return float(self.kinetic_fn(t, q, v))
 
-    def check_state(self, q0, v0, t0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-        """Validate an initial state: finite, right shape, mass matrix positive definite there."""
-        return state_checks.check_state(self, _float_array("q0", q0), _float_array("v0", v0), t0)
+    def check_state(self, q0, v0, t0: float = 0.0, mass_nonzeros=None) -> tuple[np.ndarray, np.ndarray]:
+        """Validate an initial state: finite, right shape, mass matrix positive definite there.
+
+        ``mass_nonzeros``: the nonzeros of a constant mass matrix where the caller has evaluated them
+        already (the Moreau-Jean assembly), so that the check does not evaluate A again."""
+        return state_checks.check_state(self, _float_array("q0", q0), _float_array("v0", v0), t0, mass_nonzeros)
 
     def sparse_mass(self, q, t: float = 0.0):
         """The mass matrix A(t, q) as a SciPy CSC matrix of its structural nonzeros (never dense).

@@ -34,12 +34,15 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CLOSE_ULPS", "OPEN_ULPS", "EPS", "Activation"]
+__all__ = ["CLOSE_ULPS", "OPEN_ULPS", "EPS", "LIST_MAX_CONTACTS", "Activation"]
 
 #: closing tolerance of the activation rule, in units of eps times the size of the gap's terms
 CLOSE_ULPS = 16.0
 #: opening threshold for a contact loaded in the previous step (hysteresis), same units
 OPEN_ULPS = 16384.0
+#: up to this many contacts the largest predicted gap is taken by Python's max over a list (faster
+#: than NumPy's reduction for a few; the compiled loops decide NaNs as it does: compiled_kernels.all_closing)
+LIST_MAX_CONTACTS = 16
 #: the unit roundoff of float64 the tolerances are counted in
 EPS = float(np.finfo(float).eps)
 
@@ -65,7 +68,7 @@ class Activation:
         pred = gap + a + (h * th) * uN_free
         # every gap closes: no tolerance needed (the common case in contact); a list's max is faster
         # than NumPy's reduction for the few contacts of a Python-loop system
-        if (max(pred.tolist()) if self.m <= 16 else pred.max()) <= 0.0:
+        if (max(pred.tolist()) if self.m <= LIST_MAX_CONTACTS else pred.max()) <= 0.0:
             return self.all
         b = (h * th) * uN_free
         if self.absHN is not None:

@@ -11,7 +11,7 @@ import numpy as np
 from lcp.timestepping.force_check import ForceStepCheck, nonfinite_cause
 from lcp.numerics.lazy import sparse as sp
 from lcp.numerics.block_diagonal import block_inverse
-from lcp.numerics.casadi_eval import evaluate_into
+from lcp.numerics.casadi_eval import evaluate_into, evaluate_kept
 
 __all__ = ["StepAssembly", "kahan_add", "one_step_fn", "SPARSE_MIN_CONTACT_ROWS", "SPARSE_DROP_TOL"]
 
@@ -109,13 +109,14 @@ class StepAssembly:
         # the nonzeros of A, F, K, C, G, phi_t, gap, H, then h and theta: the core's one argument
         data = np.empty(offsets[-1] + 2)
         data[-2:] = h, th
-        z = np.zeros(n)
-        evaluate_into(fn, [np.zeros(1), z, z], [data[offsets[i]:offsets[i + 1]] for i in range(8)])
+        evaluate_into(fn, [None, None, None], [data[offsets[i]:offsets[i + 1]] for i in range(8)])  # at (0, 0, 0)
+        #: the mass matrix's nonzeros (CasADi's order): the state check of a constant system reads them
+        self.mass_nonzeros = data[:offsets[1]]
         out = np.empty(layout[-1][0] + layout[-1][1] * layout[-1][2])
-        evaluate_into(core, [data], [out])
+        evaluate_kept(core, [data], [out])  # the core is shared by every system of this structure
         # dense results, column-major as CasADi writes them: transposed copies of (columns, rows)
         S, T, SHt, W, F, K, C, G, phi_t, gap, H = (out[a:a + nr * nc].reshape(nc, nr).T for a, nr, nc in layout)
-        if not (np.all(np.isfinite(S)) and np.all(np.isfinite(F))):
+        if not (np.isfinite(S).all() and np.isfinite(F).all()):
             raise FloatingPointError("singular iteration matrix: the mass matrix is singular on the "
                                      "constraint manifold")
         self.S, self.T, self.SHt, self.W, self.H = S.copy(), T.copy(), SHt.copy(), W.copy(), H.copy()
@@ -463,13 +464,15 @@ def _constant_core(system):
     """
     fn = system.step_data_fn
     n, nb = system.n, system.n_bilateral
-    nnz = [fn.nnz_out(i) for i in range(8)]
-    key = (n, nb, system.n_contact_rows, *nnz)
+    # the key narrows the candidates, the patterns decide; each call into CasADi costs a
+    # microsecond or two, which a fresh small system pays several times over
+    key = (n, nb, system.n_contact_rows, fn.nnz_out())
     sps = [fn.sparsity_out(i) for i in range(8)]
     entries = _CORES.setdefault(key, [])
     for patterns, found in entries:
         if all(a == b for a, b in zip(patterns, sps)):
             return found
+    nnz = [x.nnz() for x in sps]
     offsets = np.concatenate([[0], np.cumsum(nnz)]).tolist()
     d = ca.MX.sym("d", offsets[-1] + 2)
     A, F, K, C, G, phi_t, gap, H = (ca.MX(x, d[offsets[i]:offsets[i + 1]]) for i, x in enumerate(sps))

@@ -39,13 +39,14 @@ import math
 
 import numpy as np
 
+from lcp.timestepping.activation import LIST_MAX_CONTACTS
 from lcp.contact.law import SCALE_FLOOR
 from lcp.contact.kernels import contact_residual, contact_scale, local_planar, row_absdot, row_dot
 from lcp.numerics.jit import njit
 from lcp.timestepping.control_kernels import constant_control_dv, dense_mv
 
 __all__ = ["BRANCH_MAX_SWEEPS", "BRANCH_DIRECT_MAX", "DONE", "NEEDS_PYTHON", "NONFINITE", "BUFFER_FULL",
-           "activate", "enum_one", "free_velocity", "run_steps"]
+           "activate", "all_closing", "enum_one", "free_velocity", "run_steps"]
 
 #: Gauss-Seidel sweeps of the branch refinement before the step goes to the exact Python solve
 BRANCH_MAX_SWEEPS = 60
@@ -141,20 +142,38 @@ def _sparse_control(mode, fv, B, u, t1, t2, dvf):
 
 
 @njit(cache=True, inline="always")
+def all_closing(m, gap, uNm, uNf, a_c, b_c):
+    """Whether every contact's predicted gap (gap + a_c u_N-) + b_c u_Nf is <= 0, decided as the
+    Python rule decides it (:class:`lcp.timestepping.activation.Activation`), NaN included: up to
+    :data:`~lcp.timestepping.activation.LIST_MAX_CONTACTS` contacts by Python's max over the list (a later entry replaces the
+    largest only where it compares greater, so a NaN counts only in the first place), beyond by
+    NumPy's max (a NaN anywhere wins). A state that overflowed then takes the Python loop's path:
+    no contact closes, and the step ends non-finite."""
+    top = 0.0
+    nan = False
+    for j in range(m):
+        pred = (gap[j] + a_c * uNm[j]) + b_c * uNf[j]
+        if j == 0 or pred > top:
+            top = pred
+        if pred != pred:
+            nan = True
+    if m > LIST_MAX_CONTACTS and nan:
+        return False
+    return top <= 0.0
+
+
+@njit(cache=True, inline="always")
 def _activate(m, n, Hp, Hi, Hx, aHp, aHi, aHx, gap0, absg0, q, v, vfree, loaded, a_c, b_c, close_tol, open_tol,
               uNm, uNf, gap, absq, act):
     """The activation rule of :class:`lcp.timestepping.activation.Activation` on constant contact
     rows (CSR H and |H|): the same sums in the same order. Fills uNm, uNf, gap and the active
     indices ``act``; returns their number (the compiled many-contact and spatial loops share it)."""
-    any_open = False
     for j in range(m):
         uNm[j] = row_dot(Hp, Hi, Hx, v, j)
         uNf[j] = row_dot(Hp, Hi, Hx, vfree, j)
         gap[j] = gap0[j] + row_dot(Hp, Hi, Hx, q, j)
-        if (gap[j] + a_c * uNm[j]) + b_c * uNf[j] > 0.0:
-            any_open = True
     na = 0
-    if not any_open:
+    if all_closing(m, gap, uNm, uNf, a_c, b_c):
         for j in range(m):
             act[na] = j
             na += 1
@@ -185,7 +204,10 @@ activate = _activate
 
 @njit(cache=True)
 def _enum1(W00, W01, W10, W11, qN, qT, mu):
-    """lcp.contact.problem.planar_enum on floats (rtol 1e-12): (pN, pT, mode, n_distinct)."""
+    """lcp.contact.problem.planar_enum on floats (rtol 1e-12): (pN, pT, mode, n_distinct); no case
+    where a diagonal entry of W is not positive (a degenerate contact row, as EnumSolver)."""
+    if not (W00 > 0.0 and W11 > 0.0):
+        return np.nan, np.nan, -1, 0
     scale = max(max(abs(qN) / W00, abs(qT) / W11), 1e-300)
     tol = 1e-12 * scale
     open_ok = (qN / W00) >= -tol

@@ -41,7 +41,7 @@ from lcp.timestepping.activation import CLOSE_ULPS, EPS, OPEN_ULPS
 from lcp.timestepping.compiled_kernels import (BRANCH_MAX_SWEEPS, BUFFER_FULL, DONE, NONFINITE,
                                                run_steps)
 from lcp.timestepping.contact_step import count_solve, retry_with_fallback
-from lcp.timestepping.outcome import ambiguity_note
+from lcp.timestepping.outcome import ambiguity_note, free_velocity_overflows, nonfinite_message
 from lcp.timestepping.projection import violation_function
 from lcp.result import STATUS_MESSAGES, Impact, SimulationResult, SolverStats
 
@@ -411,6 +411,9 @@ def moreau_jean_loop(asm, q0, v0, n_steps: int, every: int, solver, fallback: bo
             status, message = -2, f"{STATUS_MESSAGES[-2]} Step {k} (t = {k * h:.10g})."
             break
         # the compiled step could not finish: the Python solver takes this step
+        if free_velocity_overflows(v + asm.at(k * h, q, v)[0]):  # as the Python loop: no solver for infinities
+            status, message = -2, nonfinite_message(k, h)
+            break
         na = int(istate[13])
         active = act[:na].copy()
         its = int(istate[12])

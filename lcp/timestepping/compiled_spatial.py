@@ -53,7 +53,7 @@ from lcp.timestepping.compiled_kernels import (
 )
 from lcp.timestepping.compiled_loop import free_velocity_data, operator_arrays
 from lcp.timestepping.contact_step import ContactStep
-from lcp.timestepping.outcome import RunNotes
+from lcp.timestepping.outcome import RunNotes, free_velocity_overflows, nonfinite_message
 from lcp.timestepping.projection import violation_function
 
 __all__ = ["applicable", "contact_blocks", "moreau_jean_spatial", "run_spatial_steps"]
@@ -72,7 +72,7 @@ def applicable(asm, solver, options) -> bool:
     sys_ = asm.sys
     if not (HAVE_NUMBA and sys_.n_contacts >= 1 and sys_.is_spatial and sys_.is_constant
             and asm.matrices_constant and asm.schedule is None and sys_.n_bilateral == 0
-            and np.all(sys_.tangent_dims == 2)):
+            and sys_.n_tangent == 2 * sys_.n_contacts):  # (one or two tangents each: two each)
         return False
     kind = type(solver)
     if not (kind is ConeAutoSolver or (kind is ConeNsgsSolver and solver.polish)
@@ -608,6 +608,9 @@ def moreau_jean_spatial(asm, q0, v0, n_steps: int, every: int, solver, fallback:
         if step is None:
             step = ContactStep(sys_, asm, solver, fallback, notes)
         dvf, SHt, W, _, H = asm.at(k * h, q, v)
+        if free_velocity_overflows(v + dvf):  # as the Python loop: no solver for infinities
+            status, message = -2, nonfinite_message(k, h)
+            break
         _, p, md, _, sol = step.solve(k, k * h, active, v, v + dvf, dvf, SHt, W, H, H[:m] @ v)
         if p is None:
             status = -1

@@ -29,6 +29,7 @@ import numpy as np
 
 from lcp.contact.problem import CASADI_OPS, MODE_NAMES, planar_enum, planar_refine
 from lcp.numerics import cache
+from lcp.timestepping.outcome import free_velocity_overflows
 
 __all__ = ["applicable", "pack", "step_function", "chunk_function", "simulate_compiled"]
 
@@ -328,7 +329,9 @@ def simulate_compiled(asm, q0, v0, n_steps: int, save_every: int = 1, compiled: 
 
     Saved rows: every ``save_every``-th state (and the impulses of the step that led to it), so that
     long runs keep only what is asked for. The arrays stop at the first failed step, whose index is
-    returned last (None if every step succeeded).
+    returned last but one (None if every step succeeded); last, whether that step failed by
+    overflow (its free velocity or its end state not finite: the Python loop's status -2) rather
+    than by a contact problem without an admissible case.
     """
     n = asm.n
     affine = needs_affine(asm)
@@ -343,13 +346,16 @@ def simulate_compiled(asm, q0, v0, n_steps: int, save_every: int = 1, compiled: 
     modes_count = np.zeros(5, dtype=np.int64)  # inactive, open, stick, slide+, slide-
     max_res, n_amb = 0.0, 0
     done = 0
-    fail = None
+    fail, overflow = None, False
     while done < n_steps:
         take = min(CHUNK, n_steps - done)
         run_chunk(take)
         X, info = Xbuf[:take], Ibuf[:take]  # (take, 4n) and (take, 5): one row per step
         if not (np.isfinite(X).all() and (info[:, 2] != -1).all()):
             take = int(np.flatnonzero((info[:, 2] == -1) | ~np.all(np.isfinite(X), axis=1))[0])
+            start = X[take - 1] if take else x  # the state the failed step started from
+            fv = start[n:2 * n] + asm.at((done + take) * asm.h, start[:n], start[n:2 * n])[0]
+            overflow = info[take, 2] != -1 or free_velocity_overflows(fv)
             X, info = X[:take], info[:take]
             fail = done + take
         # steps done + 1 .. done + take; keep those whose index is a multiple of save_every
@@ -377,4 +383,4 @@ def simulate_compiled(asm, q0, v0, n_steps: int, save_every: int = 1, compiled: 
     counts = {"inactive": int(modes_count[0])}
     counts.update({MODE_NAMES[k]: int(modes_count[k + 1]) for k in range(4)})
     return (Q[:last + 1], V[:last + 1], info_saved[:last, 0], info_saved[:last, 1],
-            info_saved[:last, 2].astype(np.int8), counts, max_res, n_amb, done, fail)
+            info_saved[:last, 2].astype(np.int8), counts, max_res, n_amb, done, fail, bool(overflow))

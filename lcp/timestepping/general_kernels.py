@@ -47,7 +47,7 @@ import numpy as np
 from lcp.contact.kernels import local_disk3
 from lcp.contact.spatial_nsgs import refine_dense, residual_blocked_dense
 from lcp.numerics.jit import njit
-from lcp.timestepping.compiled_kernels import enum_one
+from lcp.timestepping.compiled_kernels import all_closing, enum_one
 from lcp.timestepping.control_kernels import control_vector
 from lcp.timestepping.step_products import cols as _cols, matvec as _matvec, rows as _rows, seqmv as _seqmv
 from lcp.timestepping.kinematic_kernels import advance, amax_abs, kinematic_sizes
@@ -90,7 +90,8 @@ def _error_one(W00, W01, W10, W11, qN, qT, mu, rN, rT):
 def _closed_form_step(j, m, n, r, k, tk, h, o_W, o_H, o_SHt, o_b1, moving, v, vfree, dvf, uNm, mu, e, res_tol,
                       istate, fstate, dv, w, out):
     """One active planar contact j by the closed form, as ContactStep.solve with EnumSolver: fills
-    dv and out = (pN, pT, mode); False where the Python side must solve the step."""
+    dv and out = (pN, pT, mode); False where the Python side must solve the step (also where a
+    diagonal entry of W is not positive: enum_one finds no case there, as EnumSolver)."""
     iN = j
     iT = m + j
     idx = np.empty(2, dtype=np.int64)
@@ -532,7 +533,6 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
             # activation (lcp.timestepping.activation.Activation): the same sums in the same order
             na = 0
             if m:
-                any_open = False
                 HN = _rows(o_H, r, n, allm)
                 um = _matvec(HN, v)
                 uf = _matvec(HN, vfree)
@@ -544,8 +544,7 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
                         sf = sf + o_b1[j]
                     uNm[j] = sm
                     uNf[j] = sf
-                    if (o_gap[j] + a_c * sm) + b_c * sf > 0.0:
-                        any_open = True
+                any_open = not all_closing(m, o_gap, uNm, uNf, a_c, b_c)
                 if not any_open:
                     for j in range(m):
                         act[na] = j
@@ -648,6 +647,12 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
         for a in range(n):
             tot += vn[a]
         finite = math.isfinite(tot)
+        if not finite:  # a sum that overflows on finite entries is looked at entry by entry
+            finite = True
+            for a in range(nq):
+                finite = finite and math.isfinite(qn[a])
+            for a in range(n):
+                finite = finite and math.isfinite(vn[a])
         if not finite:
             return k, NONFINITE
         for a in range(nq):

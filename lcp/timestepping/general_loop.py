@@ -51,7 +51,8 @@ from lcp.timestepping.contact_step import ContactStep
 from lcp.timestepping.force_check import ForceStepCheck, StepRejected, nonfinite_cause
 from lcp.timestepping.general_kernels import (BAD_DATA, BUFFER_FULL, DONE, NEEDS_PYTHON, NONFINITE,
                                               PROJECTION_FAILED, REJECTED, run_general)
-from lcp.timestepping.outcome import RunNotes, loop_result, projection_failure, record_impacts
+from lcp.timestepping.outcome import (RunNotes, free_velocity_overflows, loop_result, nonfinite_message,
+                                      projection_failure, record_impacts)
 from lcp.timestepping.projection import NEWTON_PER_EVAL, violation_function
 
 __all__ = ["PROJECTION_NOTE", "applicable", "run_general_loop"]
@@ -314,6 +315,9 @@ def _run(system, asm, lib, q0, v0, h, th, n_steps, every, solver, fallback, proj
             status, message = -7, f"{STATUS_MESSAGES[-7]} Step {k} (t = {tk:.10g}): {why}."
             break
         assert reason == NEEDS_PYTHON
+        if free_velocity_overflows(vfree):  # as the Python loop: no solver for infinities
+            status, message = -2, nonfinite_message(k, h)
+            break
         na = int(istate[13])
         stats.python_steps += 1
         active = act[:na].copy()

@@ -41,7 +41,7 @@ from lcp.model.kinematics import refuse_kinematics
 from lcp.model.start import consistent_start
 from lcp.timestepping import compiled_step as compiled
 from lcp.timestepping.activation import CLOSE_ULPS, OPEN_ULPS
-from lcp.timestepping.assembly import StepAssembly
+from lcp.timestepping.assembly import SPARSE_MIN_CONTACT_ROWS, StepAssembly
 from lcp.timestepping.outcome import compiled_step_result
 from lcp.timestepping.projection import PositionProjection, needs_projection
 from lcp.timestepping.python_loop import run_python_loop
@@ -81,7 +81,11 @@ class MoreauJeanOptions:
         moving contact is projected and a C compiler is found, with or without a control schedule
         (B(t) or B(t, q)); a control schedule on a constant drift with a constant B runs the
         constant compiled loop (:mod:`lcp.timestepping.compiled_loop`, one contact or more). Where a
-        control schedule keeps the Python loop, the message says why.
+        control schedule keeps the Python loop, the message says why; a run of fewer than 50,000 steps (at most one contact)
+        takes the Python loop while the general loop's numba kernel is not compiled on the machine
+        yet, and has it compiled in the background (short runs also while it is not loaded, up to
+        3,000 steps per process: :mod:`lcp.timestepping.first_compile`; ``LCP_COMPILE=always`` runs
+        it now).
     projection : {"auto", True, False}
         Project the positions onto the constraints after each step (:mod:`lcp.timestepping.projection`).
         ``"auto"``: only where a constraint is nonlinear in q or time-dependent (where the
@@ -178,26 +182,51 @@ def moreau_jean(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Sim
     """
     if not (isinstance(t_end, (int, float, np.floating)) and np.isfinite(t_end) and t_end > 0):
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
-    q0, v0 = system.check_state(q0, v0)
-    q0, v0, note = consistent_start(system, q0, v0)  # ValueError beyond the start tolerance
-    result = flag_unresolvable(_run(system, q0, v0, t_end, options),
+    try:
+        asm = _early_assembly(system, options)
+    except ValueError:
+        system.check_state(q0, v0)  # a bad state or mass matrix is named by its own check first
+        raise
+    q0, v0 = system.check_state(q0, v0, mass_nonzeros=getattr(asm, "mass_nonzeros", None))
+    # the constant assembly's contact rows are the start check's (one evaluation, not two)
+    rows = None if asm is None else (asm.H[:system.n_contacts], asm.gap0)
+    q0, v0, note = consistent_start(system, q0, v0, rows=rows)  # ValueError beyond the start tolerance
+    result = flag_unresolvable(_run(system, q0, v0, t_end, options, asm),
                                resolvable(mass_condition(system, q0), MOREAU_JEAN_LIMIT))
     if note is not None:
         result.message = f"{result.message} {note}"
     return result
 
 
-def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> SimulationResult:
-    """The body of :func:`moreau_jean` from a checked, consistent start."""
+def _assembly(system, options) -> StepAssembly:
+    """The step's :class:`StepAssembly` (ValueError for a singular iteration matrix)."""
+    try:
+        return StepAssembly(system, float(options.h), float(options.theta))
+    except FloatingPointError as exc:
+        raise ValueError(str(exc)) from exc
+
+
+def _early_assembly(system, options) -> StepAssembly | None:
+    """The assembly built before the start check where it is dense and constant with contacts and
+    no bilateral constraint (its H and g(0) serve the check), else None (built later, in
+    :func:`_run`)."""
+    if (system.n_contacts and not system.n_bilateral and system.mass_is_constant
+            and system.kinematics_is_constant and system.force_is_affine
+            and system.n_contact_rows < SPARSE_MIN_CONTACT_ROWS and not getattr(system, "is_controlled", False)):
+        return _assembly(system, options)
+    return None
+
+
+def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions, asm=None) -> SimulationResult:
+    """The body of :func:`moreau_jean` from a checked, consistent start (``asm``: the step's
+    assembly where :func:`_early_assembly` built it)."""
     h, th = float(options.h), float(options.theta)
     spatial = system.is_spatial
     solver = _spatial_solver(options) if spatial else make_solver(options.solver, **(options.solver_options or {}))
     n_steps = _n_steps(t_end, h)
     every = int(options.save_every)
-    try:
-        asm = StepAssembly(system, h, th)
-    except FloatingPointError as exc:
-        raise ValueError(str(exc)) from exc
+    if asm is None:
+        asm = _assembly(system, options)
     proj = _projector(system, options)
     if options.scheme == "order2":
         refuse_kinematics(system, "scheme='order2'")
@@ -231,6 +260,13 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
         from lcp.timestepping import general_loop
 
         why = general_loop.applicable(system, asm, proj)
+        if why is None:
+            from lcp.timestepping.first_compile import deferred
+
+            # a short run does not wait for the kernel's first compilation (lcp.timestepping.first_compile),
+            # where the Python loop gives the same bits (one contact at most)
+            note = deferred(n_steps, exact=system.n_contacts <= 1) or ""
+            why = "cold" if note else None
         if why is None:
             from lcp.timestepping.codegen import kinematics_library, projection_library, step_library
 

@@ -17,13 +17,16 @@ h -> 0 the two separate). Its time is the estimated closing time t_k + min(h, g_
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from lcp.contact.problem import ModeArray
 from lcp.result import STATUS_MESSAGES, Impact, SimulationResult, SolverStats
 from lcp.timestepping.projection import violation_function
 
-__all__ = ["RunNotes", "ambiguity_note", "lazy_violation", "loop_result", "projection_failure", "record_impacts",
+__all__ = ["RunNotes", "ambiguity_note", "free_velocity_overflows", "lazy_violation", "loop_result", "nonfinite_message",
+           "projection_failure", "record_impacts",
            "compiled_step_impacts",
            "compiled_step_result"]
 
@@ -107,7 +110,7 @@ def compiled_step_impacts(asm, Q, V, PN, PT, h, name):
 def compiled_step_result(asm, raw, every, solver_name, contact_name=None, violation=None) -> SimulationResult:
     """The result of the compiled single-contact path from the kernel's output ``raw``
     (:func:`lcp.timestepping.compiled_step.simulate_compiled`); same contract as the Python loop's."""
-    Q, V, PN, PT, md, counts, max_res, n_amb, done, fail = raw
+    Q, V, PN, PT, md, counts, max_res, n_amb, done, fail, overflow = raw
     stats = SolverStats()
     stats.steps = done
     stats.free_steps = counts.pop("inactive")
@@ -120,6 +123,8 @@ def compiled_step_result(asm, raw, every, solver_name, contact_name=None, violat
     h = asm.h
     if fail is None:
         status, message = 0, STATUS_MESSAGES[0] + ambiguity_note(n_amb, None)
+    elif overflow:  # as the Python loop: the state (or the step's free velocity) overflowed
+        status, message = -2, nonfinite_message(fail, h)
     else:
         status = -1
         message = (f"{STATUS_MESSAGES[-1]} Step {fail} (t = {fail * h:.10g}), solver '{solver_name}' "
@@ -135,6 +140,19 @@ def compiled_step_result(asm, raw, every, solver_name, contact_name=None, violat
                             solver=f"{solver_name} (compiled)", h=h, theta=asm.theta, impacts=impacts,
                             violation=(lazy_violation(asm.sys, Q, t) if violation is None
                                        else (lambda: violation(Q, t))))
+
+
+def free_velocity_overflows(vfree) -> bool:
+    """Whether a step's free velocity is not finite (a state or a force that overflowed): the step
+    cannot end in a finite state, and every loop stops there with status -2
+    (:func:`nonfinite_message`) instead of handing infinities to a contact solver. The sum is the
+    quick test; a sum that overflows on finite entries is looked at entry by entry."""
+    return not math.isfinite(float(vfree.sum())) and not np.isfinite(vfree).all()
+
+
+def nonfinite_message(k: int, h: float) -> str:
+    """The message of a run stopped at step k by a non-finite state (status -2)."""
+    return f"{STATUS_MESSAGES[-2]} Step {k} (t = {k * h:.10g})."
 
 
 def projection_failure(k: int, t: float, viol: float, iters: int, tol: float) -> str:

@@ -21,7 +21,8 @@ from lcp.timestepping.activation import CLOSE_ULPS, EPS, Activation
 from lcp.timestepping.assembly import kahan_add
 from lcp.timestepping.force_check import StepRejected
 from lcp.timestepping.contact_step import ContactStep
-from lcp.timestepping.outcome import RunNotes, loop_result, projection_failure, record_impacts
+from lcp.timestepping.outcome import (RunNotes, free_velocity_overflows, loop_result, nonfinite_message,
+                                      projection_failure, record_impacts)
 from lcp.timestepping.projection import violation_function
 
 __all__ = ["run_python_loop"]
@@ -115,6 +116,9 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
                 activation.release()
                 loaded[:] = False
         else:
+            if free_velocity_overflows(vfree):
+                status, message = -2, nonfinite_message(k, h)
+                break
             dv, p, md, cols, sol = step.solve(k, tk, active, v, vfree, dvf, SHt, W, H, uN_minus, b1)
             if dv is None:
                 status = -1
@@ -142,7 +146,9 @@ def run_python_loop(system, asm, q0, v0, h: float, th: float, n_steps: int, ever
         else:
             q, cq = advance(system, tk, q, (1 - th) * v + th * v_new, h, cq)
         v = v_new
-        if not math.isfinite(float(q.sum()) + float(v.sum())):  # one test for both (NaN/inf propagate)
+        # one test for both (NaN/inf propagate); a sum that overflows on finite entries is looked at
+        # entry by entry (as the compiled loops test)
+        if not math.isfinite(float(q.sum()) + float(v.sum())) and not (np.isfinite(q).all() and np.isfinite(v).all()):
             status = -2
             message = f"{STATUS_MESSAGES[-2]} Step {k} (t = {tk:.10g})."
             break

@@ -222,7 +222,7 @@ def run_second_order(system, asm, q0, v0, h: float, th: float, n_steps: int, eve
                 worst = max(worst, viol)
         elif not taken:
             held = {}
-        if not math.isfinite(float(q.sum()) + float(v.sum())):
+        if not math.isfinite(float(q.sum()) + float(v.sum())) and not (np.isfinite(q).all() and np.isfinite(v).all()):
             status = -2
             message = f"{STATUS_MESSAGES[-2]} Step {k} (t = {tk:.10g})."
             break
