@@ -12,6 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from lcp.ocp.collocation import RadauTranscription
 from lcp.ocp.complementarity import run_homotopy, run_phases
 from lcp.ocp.guess import resample, x0_from_guess
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions
@@ -45,7 +46,8 @@ def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
                 and not problem.system.is_spatial)
         method = "phases" if free else "homotopy"
     if problem.transcription is None:
-        problem.transcription = (SpatialTranscription if problem.system.is_spatial else Transcription)(problem)
+        kind = RadauTranscription if getattr(problem, "integrator", "theta") == "radau" else Transcription
+        problem.transcription = (SpatialTranscription if problem.system.is_spatial else kind)(problem)
     t0 = time.perf_counter()
     first_pass = []
     if method == "phases" and guess is None:
