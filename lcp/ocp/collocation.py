@@ -24,12 +24,13 @@ stage's contact velocities u = H(Q_kj) V_kj::
     0 <= lambda perp mu N - beta+ - beta- >= 0,
 
 so a closed contact has u_N = 0 at every stage (the velocity level: index 2, order 2s - 1 in q
-and v). The FESD cross complementarity (Nurkanovic et al. 2024) holds between all stages of a
-step (a multiplier of stage j against the slack of every other stage l of the same step), so a
-step is one mode; with ``steps="free"`` also between every stage of step k and the last stage of
+and v). With ``steps="free"`` the FESD cross complementarity (Nurkanovic et al. 2024) holds
+between all stages of a step (a multiplier of stage j against the slack of every other stage l of
+the same step), so a step is one mode, and between every stage of step k and the last stage of
 step k - 1 (as the theta transcription's cross pairs), so that the switches fall on nodes and the
-step lengths place them. The fixed-phase solve (:func:`fixed_mode_bounds`) therefore fixes one
-member of each pair for all stages of a step at once.
+step lengths place them; the fixed-phase solve (:func:`fixed_mode_bounds`) then fixes one member
+of each pair for all stages of a step at once. Uniform steps keep each stage's own pairs only (a
+switch may fall inside a step, between stages, as in plain collocation).
 
 The impulse of a step handed to the costs and the replay is h_k sum_j b_j f_kj (b the last row of
 A). Not modelled (refused by name in :class:`~lcp.ocp.problem.OptimalControlProblem`): the gap law
@@ -172,8 +173,9 @@ class RadauTranscription(Transcription):
             pN = pT = ca.SX.zeros(0, 1)
             if m:
                 a, w = [], []
-                for j in range(s):  # each stage's own pairs, then every other stage's slacks (one mode)
-                    for l_ in range(s):
+                for j in range(s):  # each stage's own pairs; with free steps every other stage's slacks
+                    # too (one mode per step: uniform steps keep a switch inside a step possible)
+                    for l_ in (range(s) if self.cross else (j,)):
                         a += [blks[j][x] for x, _ in PAIRS]
                         w += [blks[l_][y] for _, y in PAIRS]
                     if self.cross:  # (the start state has no force: no (lam, wl) pair at node 0)
@@ -319,6 +321,11 @@ def fixed_mode_bounds(tr, x):
     for a, w in PAIRS:
         ia, xa = _blocks(tr, x, a)
         iw, xw = _blocks(tr, x, w)
+        if not tr.cross:  # uniform steps: stage by stage
+            a_small = xa <= xw
+            ubx[ia[a_small]] = 0.0
+            ubx[iw[~a_small]] = 0.0
+            continue
         a_small = np.max(xa, axis=1) <= np.max(xw, axis=1)  # (N, m)
         ubx[ia.transpose(0, 2, 1)[a_small]] = 0.0
         ubx[iw.transpose(0, 2, 1)[~a_small]] = 0.0
@@ -366,21 +373,23 @@ def diagnose(tr, x) -> dict:
         xa, xw = _blocks(tr, x, a)[1], _blocks(tr, x, w)[1]
         own_a.append(xa.ravel())
         own_w.append(xw.ravel())
-        cr_a.append(np.repeat(xa, s, axis=1).ravel())  # every stage against every stage of its step
-        cr_w.append(np.tile(xw, (1, s, 1)).ravel())
+        if tr.cross:  # every stage against every other stage of its step
+            other = ~np.eye(s, dtype=bool).ravel()
+            cr_a.append(np.repeat(xa, s, axis=1)[:, other].ravel())
+            cr_w.append(np.tile(xw, (1, s, 1))[:, other].ravel())
     if tr.cross and N > 1:
         for a, w in STEP_CROSS:
             xa, xw = _blocks(tr, x, a)[1], _blocks(tr, x, w)[1]
             cr_a.append(xa[1:].ravel())
             cr_w.append(np.repeat(xw[:-1, -1:], s, axis=1).ravel())
-    own_a, own_w, cr_a, cr_w = (np.concatenate(z) for z in (own_a, own_w, cr_a, cr_w))
+    own_a, own_w, cr_a, cr_w = (np.concatenate(z) if z else np.zeros(0) for z in (own_a, own_w, cr_a, cr_w))
     k_worst = int(np.argmax(step_res))
     where = "" if not np.any(step_res > 0) else (
         f"largest in step {k_worst} (t = {float(np.sum(tr.unpack(x)[1][:k_worst])):.6g}): {step_res[k_worst]:.3g}")
     return {**empty, "residual": float(np.max(step_res)), "modes": modes,
-            "max_product": float(max(np.max(own_a * own_w), np.max(cr_a * cr_w))),
+            "max_product": float(max(np.max(own_a * own_w), np.max(cr_a * cr_w, initial=0.0))),
             "lcp": float(np.max(np.abs(np.minimum(own_a, own_w)))),
-            "cross": float(np.max(np.abs(np.minimum(cr_a, cr_w)))), "where": where}
+            "cross": float(np.max(np.abs(np.minimum(cr_a, cr_w)), initial=0.0)), "where": where}
 
 
 def _stage_forces_of(tr, x):
