@@ -143,7 +143,8 @@ class RadauTranscription(Transcription):
         if self.cross:  # the start state's slacks stand for the "previous step" of step 0
             H0 = ca.Function("H0", [q], [sys.H_expr])(q0p)
             uN0, uT0 = ca.mtimes(H0[:m, :], v0p), ca.mtimes(H0[m:, :], v0p)
-            prev = {"wN": uN0, "wp": ca.fabs(uT0) + uT0, "wm": ca.fabs(uT0) - uT0, "lam": ca.fabs(uT0)}
+            prev = {"wN": uN0, "wp": ca.fabs(uT0) + uT0, "wm": ca.fabs(uT0) - uT0, "lam": ca.fabs(uT0),
+                    "wl": self._start_margin(stage_fn, q0p, v0p, self.control_pair(us, 0)[0])}
         for k in range(N):
             h = hs[k]
             ua, ub = self.control_pair(us, k)
@@ -178,9 +179,9 @@ class RadauTranscription(Transcription):
                     for l_ in (range(s) if self.cross else (j,)):
                         a += [blks[j][x] for x, _ in PAIRS]
                         w += [blks[l_][y] for _, y in PAIRS]
-                    if self.cross:  # (the start state has no force: no (lam, wl) pair at node 0)
-                        a += [blks[j][x] for x, y in STEP_CROSS if y in prev]
-                        w += [prev[y] for _, y in STEP_CROSS if y in prev]
+                    if self.cross:
+                        a += [blks[j][x] for x, _ in STEP_CROSS]
+                        w += [prev[y] for _, y in STEP_CROSS]
                 if self.cross:
                     prev = blks[-1]
                 self._constrain(ca.vertcat(*a) * ca.vertcat(*w) - sigma, -np.inf, 0.0)  # Scholtes
@@ -206,6 +207,22 @@ class RadauTranscription(Transcription):
         self.ubg = np.concatenate(self._ubg) if self._ubg else np.zeros(0)
         del self._x, self._g, self._lbx, self._ubx, self._lbg, self._ubg, self._nx
         self.build_time = time.perf_counter() - t_start
+
+    def _start_margin(self, stage_fn, q0p, v0p, u0):
+        """The variable ``wl0`` = mu f_N - |f_T| of the forces that hold every contact closed and stuck at
+        t = 0 (the acceleration-level law), for the contacts that start at rest tangentially (0 for
+        the others): a contact that slides in step 0 must start sliding there, wl0 <= 0, through the
+        pair (lam, wl) of :data:`STEP_CROSS` (relaxed as lam wl0 <= sigma: wl0 may be negative)."""
+        sys, m = self.pb.system, self.pb.system.n_contacts
+        Mq, F, H = stage_fn(0.0, q0p, v0p, u0)
+        Hv = ca.mtimes(sys.H_expr, sys.v_sym)
+        drift = ca.Function("Hdot_v", [sys.q_sym, sys.v_sym], [ca.jtimes(Hv, sys.q_sym, sys.v_sym)])(q0p, v0p)
+        MHt = ca.solve(Mq, H.T)
+        f = -ca.solve(ca.mtimes(H, MHt), ca.mtimes(H, ca.solve(Mq, F)) + drift)
+        at_rest = np.abs(sys.contact_jacobian(self.pb.q0)[m:] @ self.pb.v0) == 0.0
+        wl0 = self._var("wl0", m, -np.inf, np.inf, key="wl0")
+        self._constrain(wl0 - ca.DM(at_rest.astype(float)) * (ca.DM(sys.mu) * f[:m] - ca.fabs(f[m:])), 0.0, 0.0)
+        return wl0
 
     def _step_terms(self, J, st, us, k, h, ua, ub, z, sigma, pair_sizes):
         """The step's cost terms and the user's path constraints and pairs (as the theta transcription)."""
@@ -329,6 +346,12 @@ def fixed_mode_bounds(tr, x):
         a_small = np.max(xa, axis=1) <= np.max(xw, axis=1)  # (N, m)
         ubx[ia.transpose(0, 2, 1)[a_small]] = 0.0
         ubx[iw.transpose(0, 2, 1)[~a_small]] = 0.0
+    if tr.cross:  # step 0 slides only where the stick force at t = 0 leaves the cone (wl0 <= 0)
+        il, xl = _blocks(tr, x, "lam")
+        i0 = tr.ix["wl0"].reshape(-1)
+        slides = np.max(xl[0], axis=0) > np.maximum(x[i0], 0.0)
+        ubx[il[0].T[~slides]] = 0.0
+        ubx[i0[slides]] = 0.0
     if tr.cross and tr.pb.N > 1:
         for a, w in STEP_CROSS:
             ia, xa = _blocks(tr, x, a)
@@ -377,6 +400,9 @@ def diagnose(tr, x) -> dict:
             other = ~np.eye(s, dtype=bool).ravel()
             cr_a.append(np.repeat(xa, s, axis=1)[:, other].ravel())
             cr_w.append(np.tile(xw, (1, s, 1))[:, other].ravel())
+    if tr.cross:
+        cr_a.append(_blocks(tr, x, "lam")[1][0].ravel())
+        cr_w.append(np.tile(np.maximum(x[tr.ix["wl0"].reshape(-1)], 0.0), s))
     if tr.cross and N > 1:
         for a, w in STEP_CROSS:
             xa, xw = _blocks(tr, x, a)[1], _blocks(tr, x, w)[1]

@@ -160,6 +160,8 @@ def first_pass(problem, options: HomotopyOptions | None = None) -> OCPResult:
     (:func:`piecewise_uniform`, stored as the twin's ``step_fractions``), constant hold, no replay."""
     twin = copy.copy(problem)
     twin.steps, twin.hold, twin.replay_tol, twin.transcription, twin.nlp_solvers = "uniform", "constant", None, None, {}
+    # the phases, not the integration, are wanted: a Radau problem's first pass on theta steps
+    twin.integrator = "theta"
     # with a free T the pins stay constraints of the uniform twin (its grid scales with T)
     twin.step_fractions = None if problem.free_time else piecewise_uniform(problem.N, problem.T, problem.node_times)
     return twin.solve(options=options or HomotopyOptions(tol=1e-4, factor=1e-2))
