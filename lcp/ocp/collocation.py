@@ -217,8 +217,11 @@ class RadauTranscription(Transcription):
         Mq, F, H = stage_fn(0.0, q0p, v0p, u0)
         Hv = ca.mtimes(sys.H_expr, sys.v_sym)
         drift = ca.Function("Hdot_v", [sys.q_sym, sys.v_sym], [ca.jtimes(Hv, sys.q_sym, sys.v_sym)])(q0p, v0p)
-        MHt = ca.solve(Mq, H.T)
-        f = -ca.solve(ca.mtimes(H, MHt), ca.mtimes(H, ca.solve(Mq, F)) + drift)
+        W = ca.mtimes(H, ca.solve(Mq, H.T))
+        # (a tiny Tikhonov term: redundant contacts, a box's corners on a floor, leave W singular;
+        # the stick forces are then not unique and this picks the smallest)
+        W = W + 1e-12 * ca.trace(W) * ca.DM.eye(2 * m)
+        f = -ca.solve(W, ca.mtimes(H, ca.solve(Mq, F)) + drift)
         at_rest = np.abs(sys.contact_jacobian(self.pb.q0)[m:] @ self.pb.v0) == 0.0
         wl0 = self._var("wl0", m, -np.inf, np.inf, key="wl0")
         self._constrain(wl0 - ca.DM(at_rest.astype(float)) * (ca.DM(sys.mu) * f[:m] - ca.fabs(f[m:])), 0.0, 0.0)
