@@ -90,6 +90,19 @@ def test_block_pushed_to_rest_exact_with_radau():
     assert r.replay.final_miss <= 1e-8
 
 
+def test_block_min_effort_exact_with_radau_and_the_affine_hold():
+    # stick, slide, stick from rest to rest 0.5 m in 1 s: the affine hold's forces are affine in t
+    # within a phase, which two stages integrate exactly (continuous optimum 86.905749 N^2 s)
+    sc = lcp.scenes.jean_pratt(v0=0.0)
+    pb = OptimalControlProblem(sc, 6, control_matrix=tangential_push(sc.system), u_min=-20, u_max=20, T=1.0,
+                               stage_cost=effort, steps="free", hold="affine", integrator="radau", stages=2,
+                               terminal_constraints=lambda q, v: ca.vertcat(q[0] - 0.5, v[0]))
+    r = pb.solve()
+    assert r.success, r.message
+    assert r.cost == pytest.approx(86.905749, abs=1e-6)
+    assert r.replay.final_miss <= 1e-9
+
+
 @pytest.mark.parametrize("case, message", [
     ("name", "integrator must be 'theta' or 'radau'"),
     ("stages", "stages must be an integer in 1..4"),
