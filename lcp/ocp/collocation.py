@@ -349,14 +349,19 @@ def fixed_mode_bounds(tr, x):
         a_small = np.max(xa, axis=1) <= np.max(xw, axis=1)  # (N, m)
         ubx[ia.transpose(0, 2, 1)[a_small]] = 0.0
         ubx[iw.transpose(0, 2, 1)[~a_small]] = 0.0
-    if tr.cross:  # step 0 slides only where the stick force at t = 0 leaves the cone (wl0 <= 0)
-        il, xl = _blocks(tr, x, "lam")
-        i0 = tr.ix["wl0"].reshape(-1)
-        slides = np.max(xl[0], axis=0) > np.maximum(x[i0], 0.0)
-        ubx[il[0].T[~slides]] = 0.0
-        ubx[i0[slides]] = 0.0
-    if tr.cross and tr.pb.N > 1:
-        for a, w in STEP_CROSS:
+        if a == "lam":
+            slides = ~a_small  # (N, m): the steps whose contact slides (lam free, wl fixed at zero)
+    if not tr.cross:
+        return lbx, ubx
+    # a step that slides after a stick starts at the cone: its stick-to-slide pair fixes the slack
+    # (wl0 at t = 0, the previous step's last wl after it) by the step's mode, not by comparing a
+    # speed with a force (a slide that starts slowly would otherwise be frozen at rest)
+    i0 = tr.ix["wl0"].reshape(-1)
+    ubx[i0[slides[0]]] = 0.0
+    if tr.pb.N > 1:
+        iwl = _blocks(tr, x, "wl")[0]
+        ubx[iwl[:-1, -1][slides[1:]]] = 0.0
+        for a, w in STEP_CROSS[:-1]:
             ia, xa = _blocks(tr, x, a)
             iw, xw = _blocks(tr, x, w)
             a_small = np.max(xa[1:], axis=1) <= xw[:-1, -1]  # (N - 1, m)
