@@ -8,6 +8,8 @@ control_bounds=...)``, the force affine in u); :class:`OptimalControlProblem` op
   deterministic multi-start);
 - :mod:`~lcp.ocp.transcription`: the NLP (uniform or free steps, piecewise-constant, linear or
   affine control hold, the cross complementarity that puts switches on nodes);
+- :mod:`~lcp.ocp.collocation`: Radau IIA collocation inside each step (``integrator="radau"``,
+  contacts under the velocity law);
 - :mod:`~lcp.model.schedule`: :class:`AffineSchedule`, the control of the affine hold (affine on each
   step, jumps at the nodes);
 - :mod:`~lcp.ocp.complementarity`: the Scholtes homotopy, polishing and the independent checks;

@@ -80,7 +80,9 @@ def x0_from_guess(pb, tr, gs: OCPGuess) -> np.ndarray:
         x0[ix["q"][k - 1]] = gs.q[k]
         x0[ix["v"][k - 1]] = gs.v[k]
     m = pb.system.n_contacts
-    if m and hasattr(tr, "x0_law"):  # a transcription with its own contact variables (lcp.ocp.spatial)
+    if hasattr(tr, "stages"):  # Radau collocation (lcp.ocp.collocation): its stage states, and contacts
+        tr.x0_law(x0, gs, steps)
+    elif m and hasattr(tr, "x0_law"):  # a transcription with its own contact variables (lcp.ocp.spatial)
         tr.x0_law(x0, gs, steps)
     elif m:  # the guess's impulses as forces over the steps; no impulses at the nodes
         mu, e = pb.system.mu, pb.system.e

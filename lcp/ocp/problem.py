@@ -105,6 +105,12 @@ class OptimalControlProblem:
         other). ``"auto"``: the gap law when a contact starts open, else the velocity law.
     complementarity : list of (callable(Step), callable(Step)), optional
         Path pairs 0 <= a(step) perp b(step) >= 0 at every step, relaxed with the contacts (:mod:`lcp.ocp.pairs`).
+    integrator : {"theta", "radau"}
+        The step: Moreau-Jean's theta step (:mod:`lcp.ocp.transcription`), or Radau IIA collocation with
+        ``stages`` stages in each step (:mod:`lcp.ocp.collocation`: order 2 stages - 1 on smooth
+        dynamics; the velocity law only, so contacts must start closed, ``contact_law`` defaulting to "auto").
+    stages : int
+        Radau IIA stages per step, 1 to 4 (``integrator="radau"``).
 
     Examples
     --------
@@ -129,7 +135,8 @@ class OptimalControlProblem:
                  stage_cost: Callable | None = None, terminal_cost: Callable | None = None,
                  terminal_constraints: Callable | None = None, path_constraints: Callable | None = None,
                  path_equalities: Callable | None = None, max_cost: Callable | None = None, control_rate_weight: float = 0.0,
-                 replay_tol: float | None = 1e-6, contact_law: str | None = None, complementarity=None):
+                 replay_tol: float | None = 1e-6, contact_law: str | None = None, complementarity=None,
+                 integrator: str = "theta", stages: int = 2):
         from lcp.scenes.scene import Scene
 
         if isinstance(system, Scene):
@@ -163,7 +170,7 @@ class OptimalControlProblem:
         self.theta = float(theta)
         self.step_fractions = None  # fixed steps / T (None: uniform): a phase_guess grid
         #: the contact law of the transcription, "gap" or "velocity" ("auto" resolved)
-        self.contact_law = _contact_law(system, self.q0, contact_law)
+        self.integrator, self.stages, self.contact_law = _integrator(system, self.q0, integrator, stages, contact_law)
         self.T = positive("T", T)
         self.free_time = bool(free_time)
         self.T_bounds = _pair("T_bounds", T_bounds)
@@ -171,7 +178,7 @@ class OptimalControlProblem:
             raise ValueError(f"T (the initial guess) must lie within T_bounds {T_bounds!r}, got {T!r}")
         self.hold, self.steps, self.step_bounds = _grid(system, self.theta, hold, steps, step_bounds)
         check_spatial(system, self.contact_law, self.hold, self.steps)  # what lcp.ocp.spatial models
-        self.node_times = self._check_node_times(node_times)
+        self.node_times = _check_node_times(self, node_times)
         for name, fn in (("stage_cost", stage_cost), ("terminal_cost", terminal_cost),
                          ("terminal_constraints", terminal_constraints),
                          ("path_constraints", path_constraints), ("path_equalities", path_equalities),
@@ -187,20 +194,6 @@ class OptimalControlProblem:
         self.transcription = None  # the NLP (lcp.ocp.transcription), built on the first solve, then reused
         # IPOPT solvers per (method, options), reused across solves of this problem
         self.nlp_solvers = {}
-
-    def _check_node_times(self, node_times) -> dict:
-        if node_times is None:
-            return {}
-        if not isinstance(node_times, dict):
-            raise ValueError("node_times must be a dict {node index: time}")
-        out = {}
-        for k, t in node_times.items():
-            if not isinstance(k, (int, np.integer)) or not 0 < k < self.N:
-                raise ValueError(f"node_times keys must be interior node indices in (0, {self.N}), got {k!r}")
-            out[int(k)] = positive(f"node_times[{k}]", t)
-            if self.steps == "uniform" and not self.free_time and abs(out[k] - k * self.T / self.N) > 1e-12 * self.T:
-                raise ValueError(f"node_times[{k}] = {t!r} is not node {k} of the uniform grid; use steps='free'")
-        return out
 
     @property
     def B(self):
@@ -325,6 +318,22 @@ class OptimalControlProblem:
         """
         return multistart(self, guesses, options, rtol, **option_kw)
 
+def _check_node_times(self, node_times) -> dict:
+    """The checked ``node_times`` of the problem ``self`` (interior nodes, positive times)."""
+    if node_times is None:
+        return {}
+    if not isinstance(node_times, dict):
+        raise ValueError("node_times must be a dict {node index: time}")
+    out = {}
+    for k, t in node_times.items():
+        if not isinstance(k, (int, np.integer)) or not 0 < k < self.N:
+            raise ValueError(f"node_times keys must be interior node indices in (0, {self.N}), got {k!r}")
+        out[int(k)] = positive(f"node_times[{k}]", t)
+        if self.steps == "uniform" and not self.free_time and abs(out[k] - k * self.T / self.N) > 1e-12 * self.T:
+            raise ValueError(f"node_times[{k}] = {t!r} is not node {k} of the uniform grid; use steps='free'")
+    return out
+
+
 def _refuse_unmodelled(system) -> None:
     """The transcription writes each contact's law with H and g of q only, and moves q by v: a gap or
     tangent that moves with time (dg/dt, ds/dt), or kinematics qdot = T(q) v, would be ignored,
@@ -334,6 +343,25 @@ def _refuse_unmodelled(system) -> None:
     if name is not None:
         raise ValueError(f"contact {name!r} has a time-dependent gap or tangent, which the optimal-control "
                          "transcription does not model; simulate it with method='moreau-jean'")
+
+
+def _integrator(system, q0, integrator, stages, contact_law) -> tuple[str, int, str]:
+    """(integrator, stages, contact law), or ValueError naming what Radau collocation does not model."""
+    if integrator not in ("theta", "radau"):
+        raise ValueError(f"integrator must be 'theta' or 'radau', got {integrator!r}")
+    if not isinstance(stages, (int, np.integer)) or isinstance(stages, bool) or not 1 <= stages <= 4:
+        raise ValueError(f"stages must be an integer in 1..4, got {stages!r}")
+    if integrator == "theta":
+        return integrator, int(stages), _contact_law(system, q0, contact_law)
+    for what, bad in (("bilateral constraints", system.n_bilateral), ("spatial contacts", system.is_spatial),
+                      ("restitution", system.n_contacts and np.any(system.e > 0))):
+        if bad:
+            raise ValueError(f"integrator='radau' does not support {what} yet")
+    law = _contact_law(system, q0, "auto" if contact_law is None else contact_law)
+    if law == "gap":
+        raise ValueError("integrator='radau' supports the velocity law only (contacts that start closed) yet, "
+                         f"got contact_law={contact_law!r} with the gaps {system.gaps(q0)!r}; use integrator='theta'")
+    return integrator, int(stages), law
 
 
 def _contact_law(system, q0, contact_law: str) -> str:

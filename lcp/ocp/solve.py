@@ -12,6 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from lcp.ocp.collocation import RadauTranscription
 from lcp.ocp.complementarity import run_homotopy, run_phases
 from lcp.ocp.guess import event_guess, resample, x0_from_guess
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions
@@ -46,7 +47,8 @@ def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
                 and not problem.system.is_spatial)
         method = "phases" if free else "homotopy"
     if problem.transcription is None:
-        problem.transcription = (SpatialTranscription if problem.system.is_spatial else Transcription)(problem)
+        kind = RadauTranscription if getattr(problem, "integrator", "theta") == "radau" else Transcription
+        problem.transcription = (SpatialTranscription if problem.system.is_spatial else kind)(problem)
     t0 = time.perf_counter()
     first_pass, history = [], None
     if method == "phases" and guess is None:
@@ -205,6 +207,8 @@ def first_pass(problem, options: HomotopyOptions | None = None) -> OCPResult:
     (:func:`piecewise_uniform`, stored as the twin's ``step_fractions``), constant hold, no replay."""
     twin = copy.copy(problem)
     twin.steps, twin.hold, twin.replay_tol, twin.transcription, twin.nlp_solvers = "uniform", "constant", None, None, {}
+    # the phases, not the integration, are wanted: a Radau problem's first pass on theta steps
+    twin.integrator = "theta"
     # with a free T the pins stay constraints of the uniform twin (its grid scales with T)
     twin.step_fractions = None if problem.free_time else piecewise_uniform(problem.N, problem.T, problem.node_times)
     return twin.solve(options=options or HomotopyOptions(tol=1e-4, factor=1e-2))

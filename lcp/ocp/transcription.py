@@ -81,6 +81,11 @@ keeps a closed contact closed and a sticking contact stuck over the whole step (
 multiplier >= 0 and a signed rate, relaxed as |a s| <= sigma with the other pairs). Exact for a
 constant mass matrix and contact Jacobian and forces affine in t (the Jean-Pratt block);
 otherwise second order like the theta = 1/2 step. theta = 1/2 only, no bilateral constraints.
+
+This theta step stays the default integrator: Radau IIA collocation (``integrator="radau"``,
+:mod:`lcp.ocp.collocation`) has order 2s - 1 on smooth dynamics and cuts the replay misses of
+nosnoc's friction examples (motor, N = 30: 0.50 -> 4.6e-4) but meets their 1e-6 on none of
+them, and supports only the velocity law, while this step is exact on the constant systems.
 """
 from __future__ import annotations
 
