@@ -555,3 +555,13 @@ def test_affine_hold_needs_the_trapezoid():
 def test_affine_hold_min_effort_at_N40():
     _, res = _affine_effort(40)
     assert res.success and abs(res.cost - j_star()) <= 1e-8 * j_star() and res.replay.final_miss <= 1e-10
+
+
+def test_failure_message_quotes_the_kept_iterates_residual():
+    """A homotopy that ends above its tolerance keeps the polished point when polishing lowers the
+    residual: the message must quote that point's residual, not the one before polishing."""
+    ocp = rest_problem(8, objective="effort")
+    r = ocp.solve(options=HomotopyOptions(tol=1e-300, sigma_min=1e-6), method="homotopy")
+    assert r.status == -2
+    quoted = float(r.message.split("Residual ")[1].split(" ")[0])
+    assert quoted == pytest.approx(r.complementarity_residual, rel=1e-2, abs=1e-300)

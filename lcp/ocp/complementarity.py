@@ -104,6 +104,10 @@ def run_homotopy(tr, x0, P0, options: HomotopyOptions, cache: dict):
                 # the last converged stage identified the active set; polishing finished it
                 message = f"{OCP_STATUS_MESSAGES[0]} (By the polishing solve; before it: {message})"
                 status = 0
+            elif status == -2:  # the polished point is kept: the message must quote its residual
+                message = (f"{OCP_STATUS_MESSAGES[-2]} Residual {diagp['residual']:.3g} > tol = {options.tol:.3g} "
+                           f"after the polishing solve (before it {history[-2].residual:.3g} at sigma = "
+                           f"{history[-2].sigma:.3g}){_at(diagp)}.")
         elif status == 0:
             status, message = 1, OCP_STATUS_MESSAGES[1]
     if best is None:
