@@ -28,6 +28,11 @@ import numpy as np
 import lcp
 from lcp.classical import pendulum
 
+# this script times the compiled loops: its short runs must not take the Python loop while a
+# kernel is not loaded yet (lcp.timestepping.first_compile)
+os.environ.setdefault("LCP_COMPILE", "always")
+
+
 
 def _crossings(t, x):
     i = np.flatnonzero((x[:-1] > 0) & (x[1:] <= 0))

@@ -38,6 +38,11 @@ from lcp.classical import pendulum, slider_crank
 from lcp.model.system import Contact, System
 from lcp.scenes.classical import PendulumExact
 
+# this script times the compiled loops: its short runs must not take the Python loop while a
+# kernel is not loaded yet (lcp.timestepping.first_compile)
+os.environ.setdefault("LCP_COMPILE", "always")
+
+
 SCHEMES = ("moreau-jean", "order2")
 
 

@@ -74,6 +74,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+# this script times the compiled loops: its short runs must not take the Python loop while a
+# kernel is not loaded yet (lcp.timestepping.first_compile)
+os.environ.setdefault("LCP_COMPILE", "always")
 
 import lcp  # noqa: E402
 from lcp import classical  # noqa: E402

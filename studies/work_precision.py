@@ -86,6 +86,11 @@ from studies._common import floored, legend, out_dir, parse_args, save, write_cs
 
 import matplotlib.pyplot as plt  # noqa: E402  (studies._common selects the Agg backend first)
 
+# this script times the compiled loops: its short runs must not take the Python loop while a
+# kernel is not loaded yet (lcp.timestepping.first_compile)
+os.environ.setdefault("LCP_COMPILE", "always")
+
+
 NAME = "work_precision"
 #: a method has stopped when |xd| <= V_STOP_REL |v0| (a regularized law never reaches 0 exactly)
 V_STOP_REL = 1e-9
