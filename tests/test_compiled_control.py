@@ -265,8 +265,8 @@ def test_python_loop_note_solver_and_spatial():
     sched = schedule("constant", C_ROWS)
     fast = lcp.simulate(system, 0.2, h=1e-3, q0=[0.0, 0.0], v0=[1.0, 0.0], control=sched, solver="lemke")
     slow = lcp.simulate(system, 0.2, h=1e-3, q0=[0.0, 0.0], v0=[1.0, 0.0], control=sched, solver="lemke", fast=False)
-    assert fast.message == slow.message + (" (Python loop: the compiled loop of a controlled constant system needs a "
-                                           "contact, the solver 'auto' or 'nsgs' without error_tol, and no projection)")
+    assert fast.message == slow.message + (" (Python loop: the compiled loop of a controlled constant system needs the "
+                                           "solver 'auto' or 'nsgs' without error_tol, and no projection)")
     assert np.array_equal(fast.q, slow.q)
     q, v, u = ca.SX.sym("q", 3), ca.SX.sym("v", 3), ca.SX.sym("u", 1)
     puck = System(q, v, ca.SX.eye(3), ca.vertcat(u[0], 0, -9.81), control=u, control_bounds=(-9, 9),

@@ -20,7 +20,8 @@ and exact branch refinement) and the compiled loop resumes after it. Every such 
 in ``stats.fallbacks`` and named in the message: no step is silently wrong.
 
 A control schedule on a constant drift with a constant B (``StepAssembly.control_matrix``: a
-pushed block, a controlled chain) runs here too, with one contact or more: the kernel adds S B int u
+pushed block, a controlled chain, a pushed body without contact) runs here too, with any number of
+contacts: the kernel adds S B int u
 over each step (the impulses computed before the run) to the drift's increment, both by NumPy's
 products of the assembly's dense matrices (:mod:`lcp.timestepping.control_kernels`), as the Python
 loop's ``StepAssembly.at``.
@@ -57,13 +58,14 @@ def applicable(asm, solver, options) -> bool:
     """Whether the compiled loop runs this simulation: numba installed; a constant planar system
     (affine time-independent forces, no control schedule) with at least two contacts, or a
     controlled constant one (a control schedule on a constant drift with a constant B:
-    ``asm.control_matrix``) with at least one; the solver ``"auto"`` or ``"nsgs"`` (as a name or as
+    ``asm.control_matrix``) with any number of contacts (none: the kernel's free steps alone, the
+    same arithmetic as the Python loop's); the solver ``"auto"`` or ``"nsgs"`` (as a name or as
     a plain instance) without an ``error_tol``."""
     from lcp.contact.solvers import AutoSolver, NsgsSolver
 
     sys_ = asm.sys
     controlled = getattr(asm, "control_matrix", None) is not None
-    if not (HAVE_NUMBA and sys_.n_contacts >= (1 if controlled else 2) and not sys_.is_spatial
+    if not (HAVE_NUMBA and sys_.n_contacts >= (0 if controlled else 2) and not sys_.is_spatial
             and asm.matrices_constant and (controlled or (sys_.is_constant and asm.schedule is None))):
         return False
     if type(solver) is AutoSolver:

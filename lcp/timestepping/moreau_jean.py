@@ -80,7 +80,7 @@ class MoreauJeanOptions:
         (:mod:`lcp.timestepping.general_loop`: CasADi's C code of the step, a numba loop) where no
         moving contact is projected and a C compiler is found, with or without a control schedule
         (B(t) or B(t, q)); a control schedule on a constant drift with a constant B runs the
-        constant compiled loop (:mod:`lcp.timestepping.compiled_loop`, one contact or more). Where a
+        constant compiled loop (:mod:`lcp.timestepping.compiled_loop`, with or without contacts). Where a
         control schedule keeps the Python loop, the message says why.
     projection : {"auto", True, False}
         Project the positions onto the constraints after each step (:mod:`lcp.timestepping.projection`).
@@ -219,7 +219,7 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
             return compiled_spatial.moreau_jean_spatial(asm, q0, v0, n_steps, every, solver, options.fallback)
     controlled = getattr(asm, "control_matrix", None) is not None  # a control on a constant drift, constant B
     if options.fast and proj is None and not spatial and (
-            (system.n_contacts >= 2 and system.is_constant) or (controlled and system.n_contacts >= 1)):
+            (system.n_contacts >= 2 and system.is_constant) or controlled):
         # imported here: numba loads only where the compiled loop may run
         from lcp.timestepping import compiled_loop
 
@@ -262,8 +262,8 @@ def _control_note(asm, spatial) -> str:
     elif spatial:
         why = "the compiled loops do not take a control schedule on spatial contacts"
     else:
-        why = ("the compiled loop of a controlled constant system needs a contact, the solver 'auto' or "
-               "'nsgs' without error_tol, and no projection")
+        why = ("the compiled loop of a controlled constant system needs the solver 'auto' or 'nsgs' without "
+               "error_tol, and no projection")
     return f" (Python loop: {why})"
 
 

@@ -1,0 +1,131 @@
+"""Routes of ``lcp.simulate`` (Moreau-Jean, ``fast``) that the compiled loops took over from the
+Python loop, against the Python loop (fast=False); the route asserted by the call of the compiled
+loop and the solver's name.
+
+- Controlled constant systems without a contact (a constant drift, a constant B): the constant
+  compiled loop's free steps with S B int u added (lcp.timestepping.control_kernels), the same
+  NumPy products as the Python loop's ``StepAssembly.at``: bit for bit. A pushed point, two masses
+  with springs and dampers (a dense mass matrix, a state-dependent drift), and a bilateral
+  constraint.
+"""
+import casadi as ca
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import lcp
+from lcp.model.control import ControlSchedule
+from lcp.model.schedule import AffineSchedule
+from lcp.model.system import System
+from lcp.numerics.jit import HAVE_NUMBA
+from lcp.timestepping import compiled_loop
+
+pytestmark = pytest.mark.skipif(not HAVE_NUMBA, reason="needs numba")
+
+TIMES = [0.0, 0.2, 0.45, 0.6]
+
+
+def pushed_point():
+    q, v, u = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1)
+    return System(q, v, ca.SX.eye(2), ca.vertcat(u[0], -9.81), control=u, control_bounds=(-50, 50))
+
+
+def springs():
+    """Two coupled masses (dense mass matrix) with springs and dampers, both pushed."""
+    q, v, u = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 2)
+    M = ca.SX(np.array([[2.0, -1.0], [-1.0, 2.0]]))
+    F = ca.vertcat(-30 * q[0] + 5 * q[1] - 0.3 * v[0] + u[0], 5 * q[0] - 20 * q[1] - 0.1 * v[1] - 9.81 + u[1])
+    return System(q, v, M, F, control=u, control_bounds=(-50, 50))
+
+
+def slide():
+    """Jean-Pratt's block and wedge with the slide as a bilateral constraint, no floor contact."""
+    q, v, u = ca.SX.sym("q", 3), ca.SX.sym("v", 3), ca.SX.sym("u", 2)
+    return System(q, v, ca.SX(np.eye(3)), ca.vertcat(-9.81 + u[0], -9.81 + u[1], -9.81),
+                  constraints=q[2] - q[1] + q[0], control=u, control_bounds=(-100, 100))
+
+
+NO_CONTACT = {"pushed_point": (pushed_point, [0.0, 0.0], [0.5, 1.0]),
+              "springs": (springs, [0.1, -0.2], [0.0, 1.0]),
+              "slide": (slide, [0.0, 0.0, 0.0], [1.0, 0.0, -1.0])}
+
+
+def schedule(hold, values, nu):
+    """A schedule on TIMES of the given hold from 6 nu numbers."""
+    values = np.asarray(values, dtype=float).reshape(3, 2, nu)
+    if hold == "constant":
+        return ControlSchedule(TIMES, values[:, 0])
+    if hold == "linear":
+        return ControlSchedule(TIMES, np.vstack([values[:, 0], values[-1:, 1]]), hold="linear")
+    return AffineSchedule(TIMES, values.reshape(-1, nu))
+
+
+def counting(monkeypatch, module, name):
+    calls = []
+    real = getattr(module, name)
+
+    def counted(*a, **k):
+        calls.append(1)
+        return real(*a, **k)
+
+    monkeypatch.setattr(module, name, counted)
+    return calls
+
+
+def same(a, b):
+    assert a.status == b.status and a.message == b.message
+    for name in ("t", "q", "v", "p_N", "p_T"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert x.shape == y.shape and np.array_equal(x, y), name
+    assert a.stats.steps == b.stats.steps and a.stats.free_steps == b.stats.free_steps == a.stats.steps
+
+
+@pytest.mark.parametrize("theta", [0.5, 1.0])
+@pytest.mark.parametrize("hold", ["constant", "linear", "affine"])
+@pytest.mark.parametrize("name", sorted(NO_CONTACT))
+def test_controlled_without_contact_bit_for_bit(name, hold, theta, monkeypatch):
+    build, q0, v0 = NO_CONTACT[name]
+    system = build()
+    nu = 1 if name == "pushed_point" else 2
+    sched = schedule(hold, np.linspace(-7.0, 11.0, 6 * nu) * (-1) ** np.arange(6 * nu), nu)
+    calls = counting(monkeypatch, compiled_loop, "moreau_jean_loop")
+    fast = lcp.simulate(system, 0.6, h=1e-3, q0=q0, v0=v0, control=sched, theta=theta)
+    slow = lcp.simulate(system, 0.6, h=1e-3, q0=q0, v0=v0, control=sched, theta=theta, fast=False)
+    assert len(calls) == 1 and fast.solver == "auto (compiled)" and slow.solver == "auto"
+    assert "Python loop" not in fast.message
+    same(fast, slow)
+
+
+@pytest.mark.parametrize("hold", ["constant", "linear", "affine"])
+def test_pushed_point_exact(hold):
+    """v(t_k) = v0 + (int_0^{t_k} u, -9.81 t_k): the impulse of every hold over each step, by the
+    compiled loop without contact."""
+    sched = schedule(hold, [3.0, -1.0, -8.0, 2.0, 5.0, 5.0], 1)
+    h = 0.6 / 700
+    res = lcp.simulate(pushed_point(), 0.6, h=h, q0=[0.0, 0.0], v0=[0.5, 0.0], control=sched)
+    assert res.solver == "auto (compiled)"
+    assert np.max(np.abs(res.v[:, 0] - (0.5 + sched.integral(res.t)[:, 0]))) < 1e-13
+    assert np.max(np.abs(res.v[:, 1] + 9.81 * res.t)) < 1e-12
+
+
+@settings(max_examples=8, deadline=None)
+@given(hold=st.sampled_from(["constant", "linear", "affine"]),
+       values=st.lists(st.floats(-40.0, 40.0, allow_nan=False, allow_infinity=False), min_size=12, max_size=12))
+def test_drawn_schedules_springs(hold, values):
+    sched = schedule(hold, values, 2)
+    fast = lcp.simulate(springs(), 0.6, h=2e-3, q0=[0.1, -0.2], v0=[0.0, 1.0], control=sched)
+    slow = lcp.simulate(springs(), 0.6, h=2e-3, q0=[0.1, -0.2], v0=[0.0, 1.0], control=sched, fast=False)
+    assert fast.solver == "auto (compiled)"
+    same(fast, slow)
+
+
+def test_lemke_keeps_the_python_loop_with_its_note():
+    """A solver the compiled loop does not run: the Python loop, the message says why (no longer
+    "needs a contact")."""
+    sched = schedule("constant", np.arange(6.0), 1)
+    fast = lcp.simulate(pushed_point(), 0.2, h=1e-3, q0=[0.0, 0.0], v0=[0.0, 0.0], control=sched, solver="lemke")
+    slow = lcp.simulate(pushed_point(), 0.2, h=1e-3, q0=[0.0, 0.0], v0=[0.0, 0.0], control=sched, solver="lemke",
+                        fast=False)
+    assert fast.message == slow.message + (" (Python loop: the compiled loop of a controlled constant system needs "
+                                           "the solver 'auto' or 'nsgs' without error_tol, and no projection)")
+    assert np.array_equal(fast.q, slow.q) and np.array_equal(fast.v, slow.v)
