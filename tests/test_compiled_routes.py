@@ -7,6 +7,13 @@ loop and the solver's name.
   NumPy products as the Python loop's ``StepAssembly.at``: bit for bit. A pushed point, two masses
   with springs and dampers (a dense mass matrix, a state-dependent drift), and a bilateral
   constraint.
+- The constant compiled loop's steps whose NSGS sweeps stop (the bead column: many frictionless
+  contacts closing at once): finished by the compiled NSGS-then-Newton of
+  lcp.timestepping.planar_multi_kernels (counted in ``stats.kernel_multi_steps``) instead of the
+  Python solver. It starts from zero where the Python solver warm-starts, so the two solves differ
+  within the solver's tolerance; the branch refinement (the Python loop's, on the same modes) then
+  makes both exact on the branch, and the runs agree to rounding (measured: 3.5e-16 of the largest
+  impulse). Modes differ only where an impulse is a rounding zero (1e-17).
 """
 import casadi as ca
 import numpy as np
@@ -18,7 +25,8 @@ from lcp.model.control import ControlSchedule
 from lcp.model.schedule import AffineSchedule
 from lcp.model.system import System
 from lcp.numerics.jit import HAVE_NUMBA
-from lcp.timestepping import compiled_loop
+from lcp.scenes.bead_column import bead_column
+from lcp.timestepping import compiled_loop, planar_multi_kernels
 
 pytestmark = pytest.mark.skipif(not HAVE_NUMBA, reason="needs numba")
 
@@ -129,3 +137,74 @@ def test_lemke_keeps_the_python_loop_with_its_note():
     assert fast.message == slow.message + (" (Python loop: the compiled loop of a controlled constant system needs "
                                            "the solver 'auto' or 'nsgs' without error_tol, and no projection)")
     assert np.array_equal(fast.q, slow.q) and np.array_equal(fast.v, slow.v)
+
+
+def python_finished(monkeypatch):
+    """The constant compiled loop as before the compiled Newton: the Python solver takes every step
+    whose sweeps stop."""
+    monkeypatch.setattr(compiled_loop, "newton_params", lambda solver: None)
+
+
+@pytest.mark.parametrize("K, e", [(10, 0.5), (10, 0.9), (15, 0.7)])
+def test_bead_column_stopped_sweeps_finished_compiled(K, e, monkeypatch):
+    sc = bead_column(K, e=e)
+    new = lcp.simulate(sc, 1.5, h=1e-3)
+    python_finished(monkeypatch)
+    old = lcp.simulate(sc, 1.5, h=1e-3)
+    assert new.success and old.success
+    assert old.stats.fallbacks > 0 and "solved by the Python solver 'auto'" in old.message
+    assert new.stats.kernel_multi_steps == old.stats.fallbacks and new.stats.fallbacks == 0
+    assert new.message == "The integration reached t_end."
+    for name in ("q", "v", "p_N"):
+        x, y = getattr(new, name), getattr(old, name)
+        assert np.max(np.abs(x - y)) <= 1e-14 * np.max(np.abs(y)), name
+    F, O = np.asarray(new.modes), np.asarray(old.modes)
+    assert np.all((F == O) | (np.maximum(new.p_N, old.p_N) < 1e-14 * np.max(old.p_N)))
+
+
+def test_bead_column_against_the_python_loop():
+    """The whole run against the Python loop (fast=False): the solver's tolerance (the compiled
+    loop's NSGS sums are not BLAS's, as before)."""
+    sc = bead_column(10, e=0.7)
+    fast = lcp.simulate(sc, 1.0, h=1e-3)
+    slow = lcp.simulate(sc, 1.0, h=1e-3, fast=False)
+    assert fast.stats.kernel_multi_steps > 0 and fast.stats.fallbacks == 0 and fast.solver == "auto (compiled)"
+    for name in ("q", "v", "p_N"):
+        x, y = getattr(fast, name), getattr(slow, name)
+        assert np.max(np.abs(x - y)) <= 1e-8 * np.max(np.abs(y)), name
+    assert np.array_equal(np.asarray(fast.modes)[:400], np.asarray(slow.modes)[:400])  # before the first stopped sweeps
+
+
+def test_failed_compiled_newton_goes_to_the_python_solver(monkeypatch):
+    """Where the compiled finish fails its test, the Python solver takes the step, counted in
+    stats.fallbacks and named in the message, as before."""
+    sc = bead_column(10, e=0.5)
+    monkeypatch.setattr(planar_multi_kernels, "solve_planar",
+                        lambda Wl, qa, mus, tol, pm: (False, np.zeros(qa.size), 0, np.nan))
+    res = lcp.simulate(sc, 1.0, h=1e-3)
+    python_finished(monkeypatch)
+    old = lcp.simulate(sc, 1.0, h=1e-3)
+    assert res.stats.kernel_multi_steps == 0 and res.stats.fallbacks == old.stats.fallbacks > 0
+    assert res.message == old.message and "compiled NSGS stopped after 500 sweeps" in res.message
+    assert np.array_equal(res.q, old.q) and np.array_equal(res.p_N, old.p_N)
+
+
+def test_sliding_stack_finished_by_compiled_newton(monkeypatch):
+    """Four stacked blocks with friction (each contact carries the blocks above it), sliding over
+    each other, the kernel's NSGS limited to one sweep: the steps it cannot finish (where the warm
+    start does not suffice) are finished by the compiled Newton, with stick and slip, and the run
+    is the Python loop's to 1e-11 (the solver's tolerance, as the Python-finished run)."""
+    from lcp.classical import stacked_blocks
+
+    sc = stacked_blocks(4)
+    v0 = np.zeros(8)
+    v0[0::2] = np.linspace(0.5, -0.5, 4)  # x0 .. x3
+    monkeypatch.setattr(compiled_loop, "AUTO_MAX_SWEEPS", 1)
+    fast = lcp.simulate(sc.system, 0.3, h=1e-3, q0=sc.q0, v0=v0)
+    slow = lcp.simulate(sc.system, 0.3, h=1e-3, q0=sc.q0, v0=v0, fast=False)
+    assert fast.success and fast.stats.fallbacks == 0 and fast.message == slow.message
+    assert fast.stats.kernel_multi_steps >= 3 and np.any(slow.p_T != 0)
+    assert np.array_equal(np.asarray(fast.modes), np.asarray(slow.modes))
+    for name in ("q", "v", "p_N", "p_T"):
+        x, y = getattr(fast, name), getattr(slow, name)
+        assert np.max(np.abs(x - y)) <= 1e-11 * max(1.0, np.max(np.abs(y))), name
