@@ -18,12 +18,13 @@ more active contacts), the step is first finished by the compiled NSGS-then-Newt
 :func:`lcp.timestepping.planar_multi_kernels.solve_planar` (AutoSolver's algorithm, from zero where
 the Python solver warm-starts: the two solves differ within the solver's tolerance, and the branch
 refinement below, the same as the Python step's, makes both exact on the branch, so the runs agree
-to rounding; counted in ``stats.kernel_multi_steps``, with no note: the bead column's 23 to 198
-such steps cost 2-5 ms each in Python). Where that fails its test, or the compiled step cannot
-finish otherwise (the closed form finds no admissible case, or the branch sweeps do not converge),
-that one step is handed to the Python solver (with the loop's fallbacks: the same one-step problem, solver object
-and exact branch refinement) and the compiled loop resumes after it. Every such step is counted
-in ``stats.fallbacks`` and named in the message: no step is silently wrong.
+to rounding; counted in ``stats.kernel_multi_steps``, with no note; the bead column's 23 to 198
+such steps now cost 0.3-0.4 ms less each, warm: benchmarks/compiled_routes.py). Where that fails
+its test, or the compiled step cannot finish otherwise (the closed form finds no admissible case,
+or the branch sweeps do not converge), that one step is handed to the Python solver (with the
+loop's fallbacks: the same one-step problem, solver object and exact branch refinement) and the
+compiled loop resumes after it. Every such step is counted in ``stats.fallbacks`` and named in the
+message: no step is silently wrong.
 
 A control schedule on a constant drift with a constant B (``StepAssembly.control_matrix``: a
 pushed block, a controlled chain, a pushed body without contact) runs here too, with any number of

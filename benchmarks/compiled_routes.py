@@ -1,0 +1,103 @@
+"""Per-step cost of the Moreau-Jean routes the constant compiled loop took over from Python.
+
+Run: ``python benchmarks/compiled_routes.py [--repeats N]``. Prints a table and writes
+``benchmarks/recorded/compiled_routes.csv``.
+
+Rows: controlled constant systems without a contact (a pushed point; two masses with springs and
+dampers, a dense mass matrix; h = 1e-4, 1 s, an affine schedule on three pieces), which ran in the
+Python loop with ``fast=True`` before; and the bead column (``lcp.scenes.bead_column``, 3 s,
+h = 1e-3), whose steps where the kernel's NSGS stops were handed to the Python solver and
+are now finished by the compiled Newton (``planar_multi_kernels.solve_planar``). For each: the
+Python loop (``fast=False``), the compiled loop as before (for the column: ``newton_params``
+returning None, every stopped step to the Python solver) and now, warm (kernels cached), the
+median of ``--repeats`` runs; the counts of steps handed to Python and finished by the compiled
+Newton; the largest difference of q from the Python loop's and from the run before, relative to
+max |q| (0: the same bits).
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+from pathlib import Path
+import statistics
+import sys
+import time
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def cases():
+    """name -> (run(fast) -> result, needs the Python finish switch)."""
+    import casadi as ca
+    import lcp
+    from lcp.model.schedule import AffineSchedule
+    from lcp.model.system import System
+    from lcp.scenes.bead_column import bead_column
+
+    out = {}
+    q, v, u = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 2)
+    point = System(q, v, ca.SX.eye(2), ca.vertcat(u[0], -9.81 + u[1]), control=u, control_bounds=(-50, 50))
+    M = ca.SX(np.array([[2.0, -1.0], [-1.0, 2.0]]))
+    F = ca.vertcat(-30 * q[0] + 5 * q[1] - 0.3 * v[0] + u[0], 5 * q[0] - 20 * q[1] - 0.1 * v[1] - 9.81 + u[1])
+    springs = System(q, v, M, F, control=u, control_bounds=(-50, 50))
+    sched = AffineSchedule([0.0, 0.3, 0.7, 1.0], np.linspace(-7.0, 11.0, 12).reshape(6, 2))
+    for name, s, q0 in (("pushed point, no contact", point, [0.0, 0.0]), ("springs, no contact", springs, [0.1, -0.2])):
+        out[name] = (lambda fast, s=s, q0=q0: lcp.simulate(s, 1.0, h=1e-4, q0=q0, v0=[0.0, 1.0], control=sched,
+                                                           fast=fast), False)
+    for K, e in ((10, 0.5), (10, 0.9), (20, 0.5), (20, 0.9)):
+        sc = bead_column(K, e=e)
+        out[f"bead column K={K} e={e}"] = (lambda fast, sc=sc: lcp.simulate(sc, sc.t_end, h=1e-3, fast=fast), True)
+    return out
+
+
+def timed(run, fast, repeats):
+    run(fast)  # warm: kernels compiled or loaded from numba's cache
+    times, res = [], None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        res = run(fast)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times) / res.stats.steps * 1e6, res
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=3)
+    args = ap.parse_args(argv)
+    from lcp.timestepping import compiled_loop
+
+    real = compiled_loop.newton_params
+    rows = []
+    for name, (run, column) in cases().items():
+        py_us, py = timed(run, False, args.repeats)
+        before_us, before = None, None
+        if column:
+            compiled_loop.newton_params = lambda solver: None
+            try:
+                before_us, before = timed(run, True, args.repeats)
+            finally:
+                compiled_loop.newton_params = real
+        now_us, now = timed(run, True, args.repeats)
+        sq = max(1.0, float(np.max(np.abs(py.q))))
+        row = {"case": name, "python_us": py_us, "before_us": before_us if column else py_us, "now_us": now_us,
+               "handed_before": before.stats.fallbacks if column else 0, "handed_now": now.stats.fallbacks,
+               "newton_now": now.stats.kernel_multi_steps,
+               "dq_python": float(np.max(np.abs(now.q - py.q))) / sq,
+               "dq_before": float(np.max(np.abs(now.q - before.q))) / sq if column else float("nan")}
+        rows.append(row)
+        print(f"{name:28s} python {py_us:8.1f}  before {row['before_us']:8.1f}  now {now_us:7.2f} us/step  "
+              f"handed {row['handed_before']}->{row['handed_now']}  newton {row['newton_now']}  "
+              f"dq(python) {row['dq_python']:.1e}  dq(before) {row['dq_before']:.1e}", flush=True)
+    out = ROOT / "benchmarks" / "recorded" / "compiled_routes.csv"
+    with open(out, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    print(f"written {out.relative_to(ROOT)}")
+
+
+if __name__ == "__main__":
+    main()
