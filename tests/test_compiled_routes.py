@@ -14,6 +14,11 @@ loop and the solver's name.
   within the solver's tolerance; the branch refinement (the Python loop's, on the same modes) then
   makes both exact on the branch, and the runs agree to rounding (measured: 3.5e-16 of the largest
   impulse). Modes differ only where an impulse is a rounding zero (1e-17).
+- Control schedules on constant matrices that are not a constant planar drift with a constant B (a
+  drift F(t), a B(t), a spatial contact): the compiled general loop. The Python loop computes those
+  steps by the assembly's S products, the general loop by the step Function's generated C code
+  plus S c_k: the same equations, another rounding (as for an uncontrolled F(t) on constant
+  matrices); equal to 1e-12 of each array's largest entry, the same modes and message.
 """
 import casadi as ca
 import numpy as np
@@ -23,10 +28,11 @@ from hypothesis import given, settings, strategies as st
 import lcp
 from lcp.model.control import ControlSchedule
 from lcp.model.schedule import AffineSchedule
-from lcp.model.system import System
+from lcp.model.system import Contact, System
 from lcp.numerics.jit import HAVE_NUMBA
 from lcp.scenes.bead_column import bead_column
-from lcp.timestepping import compiled_loop, planar_multi_kernels
+from lcp.timestepping import codegen, compiled_loop, general_loop, planar_multi_kernels
+from lcp.timestepping.assembly import StepAssembly
 
 pytestmark = pytest.mark.skipif(not HAVE_NUMBA, reason="needs numba")
 
@@ -208,3 +214,61 @@ def test_sliding_stack_finished_by_compiled_newton(monkeypatch):
     for name in ("q", "v", "p_N", "p_T"):
         x, y = getattr(fast, name), getattr(slow, name)
         assert np.max(np.abs(x - y)) <= 1e-11 * max(1.0, np.max(np.abs(y))), name
+
+
+def t_drift():
+    """Jean-Pratt's dense mass matrix, a block pushed by u on a floor with a drift of t."""
+    q, v, u, t = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1), ca.SX.sym("t")
+    M = ca.SX(np.array([[2.0, -1.0], [-1.0, 2.0]]))
+    return System(q, v, M, ca.vertcat(u[0] + ca.sin(5 * t), -9.81 + 2 * ca.cos(3 * t)), t=t, control=u,
+                  control_bounds=(-50, 50), contacts=[Contact(gap=q[1], tangent=q[0], mu=0.3, name="floor")])
+
+
+def t_matrix():
+    """The same block pushed along a direction turning with t: B(t) = (cos 2t, sin 2t)."""
+    q, v, u, t = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1), ca.SX.sym("t")
+    M = ca.SX(np.array([[2.0, -1.0], [-1.0, 2.0]]))
+    return System(q, v, M, ca.vertcat(u[0] * ca.cos(2 * t), -9.81 + u[0] * ca.sin(2 * t)), t=t, control=u,
+                  control_bounds=(-50, 50), contacts=[Contact(gap=q[1], tangent=q[0], mu=0.3, name="floor")])
+
+
+def puck():
+    """A puck on a spatial floor pushed along x (constant drift and B, a spatial contact)."""
+    q, v, u = ca.SX.sym("q", 3), ca.SX.sym("v", 3), ca.SX.sym("u", 1)
+    return System(q, v, ca.SX.eye(3), ca.vertcat(u[0], 0, -9.81), control=u, control_bounds=(-50, 50),
+                  contacts=[Contact(gap=q[2], tangent=ca.vertcat(q[0], q[1]), mu=0.3, name="floor")])
+
+
+CONSTANT_MATRICES = {"t_drift": (t_drift, [0.0, 0.0], [0.5, 0.0]), "t_matrix": (t_matrix, [0.0, 0.0], [0.5, 0.0]),
+                     "puck": (puck, [0.0, 0.0, 0.0], [1.0, 0.0, 0.0])}
+
+
+def close(a, b, rtol=1e-12):
+    assert a.status == b.status and a.message == b.message
+    assert np.array_equal(np.asarray(a.modes), np.asarray(b.modes))
+    for name in ("t", "q", "v", "p_N", "p_T"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert x.shape == y.shape and np.max(np.abs(x - y), initial=0.0) <= rtol * np.max(np.abs(y), initial=0.0), name
+    assert [(i.contact, i.t) for i in a.impacts] == [(i.contact, i.t) for i in b.impacts]
+
+
+@pytest.mark.skipif(codegen.c_compiler() is None, reason="needs a C compiler")
+@pytest.mark.parametrize("hold", ["constant", "linear", "affine"])
+@pytest.mark.parametrize("name", sorted(CONSTANT_MATRICES))
+def test_schedule_on_constant_matrices_general_loop(name, hold, monkeypatch):
+    build, q0, v0 = CONSTANT_MATRICES[name]
+    system = build()
+    # the last piece lifts the block (or presses the puck) by more than its weight
+    sched = schedule(hold, [3.0, -2.0, -8.0, 5.0, 30.0, 0.0], 1)
+    scheduled = system.with_control(sched)
+    asm = StepAssembly(scheduled, 1e-3, 0.5)
+    assert asm.matrices_constant and general_loop.applicable(scheduled, asm, None) is None
+    calls = counting(monkeypatch, general_loop, "run_general_loop")
+    fast = lcp.simulate(system, 0.6, h=1e-3, q0=q0, v0=v0, control=sched)
+    slow = lcp.simulate(system, 0.6, h=1e-3, q0=q0, v0=v0, control=sched, fast=False)
+    assert len(calls) == 1 and fast.success and "Python loop" not in fast.message
+    assert fast.stats.python_steps == 0
+    close(fast, slow)
+    assert np.any(slow.p_N > 0) and np.any(slow.p_T != 0)
+    if name != "puck":
+        assert slow.stats.free_steps > 0  # lifted off by the last piece

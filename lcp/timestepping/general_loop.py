@@ -66,15 +66,22 @@ _IMPACT_BUFFER = 4096
 
 def applicable(system, asm, proj) -> str | None:
     """None where the compiled general loop runs this simulation, else the reason it does not:
-    a constant system (the constant paths serve it), numba missing, a control schedule on constant
-    matrices (the Python loop's increment is then not the step Function's), a position
-    projection on moving contacts (``"projection"``: its opening test needs the contacts' rates at
-    the projected state)."""
+    a constant system (the constant paths serve it), numba missing, a control schedule on a
+    constant planar drift with a constant B (``"control"``: the constant compiled loop's, or the
+    Python loop's with a note), a position projection on moving contacts (``"projection"``: its
+    opening test needs the contacts' rates at the projected state).
+
+    A control schedule on constant matrices otherwise (a drift F(t), a B(t), spatial contacts) runs
+    here: the Python loop computes those steps by the assembly's S products (``StepAssembly.at``),
+    this loop by the step Function's generated C code plus S c_k, the same equations in another
+    rounding (measured: 4e-16 of max |q| and |v|, 7e-14 of the largest tangential impulse; as an
+    uncontrolled F(t) on constant matrices)."""
     if system.is_constant:
         return "constant"
     if not HAVE_NUMBA:
         return "numba"
-    if getattr(system, "is_controlled", False) or (asm.schedule is not None and asm.matrices_constant):
+    if getattr(system, "is_controlled", False) or (asm.schedule is not None and asm.matrices_constant
+                                                   and asm.control_matrix is not None and not system.is_spatial):
         return "control"
     if proj is not None and system.contacts_depend_on_t:
         return "projection"

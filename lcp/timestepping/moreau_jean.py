@@ -80,7 +80,9 @@ class MoreauJeanOptions:
         (:mod:`lcp.timestepping.general_loop`: CasADi's C code of the step, a numba loop) where no
         moving contact is projected and a C compiler is found, with or without a control schedule
         (B(t) or B(t, q)); a control schedule on a constant drift with a constant B runs the
-        constant compiled loop (:mod:`lcp.timestepping.compiled_loop`, with or without contacts). Where a
+        constant compiled loop (:mod:`lcp.timestepping.compiled_loop`, with or without contacts), any
+        other schedule on constant matrices (a drift F(t), a B(t), spatial contacts) the compiled
+        general loop, to rounding. Where a
         control schedule keeps the Python loop, the message says why.
     projection : {"auto", True, False}
         Project the positions onto the constraints after each step (:mod:`lcp.timestepping.projection`).
@@ -260,7 +262,7 @@ def _control_note(asm, spatial) -> str:
         why = ("a control schedule on constant matrices runs compiled only where the drift F0 is constant "
                "and B does not depend on t or q")
     elif spatial:
-        why = "the compiled loops do not take a control schedule on spatial contacts"
+        why = "the compiled loops do not take a control schedule constant in time on spatial contacts"
     else:
         why = ("the compiled loop of a controlled constant system needs the solver 'auto' or 'nsgs' without "
                "error_tol, and no projection")
