@@ -4,8 +4,9 @@ Run: ``python benchmarks/compiled_routes.py [--repeats N]``. Prints a table and 
 ``benchmarks/recorded/compiled_routes.csv``.
 
 Rows: controlled constant systems without a contact (a pushed point; two masses with springs and
-dampers, a dense mass matrix; h = 1e-4, 1 s, an affine schedule on three pieces), which ran in the
-Python loop with ``fast=True`` before; and the bead column (``lcp.scenes.bead_column``, 3 s,
+dampers, a dense mass matrix; h = 1e-4, 1 s, an affine schedule on three pieces), and schedules on
+constant matrices with a drift F(t), a B(t) or a spatial contact (0.6 s, h = 1e-3: now the compiled
+general loop), which ran in the Python loop with ``fast=True`` before; and the bead column (``lcp.scenes.bead_column``, 3 s,
 h = 1e-3), whose steps where the kernel's NSGS stops were handed to the Python solver and
 are now finished by the compiled Newton (``planar_multi_kernels.solve_planar``). For each: the
 Python loop (``fast=False``), the compiled loop as before (for the column: ``newton_params``
@@ -34,7 +35,7 @@ def cases():
     import casadi as ca
     import lcp
     from lcp.model.schedule import AffineSchedule
-    from lcp.model.system import System
+    from lcp.model.system import Contact, System
     from lcp.scenes.bead_column import bead_column
 
     out = {}
@@ -47,6 +48,24 @@ def cases():
     for name, s, q0 in (("pushed point, no contact", point, [0.0, 0.0]), ("springs, no contact", springs, [0.1, -0.2])):
         out[name] = (lambda fast, s=s, q0=q0: lcp.simulate(s, 1.0, h=1e-4, q0=q0, v0=[0.0, 1.0], control=sched,
                                                            fast=fast), False)
+    # control schedules on constant matrices that are not a constant planar drift with a constant B:
+    # the Python loop before, the compiled general loop now (0.6 s, h = 1e-3, one contact)
+    t = ca.SX.sym("t")
+    w = ca.SX.sym("u", 1)
+    floor = [Contact(gap=q[1], tangent=q[0], mu=0.3)]
+    t_drift = System(q, v, M, ca.vertcat(w[0] + ca.sin(5 * t), -9.81 + 2 * ca.cos(3 * t)), t=t, control=w,
+                     control_bounds=(-50, 50), contacts=floor)
+    t_matrix = System(q, v, M, ca.vertcat(w[0] * ca.cos(2 * t), -9.81 + w[0] * ca.sin(2 * t)), t=t, control=w,
+                      control_bounds=(-50, 50), contacts=floor)
+    q3, v3 = ca.SX.sym("q", 3), ca.SX.sym("v", 3)
+    puck = System(q3, v3, ca.SX.eye(3), ca.vertcat(w[0], 0, -9.81), control=w, control_bounds=(-50, 50),
+                  contacts=[Contact(gap=q3[2], tangent=ca.vertcat(q3[0], q3[1]), mu=0.3)])
+    one = AffineSchedule([0.0, 0.2, 0.45, 0.6], np.array([[3.0], [-2.0], [-8.0], [5.0], [30.0], [0.0]]))
+    for name, s, q0, v0 in (("drift F(t), constant M", t_drift, [0.0, 0.0], [0.5, 0.0]),
+                            ("B(t), constant M", t_matrix, [0.0, 0.0], [0.5, 0.0]),
+                            ("spatial puck, pushed", puck, [0.0, 0.0, 0.0], [1.0, 0.0, 0.0])):
+        out[name] = (lambda fast, s=s, q0=q0, v0=v0: lcp.simulate(s, 0.6, h=1e-3, q0=q0, v0=v0, control=one,
+                                                                  fast=fast), False)
     for K, e in ((10, 0.5), (10, 0.9), (20, 0.5), (20, 0.9)):
         sc = bead_column(K, e=e)
         out[f"bead column K={K} e={e}"] = (lambda fast, sc=sc: lcp.simulate(sc, sc.t_end, h=1e-3, fast=fast), True)
@@ -88,7 +107,7 @@ def main(argv=None):
                "dq_python": float(np.max(np.abs(now.q - py.q))) / sq,
                "dq_before": float(np.max(np.abs(now.q - before.q))) / sq if column else float("nan")}
         rows.append(row)
-        print(f"{name:28s} python {py_us:8.1f}  before {row['before_us']:8.1f}  now {now_us:7.2f} us/step  "
+        print(f"{name:30s} python {py_us:8.1f}  before {row['before_us']:8.1f}  now {now_us:7.2f} us/step  "
               f"handed {row['handed_before']}->{row['handed_now']}  newton {row['newton_now']}  "
               f"dq(python) {row['dq_python']:.1e}  dq(before) {row['dq_before']:.1e}", flush=True)
     out = ROOT / "benchmarks" / "recorded" / "compiled_routes.csv"
