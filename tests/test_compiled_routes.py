@@ -272,3 +272,54 @@ def test_schedule_on_constant_matrices_general_loop(name, hold, monkeypatch):
     assert np.any(slow.p_N > 0) and np.any(slow.p_T != 0)
     if name != "puck":
         assert slow.stats.free_steps > 0  # lifted off by the last piece
+
+
+def tipping_rod(e=0.2):
+    """A planar rod (x, y, theta) of length 1 with its lower tip on the floor (curved gap)."""
+    q, v = ca.SX.sym("q", 3), ca.SX.sym("v", 3)
+    tip = Contact(gap=q[1] - 0.5 * ca.sin(q[2]), tangent=q[0] - 0.5 * ca.cos(q[2]), mu=0.4, e=e, name="tip")
+    return System(q, v, ca.diag(ca.SX([1.0, 1.0, 1.0 / 12])), ca.vertcat(0, -9.81, 0), contacts=[tip])
+
+
+def walled_pendulum(e=0.3):
+    """A point on a circle of radius 1 (a bilateral constraint) striking a wall at x = 0.3."""
+    q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
+    return System(q, v, ca.SX.eye(2), ca.vertcat(0, -9.81), constraints=q[0] ** 2 + q[1] ** 2 - 1.0,
+                  contacts=[Contact(gap=0.3 - q[0], tangent=q[1], mu=0.2, e=e, name="wall")])
+
+
+ONE_CONTACT = {"rod": (tipping_rod, [0.0, 0.5 * np.sin(0.5) + 0.2, 0.5], [0.5, 0.0, 0.0]),
+               "pendulum": (walled_pendulum, [0.0, -1.0], [2.0, 0.0])}
+
+
+@pytest.mark.skipif(codegen.c_compiler() is None, reason="needs a C compiler")
+@pytest.mark.parametrize("e", [0.0, 0.5])
+@pytest.mark.parametrize("name", sorted(ONE_CONTACT))
+def test_one_contact_nsgs_by_name_in_the_kernel(name, e, monkeypatch):
+    """One active planar contact under the solver "nsgs" by name (no closed form: the Python loop
+    runs its NSGS): the general loop's kernel solves it as it solves several
+    (planar_multi_kernels.planar_multi_step: the same sweeps, tests, modes and branch refinement),
+    where every such step went to the Python contact step before; bit for bit. Not with a bilateral
+    constraint (the pendulum)."""
+    build, q0, v0 = ONE_CONTACT[name]
+    system = build(e)
+    calls = counting(monkeypatch, general_loop, "run_general_loop")
+    fast = lcp.simulate(system, 1.0, h=1e-3, q0=q0, v0=v0, solver="nsgs")
+    slow = lcp.simulate(system, 1.0, h=1e-3, q0=q0, v0=v0, solver="nsgs", fast=False)
+    assert len(calls) == 1 and fast.success
+    contact_steps = fast.stats.steps - fast.stats.free_steps
+    if name == "pendulum":
+        # a bilateral constraint: the one-contact problem may be redundant (the point sticking on
+        # the wall: three constraints on two velocities), its impulses' split the solver's; these
+        # steps stay with the Python contact step, counted
+        assert fast.stats.kernel_multi_steps == 0 and fast.stats.python_steps == contact_steps > 0
+    else:
+        assert fast.stats.python_steps == 0 and fast.stats.kernel_multi_steps == contact_steps > 0
+    assert fast.message == slow.message and fast.status == slow.status
+    for a in ("t", "q", "v", "p_N", "p_T"):
+        assert np.array_equal(getattr(fast, a), getattr(slow, a)), a
+    assert np.array_equal(np.asarray(fast.modes), np.asarray(slow.modes))
+    assert [(i.t, i.contact, i.p_N) for i in fast.impacts] == [(i.t, i.contact, i.p_N) for i in slow.impacts]
+    assert fast.stats.mode_counts == slow.stats.mode_counts
+    if e:
+        assert len(slow.impacts) >= 1

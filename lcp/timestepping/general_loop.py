@@ -17,7 +17,8 @@ contact under the disk law's ``"auto"``/``"local"`` (local solve, branch refinem
 correction), two to 40 active disk-law contacts under ``"auto"`` (NSGS, branch refinement, the
 solver's acceptance test, the all-stick correction: :mod:`lcp.timestepping.multi_kernels`; the Python
 loop's results to the solver's tolerance, counted in ``stats.kernel_multi_steps``), two to 40 active
-planar contacts under ``"auto"`` or ``"nsgs"`` (the Python solver's NSGS rounds and Newton, its tests,
+planar contacts under ``"auto"`` or ``"nsgs"`` (and one under ``"nsgs"`` by name on a system without
+bilateral constraints) (the Python solver's NSGS rounds and Newton, its tests,
 modes and branch refinement: :mod:`lcp.timestepping.planar_multi_kernels`; the Python loop's bits where no
 Newton iteration was needed, else to rounding; also counted in ``stats.kernel_multi_steps``; steps
 handed back to Python are counted in ``stats.python_steps``), impacts, Kahan
@@ -30,10 +31,11 @@ solver objects, fallbacks and notes). The kernel's products are those NumPy comp
 results are the Python loop's (bit for bit on the tested scenes, to rounding at worst). Control
 schedules run here: with B(t) each step's correction of the control's impulse is computed before
 the run, with B(t, q) depending on q the kernel computes it each step from the control's compiled
-C function (:mod:`lcp.timestepping.compiled_control`); either is added as S c_k. Not run here (the
+C function (:mod:`lcp.timestepping.compiled_control`); either is added as S c_k (on constant
+matrices, a drift F(t), a B(t) or spatial contacts: to rounding, :func:`applicable`). Not run here (the
 Python loop then runs): a projection of moving contacts (the message says so), control schedules
-on systems with constant matrices (the constant compiled loop runs those with a constant drift and
-a constant B; else the message says why), ``scheme="order2"``, systems without numba or without a
+with a constant planar drift and a constant B (the constant compiled loop runs those; where it
+does not, the message says why), ``scheme="order2"``, systems without numba or without a
 C compiler (a :class:`RuntimeWarning` names the compiler).
 """
 from __future__ import annotations

@@ -400,8 +400,9 @@ def solve_planar(Wl, qa, mus, res_tol, pm):
 @njit(cache=True)
 def planar_multi_step(act, na, m, n, r, o_W, o_H, o_SHt, o_b1, moving, v, vfree, dvf, uNm, mu, e, res_tol, pm,
                       istate, fstate, dv, P, MDo):
-    """The contact solve of a step whose active contacts ``act[:na]`` (two or more) are planar,
-    under ``"auto"`` (module docstring); ``pm`` = (largest count, NSGS sweeps, Newton iterations,
+    """The contact solve of a step whose active contacts ``act[:na]`` (two or more; or one under
+    ``"nsgs"``, whose Python solver runs the same sweeps) are planar, under ``"auto"`` (module
+    docstring); ``pm`` = (largest count, NSGS sweeps, Newton iterations,
     rounds) of the solver (no Newton iterations and one round of its ``max_sweeps``: ``"nsgs"``).
     Fills dv (the step's velocity increment), P (the impulses, normals then tangents) and MDo (the
     modes); False where the Python side must solve the step."""
