@@ -6,7 +6,10 @@ Run: ``python benchmarks/compiled_routes.py [--repeats N]``. Prints a table and 
 Rows: controlled constant systems without a contact (a pushed point; two masses with springs and
 dampers, a dense mass matrix; h = 1e-4, 1 s, an affine schedule on three pieces), and schedules on
 constant matrices with a drift F(t), a B(t) or a spatial contact (0.6 s, h = 1e-3: now the compiled
-general loop), which ran in the Python loop with ``fast=True`` before; and the bead column (``lcp.scenes.bead_column``, 3 s,
+general loop), which ran in the Python loop with ``fast=True`` before; the rocking block and a
+tipping rod under the solver ``"nsgs"`` by name (one active contact: the Python contact step
+before, the general loop's kernel now; their "before" column is the Python loop's, see
+benchmarks/README.md for the compiled run before); and the bead column (``lcp.scenes.bead_column``, 3 s,
 h = 1e-3), whose steps where the kernel's NSGS stops were handed to the Python solver and
 are now finished by the compiled Newton (``planar_multi_kernels.solve_planar``). For each: the
 Python loop (``fast=False``), the compiled loop as before (for the column: ``newton_params``
@@ -66,6 +69,15 @@ def cases():
                             ("spatial puck, pushed", puck, [0.0, 0.0, 0.0], [1.0, 0.0, 0.0])):
         out[name] = (lambda fast, s=s, q0=q0, v0=v0: lcp.simulate(s, 0.6, h=1e-3, q0=q0, v0=v0, control=one,
                                                                   fast=fast), False)
+    # one active planar contact under "nsgs" by name in the general loop (before: the Python contact step)
+    from lcp.scenes.classical import rocking_block
+
+    tip = Contact(gap=q3[1] - 0.5 * ca.sin(q3[2]), tangent=q3[0] - 0.5 * ca.cos(q3[2]), mu=0.4, e=0.2)
+    rod = System(q3, v3, ca.diag(ca.SX([1.0, 1.0, 1.0 / 12])), ca.vertcat(0, -9.81, 0), contacts=[tip])
+    out["rocking block, nsgs, 3.2 s"] = (lambda fast: lcp.simulate(rocking_block(), 3.2, h=1e-3, solver="nsgs",
+                                                                    fast=fast), False)
+    out["tipping rod, nsgs, 1 s"] = (lambda fast: lcp.simulate(rod, 1.0, h=1e-3, q0=[0.0, 0.5 * np.sin(0.5) + 0.2, 0.5],
+                                                               v0=[0.5, 0.0, 0.0], solver="nsgs", fast=fast), False)
     for K, e in ((10, 0.5), (10, 0.9), (20, 0.5), (20, 0.9)):
         sc = bead_column(K, e=e)
         out[f"bead column K={K} e={e}"] = (lambda fast, sc=sc: lcp.simulate(sc, sc.t_end, h=1e-3, fast=fast), True)
@@ -102,7 +114,7 @@ def main(argv=None):
         now_us, now = timed(run, True, args.repeats)
         sq = max(1.0, float(np.max(np.abs(py.q))))
         row = {"case": name, "python_us": py_us, "before_us": before_us if column else py_us, "now_us": now_us,
-               "handed_before": before.stats.fallbacks if column else 0, "handed_now": now.stats.fallbacks,
+               "handed_before": before.stats.fallbacks if column else 0, "handed_now": now.stats.fallbacks + now.stats.python_steps,
                "newton_now": now.stats.kernel_multi_steps,
                "dq_python": float(np.max(np.abs(now.q - py.q))) / sq,
                "dq_before": float(np.max(np.abs(now.q - before.q))) / sq if column else float("nan")}
