@@ -22,10 +22,10 @@ from __future__ import annotations
 
 import argparse
 import csv
-from pathlib import Path
 import statistics
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -36,6 +36,7 @@ sys.path.insert(0, str(ROOT))
 def cases():
     """name -> (run(fast) -> result, needs the Python finish switch)."""
     import casadi as ca
+
     import lcp
     from lcp.model.schedule import AffineSchedule
     from lcp.model.system import Contact, System

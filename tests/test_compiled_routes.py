@@ -7,6 +7,8 @@ loop and the solver's name.
   NumPy products as the Python loop's ``StepAssembly.at``: bit for bit. A pushed point, two masses
   with springs and dampers (a dense mass matrix, a state-dependent drift), and a bilateral
   constraint.
+- Constant systems without contact or control: the constant compiled loop, its free velocity by
+  the same dense products (no control column): bit for bit.
 - The constant compiled loop's steps whose NSGS sweeps stop (the bead column: many frictionless
   contacts closing at once): finished by the compiled NSGS-then-Newton of
   lcp.timestepping.planar_multi_kernels (counted in ``stats.kernel_multi_steps``) instead of the
@@ -19,11 +21,14 @@ loop and the solver's name.
   steps by the assembly's S products, the general loop by the step Function's generated C code
   plus S c_k: the same equations, another rounding (as for an uncontrolled F(t) on constant
   matrices); equal to 1e-12 of each array's largest entry, the same modes and message.
+- One active planar contact under the solver "nsgs" by name: the general loop's kernel
+  (planar_multi_step), bit for bit; with a bilateral constraint still the Python contact step.
 """
 import casadi as ca
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import lcp
 from lcp.model.control import ControlSchedule
@@ -323,3 +328,42 @@ def test_one_contact_nsgs_by_name_in_the_kernel(name, e, monkeypatch):
     assert fast.stats.mode_counts == slow.stats.mode_counts
     if e:
         assert len(slow.impacts) >= 1
+
+
+def free_systems():
+    """Constant systems without contact or control: a falling point (a constant increment), two
+    masses with springs and dampers (a dense mass matrix, a state-dependent force), Jean-Pratt's
+    slide as a bilateral constraint."""
+    q, v = ca.SX.sym("q", 2), ca.SX.sym("v", 2)
+    M = ca.SX(np.array([[2.0, -1.0], [-1.0, 2.0]]))
+    fall = System(q, v, ca.SX.eye(2), ca.vertcat(0.0, -9.81))
+    spr = System(q, v, M, ca.vertcat(-30 * q[0] + 5 * q[1] - 0.3 * v[0], 5 * q[0] - 20 * q[1] - 0.1 * v[1] - 9.81))
+    q3, v3 = ca.SX.sym("q", 3), ca.SX.sym("v", 3)
+    slide = System(q3, v3, ca.SX(np.eye(3)), ca.vertcat(-9.81, -9.81, -9.81), constraints=q3[2] - q3[1] + q3[0])
+    return {"fall": (fall, [0.1, -0.2], [0.0, 1.0]), "springs": (spr, [0.1, -0.2], [0.0, 1.0]),
+            "slide": (slide, [0.0, 0.0, 0.0], [1.0, 0.0, -1.0])}
+
+
+@pytest.mark.parametrize("theta", [0.5, 0.75, 1.0])
+@pytest.mark.parametrize("name", ["fall", "springs", "slide"])
+def test_constant_system_without_contact_bit_for_bit(name, theta, monkeypatch):
+    """A constant system without contact: the constant compiled loop (the Python loop before), its
+    free velocity by the Python loop's dense products (control_kernels.constant_control_dv with
+    no control column): bit for bit."""
+    system, q0, v0 = free_systems()[name]
+    calls = counting(monkeypatch, compiled_loop, "moreau_jean_loop")
+    fast = lcp.simulate(system, 0.6, h=1e-3, q0=q0, v0=v0, theta=theta)
+    slow = lcp.simulate(system, 0.6, h=1e-3, q0=q0, v0=v0, theta=theta, fast=False)
+    assert len(calls) == 1 and fast.solver == "auto (compiled)" and slow.solver == "auto"
+    same(fast, slow)
+
+
+def test_free_fall_exact():
+    """The falling point by the compiled loop: v(t_k) = v0 - g t_k and y(t_k) = y0 + v0 t - g t^2 / 2
+    (theta = 1/2 is exact on a constant force)."""
+    system, q0, v0 = free_systems()["fall"]
+    res = lcp.simulate(system, 0.6, h=1e-3, q0=q0, v0=v0)
+    assert res.solver == "auto (compiled)"
+    t = res.t
+    assert np.max(np.abs(res.v[:, 1] - (1.0 - 9.81 * t))) < 1e-12
+    assert np.max(np.abs(res.q[:, 1] - (-0.2 + t - 4.905 * t * t))) < 1e-12

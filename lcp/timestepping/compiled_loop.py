@@ -1,4 +1,4 @@
-"""Moreau-Jean for constant planar systems with several contacts: all steps in one compiled call.
+"""Moreau-Jean for constant planar systems with several contacts (or none): all steps in one compiled call.
 
 The Python loop (:mod:`lcp.timestepping.python_loop`) pays 10-30 microseconds of interpreter work
 per step (NumPy calls on small arrays, the solver's bookkeeping), which dominates the cost of a
@@ -70,15 +70,18 @@ def applicable(asm, solver, options) -> bool:
     (affine time-independent forces, no control schedule) with at least two contacts, or a
     controlled constant one (a control schedule on a constant drift with a constant B:
     ``asm.control_matrix``) with any number of contacts (none: the kernel's free steps alone, the
-    same arithmetic as the Python loop's); the solver ``"auto"`` or ``"nsgs"`` (as a name or as
+    same arithmetic as the Python loop's), or a constant one without contact (a dense S or a
+    constant increment: the Python loop's products, :func:`control_arrays`); the solver ``"auto"`` or ``"nsgs"`` (as a name or as
     a plain instance) without an ``error_tol``."""
     from lcp.contact.solvers import AutoSolver, NsgsSolver
 
     sys_ = asm.sys
     controlled = getattr(asm, "control_matrix", None) is not None
-    if not (HAVE_NUMBA and sys_.n_contacts >= (0 if controlled else 2) and not sys_.is_spatial
+    if not (HAVE_NUMBA and (controlled or sys_.n_contacts != 1) and not sys_.is_spatial
             and asm.matrices_constant and (controlled or (sys_.is_constant and asm.schedule is None))):
         return False
+    if sys_.n_contacts == 0 and not controlled and not (asm.dv_const is not None or isinstance(asm.S, np.ndarray)):
+        return False  # no contact, a sparse S: the CSR sums would not be the Python loop's bits
     if type(solver) is AutoSolver:
         return solver.iterative.error_tol is None
     if type(solver) is NsgsSolver:
@@ -282,12 +285,17 @@ def control_arrays(asm, n_steps):
     impulses are ``StepAssembly.control_increment``'s, elementwise on all steps at once (the same
     bits)."""
     B = getattr(asm, "control_matrix", None)
-    if B is None:
-        return None, None
     h, th = float(asm.h), float(asm.theta)
-    t = np.arange(n_steps) * h
-    sch = asm.schedule
-    imp = np.ascontiguousarray(sch.integral(t + h) - sch.integral(t), dtype=float)
+    if B is None:
+        if not (asm.m == 0 and asm.dv_const is None and isinstance(asm.S, np.ndarray)):
+            return None, None
+        # a constant system without contact or control: the same dense products with no control
+        # column, so that its steps are the Python loop's bits (the CSR sums are not BLAS's)
+        B, imp = np.zeros((asm.n, 0)), np.zeros((n_steps, 0))
+    else:
+        t = np.arange(n_steps) * h
+        sch = asm.schedule
+        imp = np.ascontiguousarray(sch.integral(t + h) - sch.integral(t), dtype=float)
     e2, e1 = np.zeros((0, 0)), np.zeros(0)
 
     def dense(X):
