@@ -77,7 +77,9 @@ def applicable(system, asm, proj) -> str | None:
     here: the Python loop computes those steps by the assembly's S products (``StepAssembly.at``),
     this loop by the step Function's generated C code plus S c_k, the same equations in another
     rounding (measured: 4e-16 of max |q| and |v|, 7e-14 of the largest tangential impulse; as an
-    uncontrolled F(t) on constant matrices)."""
+    uncontrolled F(t) on constant matrices). Where contacts are redundant (two pucks joined by a
+    bar, both sticking along it) only the sum of their tangential impulses is determined: it
+    agrees to rounding, their split is the solver's in both loops (tests/test_compiled_routes.py)."""
     if system.is_constant:
         return "constant"
     if not HAVE_NUMBA:
