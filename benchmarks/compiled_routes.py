@@ -4,7 +4,8 @@ Run: ``python benchmarks/compiled_routes.py [--repeats N]``. Prints a table and 
 ``benchmarks/recorded/compiled_routes.csv``.
 
 Rows: controlled constant systems without a contact (a pushed point; two masses with springs and
-dampers, a dense mass matrix; h = 1e-4, 1 s, an affine schedule on three pieces), and schedules on
+dampers, a dense mass matrix; h = 1e-4, 1 s, an affine schedule on three pieces), the springs
+without control, and schedules on
 constant matrices with a drift F(t), a B(t) or a spatial contact (0.6 s, h = 1e-3: now the compiled
 general loop), which ran in the Python loop with ``fast=True`` before; the rocking block and a
 tipping rod under the solver ``"nsgs"`` by name (one active contact: the Python contact step
@@ -52,6 +53,9 @@ def cases():
     for name, s, q0 in (("pushed point, no contact", point, [0.0, 0.0]), ("springs, no contact", springs, [0.1, -0.2])):
         out[name] = (lambda fast, s=s, q0=q0: lcp.simulate(s, 1.0, h=1e-4, q0=q0, v0=[0.0, 1.0], control=sched,
                                                            fast=fast), False)
+    free = System(q, v, M, ca.vertcat(-30 * q[0] + 5 * q[1] - 0.3 * v[0], 5 * q[0] - 20 * q[1] - 0.1 * v[1] - 9.81))
+    out["springs, no contact, no control"] = (lambda fast: lcp.simulate(free, 1.0, h=1e-4, q0=[0.1, -0.2],
+                                                                       v0=[0.0, 1.0], fast=fast), False)
     # control schedules on constant matrices that are not a constant planar drift with a constant B:
     # the Python loop before, the compiled general loop now (0.6 s, h = 1e-3, one contact)
     t = ca.SX.sym("t")
