@@ -8,7 +8,8 @@ loop and the solver's name.
   with springs and dampers (a dense mass matrix, a state-dependent drift), and a bilateral
   constraint.
 - Constant systems without contact or control: the constant compiled loop, its free velocity by
-  the same dense products (no control column): bit for bit.
+  the same dense products (no control column): bit for bit. A constant system with one contact
+  under the solver "nsgs" by name: the constant compiled loop, to rounding (as with several).
 - The constant compiled loop's steps whose NSGS sweeps stop (the bead column: many frictionless
   contacts closing at once): finished by the compiled NSGS-then-Newton of
   lcp.timestepping.planar_multi_kernels (counted in ``stats.kernel_multi_steps``) instead of the
@@ -395,3 +396,19 @@ def test_scheduled_redundant_spatial_pair_general_loop(monkeypatch):
     pt = np.max(np.abs(slow.p_T))
     sum_x = lambda r: r.p_T[:, 0] + r.p_T[:, 2]  # noqa: E731
     assert np.max(np.abs(sum_x(fast) - sum_x(slow))) <= 1e-12 * pt
+
+
+@pytest.mark.parametrize("theta", [0.5, 1.0])
+@pytest.mark.parametrize("kw", [{"R": 0.3}, {"R": 0.5}, {"R": 0.9}, {"coordinates": "full"}])
+def test_one_contact_constant_nsgs_compiled(kw, theta, monkeypatch):
+    """Jean-Pratt's block (one contact, a constant system) under the solver "nsgs" by name: the
+    constant compiled loop (the Python loop before: the compiled step is the closed form of
+    "auto"/"enum" only), its NSGS sweeps on the one contact; the Python loop's to rounding (the
+    kernel's sums are not BLAS's, as with several contacts): the same modes, message and impacts."""
+    sc = lcp.scenes.jean_pratt(**kw)
+    calls = counting(monkeypatch, compiled_loop, "moreau_jean_loop")
+    fast = lcp.simulate(sc, 0.5, h=1e-3, solver="nsgs", theta=theta)
+    slow = lcp.simulate(sc, 0.5, h=1e-3, solver="nsgs", theta=theta, fast=False)
+    assert len(calls) == 1 and fast.solver == "nsgs (compiled)" and slow.solver == "nsgs"
+    assert fast.stats.fallbacks == 0 and np.any(slow.p_N > 0)
+    close(fast, slow)

@@ -71,13 +71,15 @@ def applicable(asm, solver, options) -> bool:
     controlled constant one (a control schedule on a constant drift with a constant B:
     ``asm.control_matrix``) with any number of contacts (none: the kernel's free steps alone, the
     same arithmetic as the Python loop's), or a constant one without contact (a dense S or a
-    constant increment: the Python loop's products, :func:`control_arrays`); the solver ``"auto"`` or ``"nsgs"`` (as a name or as
-    a plain instance) without an ``error_tol``."""
+    constant increment: the Python loop's products, :func:`control_arrays`), or with one contact
+    under ``"nsgs"`` (the Python loop's to rounding, as with several); the solver ``"auto"`` or
+    ``"nsgs"`` (as a name or as a plain instance) without an ``error_tol``."""
     from lcp.contact.solvers import AutoSolver, NsgsSolver
 
     sys_ = asm.sys
     controlled = getattr(asm, "control_matrix", None) is not None
-    if not (HAVE_NUMBA and (controlled or sys_.n_contacts != 1) and not sys_.is_spatial
+    one_nsgs = sys_.n_contacts == 1 and type(solver) is NsgsSolver  # "auto" has the compiled step's closed form
+    if not (HAVE_NUMBA and (controlled or sys_.n_contacts != 1 or one_nsgs) and not sys_.is_spatial
             and asm.matrices_constant and (controlled or (sys_.is_constant and asm.schedule is None))):
         return False
     if sys_.n_contacts == 0 and not controlled and not (asm.dv_const is not None or isinstance(asm.S, np.ndarray)):

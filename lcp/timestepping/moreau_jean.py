@@ -221,7 +221,7 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions) -> Simulation
             return compiled_spatial.moreau_jean_spatial(asm, q0, v0, n_steps, every, solver, options.fallback)
     controlled = getattr(asm, "control_matrix", None) is not None  # a control on a constant drift, constant B
     if options.fast and proj is None and not spatial and (
-            (system.n_contacts != 1 and system.is_constant) or controlled):
+            system.is_constant or controlled):
         # imported here: numba loads only where the compiled loop may run
         from lcp.timestepping import compiled_loop
 
