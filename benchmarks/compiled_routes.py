@@ -10,7 +10,8 @@ constant matrices with a drift F(t), a B(t) or a spatial contact (0.6 s, h = 1e-
 general loop), which ran in the Python loop with ``fast=True`` before; the rocking block and a
 tipping rod under the solver ``"nsgs"`` by name (one active contact: the Python contact step
 before, the general loop's kernel now; their "before" column is the Python loop's, see
-benchmarks/README.md for the compiled run before); and the bead column (``lcp.scenes.bead_column``, 3 s,
+benchmarks/README.md for the compiled run before); Jean-Pratt's block under ``"nsgs"`` (one
+contact of a constant system: the Python loop before, the constant compiled loop now); and the bead column (``lcp.scenes.bead_column``, 3 s,
 h = 1e-3), whose steps where the kernel's NSGS stops were handed to the Python solver and
 are now finished by the compiled Newton (``planar_multi_kernels.solve_planar``). For each: the
 Python loop (``fast=False``), the compiled loop as before (for the column: ``newton_params``
@@ -83,6 +84,8 @@ def cases():
                                                                     fast=fast), False)
     out["tipping rod, nsgs, 1 s"] = (lambda fast: lcp.simulate(rod, 1.0, h=1e-3, q0=[0.0, 0.5 * np.sin(0.5) + 0.2, 0.5],
                                                                v0=[0.5, 0.0, 0.0], solver="nsgs", fast=fast), False)
+    jp = lcp.scenes.jean_pratt(R=0.5)  # one contact, constant: "nsgs" by name (no closed form)
+    out["Jean-Pratt, nsgs, 5 s"] = (lambda fast: lcp.simulate(jp, 5.0, h=1e-3, solver="nsgs", fast=fast), False)
     for K, e in ((10, 0.5), (10, 0.9), (20, 0.5), (20, 0.9)):
         sc = bead_column(K, e=e)
         out[f"bead column K={K} e={e}"] = (lambda fast, sc=sc: lcp.simulate(sc, sc.t_end, h=1e-3, fast=fast), True)
