@@ -15,7 +15,9 @@ contact of a constant system: the Python loop before, the constant compiled loop
 h = 1e-3), whose steps where the kernel's NSGS stops were handed to the Python solver and
 are now finished by the compiled Newton (``planar_multi_kernels.solve_planar``). For each: the
 Python loop (``fast=False``), the compiled loop as before (for the column: ``newton_params``
-returning None, every stopped step to the Python solver) and now, warm (kernels cached), the
+returning None, every stopped step to the Python solver; for block chains pushed by a force of t,
+constant matrices: ``general_loop._planar_multi`` off there, every contact step to the Python
+contact step) and now, warm (kernels cached), the
 median of ``--repeats`` runs; the counts of steps handed to Python and finished by the compiled
 Newton; the largest difference of q from the Python loop's and from the run before, relative to
 max |q| (0: the same bits).
@@ -84,6 +86,16 @@ def cases():
                                                                     fast=fast), False)
     out["tipping rod, nsgs, 1 s"] = (lambda fast: lcp.simulate(rod, 1.0, h=1e-3, q0=[0.0, 0.5 * np.sin(0.5) + 0.2, 0.5],
                                                                v0=[0.5, 0.0, 0.0], solver="nsgs", fast=fast), False)
+    # several active contacts on constant matrices with a force of t: the general loop handed every
+    # such step to the Python contact step before (switch "chain"), its kernel solves them now
+    for K in (3, 10, 30):
+        sc = lcp.scenes.block_chain(K)
+        base = sc.system
+        pushed = System(base.q_sym, base.v_sym, base.mass_expr,
+                        base.force_expr + ca.vertcat(*([3.0 * ca.sin(3 * t), 0] * K)), t=t, contacts=base.contacts,
+                        names=base.names)
+        out[f"chain K={K} pushed by sin 3t, 1 s"] = (
+            lambda fast, s=pushed, sc=sc: lcp.simulate(s, 1.0, h=1e-3, q0=sc.q0, v0=sc.v0, fast=fast), "chain")
     jp = lcp.scenes.jean_pratt(R=0.5)  # one contact, constant: "nsgs" by name (no closed form)
     out["Jean-Pratt, nsgs, 5 s"] = (lambda fast: lcp.simulate(jp, 5.0, h=1e-3, solver="nsgs", fast=fast), False)
     for K, e in ((10, 0.5), (10, 0.9), (20, 0.5), (20, 0.9)):
@@ -106,23 +118,27 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args(argv)
-    from lcp.timestepping import compiled_loop
+    from lcp.timestepping import compiled_loop, general_loop
 
-    real = compiled_loop.newton_params
+    real, real_multi = compiled_loop.newton_params, general_loop._planar_multi
     rows = []
     for name, (run, column) in cases().items():
         py_us, py = timed(run, False, args.repeats)
         before_us, before = None, None
         if column:
-            compiled_loop.newton_params = lambda solver: None
+            if column == "chain":  # the kernel off on constant matrices, as before
+                general_loop._planar_multi = (lambda solver, asm: np.zeros(4, dtype=np.int64) if asm.matrices_constant
+                                              else real_multi(solver, asm))
+            else:
+                compiled_loop.newton_params = lambda solver: None
             try:
                 before_us, before = timed(run, True, args.repeats)
             finally:
-                compiled_loop.newton_params = real
+                compiled_loop.newton_params, general_loop._planar_multi = real, real_multi
         now_us, now = timed(run, True, args.repeats)
         sq = max(1.0, float(np.max(np.abs(py.q))))
         row = {"case": name, "python_us": py_us, "before_us": before_us if column else py_us, "now_us": now_us,
-               "handed_before": before.stats.fallbacks if column else 0, "handed_now": now.stats.fallbacks + now.stats.python_steps,
+               "handed_before": before.stats.fallbacks + before.stats.python_steps if column else 0, "handed_now": now.stats.fallbacks + now.stats.python_steps,
                "newton_now": now.stats.kernel_multi_steps,
                "dq_python": float(np.max(np.abs(now.q - py.q))) / sq,
                "dq_before": float(np.max(np.abs(now.q - before.q))) / sq if column else float("nan")}

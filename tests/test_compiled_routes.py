@@ -412,3 +412,29 @@ def test_one_contact_constant_nsgs_compiled(kw, theta, monkeypatch):
     assert len(calls) == 1 and fast.solver == "nsgs (compiled)" and slow.solver == "nsgs"
     assert fast.stats.fallbacks == 0 and np.any(slow.p_N > 0)
     close(fast, slow)
+
+
+def pushed_chain(K, amp=3.0):
+    """lcp.scenes.block_chain(K) with every block pushed along x by amp sin 3t: constant matrices,
+    a force of t (the general loop)."""
+    sc = lcp.scenes.block_chain(K)
+    s = sc.system
+    t = ca.SX.sym("t")
+    force = s.force_expr + ca.vertcat(*([amp * ca.sin(3 * t), 0] * K))
+    return System(s.q_sym, s.v_sym, s.mass_expr, force, t=t, contacts=s.contacts, names=s.names), sc.q0, sc.v0
+
+
+@pytest.mark.skipif(codegen.c_compiler() is None, reason="needs a C compiler")
+@pytest.mark.parametrize("K", [3, 10])
+def test_constant_matrices_several_contacts_in_the_kernel(K, monkeypatch):
+    """Several active planar contacts on constant matrices with a force of t: the general loop's
+    kernel (planar_multi_step) instead of the Python contact step; from zero where the Python solver
+    warm-starts, so to rounding after the branch refinement: the same modes, message and impacts,
+    q, v, p_N and p_T within 1e-12 of their largest entries."""
+    system, q0, v0 = pushed_chain(K)
+    calls = counting(monkeypatch, general_loop, "run_general_loop")
+    fast = lcp.simulate(system, 1.0, h=1e-3, q0=q0, v0=v0)
+    slow = lcp.simulate(system, 1.0, h=1e-3, q0=q0, v0=v0, fast=False)
+    assert len(calls) == 1 and fast.stats.python_steps == 0 and fast.stats.kernel_multi_steps == 1000
+    close(fast, slow)
+    assert slow.stats.mode_counts["stick"] > 0 and slow.stats.mode_counts["slide+"] > 0
