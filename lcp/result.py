@@ -55,8 +55,9 @@ class SolverStats:
         Steps of the order-two scheme (``scheme="order2"``) that held closed contacts as
         constraints of a RATTLE step (:mod:`lcp.timestepping.closed_rattle`).
     kernel_multi_steps : int
-        Steps with several active contacts solved inside the compiled general loop's kernel
-        (:mod:`lcp.timestepping.multi_kernels`, :mod:`lcp.timestepping.planar_multi_kernels`), or,
+        Steps with several active contacts (or one under the solver ``"nsgs"``) solved inside the
+        compiled general loop's kernel (:mod:`lcp.timestepping.multi_kernels`,
+        :mod:`lcp.timestepping.planar_multi_kernels`), or,
         in the constant compiled loop, steps whose NSGS sweeps stopped and that the compiled Newton
         finish of :mod:`lcp.timestepping.planar_multi_kernels` solved instead of the Python solver
         (0 on every other path).
