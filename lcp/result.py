@@ -55,9 +55,12 @@ class SolverStats:
         Steps of the order-two scheme (``scheme="order2"``) that held closed contacts as
         constraints of a RATTLE step (:mod:`lcp.timestepping.closed_rattle`).
     kernel_multi_steps : int
-        Steps with several active contacts solved inside the compiled general loop's kernel
-        (:mod:`lcp.timestepping.multi_kernels`, :mod:`lcp.timestepping.planar_multi_kernels`; 0 on
-        every other path).
+        Steps with several active contacts (or one under the solver ``"nsgs"``) solved inside the
+        compiled general loop's kernel (:mod:`lcp.timestepping.multi_kernels`,
+        :mod:`lcp.timestepping.planar_multi_kernels`), or,
+        in the constant compiled loop, steps whose NSGS sweeps stopped and that the compiled Newton
+        finish of :mod:`lcp.timestepping.planar_multi_kernels` solved instead of the Python solver
+        (0 on every other path).
     python_steps : int
         Contact steps the compiled general loop handed to the Python loop's contact step (a solver
         or an active set its kernel does not solve, or a kernel solve that failed its test; 0 on

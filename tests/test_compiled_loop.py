@@ -178,6 +178,8 @@ def test_stalled_step_goes_to_the_python_solver(monkeypatch, solver):
     opts = {}
     if solver == "auto":
         monkeypatch.setattr(compiled_loop, "AUTO_MAX_SWEEPS", 1)
+        # the compiled Newton finish off, so that the Python solver takes them (tests/test_compiled_routes.py)
+        monkeypatch.setattr(compiled_loop, "newton_params", lambda solver: None)
     else:
         opts = {"solver_options": {"max_sweeps": 1}}
     fast, slow = run_both(sc, 0.1, h=1e-3, solver=solver, **opts)

@@ -1,4 +1,4 @@
-"""Moreau-Jean for constant planar systems with several contacts: all steps in one compiled call.
+"""Moreau-Jean for constant planar systems with several contacts (or none): all steps in one compiled call.
 
 The Python loop (:mod:`lcp.timestepping.python_loop`) pays 10-30 microseconds of interpreter work
 per step (NumPy calls on small arrays, the solver's bookkeeping), which dominates the cost of a
@@ -13,14 +13,22 @@ the outcome's notes of :mod:`lcp.timestepping`, :mod:`lcp.contact` and :mod:`lcp
 path choice (:mod:`lcp.timestepping.moreau_jean`), the Python loop or anything above
 :mod:`lcp.timestepping`.
 
-Where the compiled step cannot finish (NSGS does not reach the tolerance within its sweeps, the
-closed form finds no admissible case, or the branch sweeps do not converge), that one step is
-handed to the Python solver (with the loop's fallbacks: the same one-step problem, solver object
-and exact branch refinement) and the compiled loop resumes after it. Every such step is counted
-in ``stats.fallbacks`` and named in the message: no step is silently wrong.
+Where the kernel's NSGS does not reach the tolerance within its sweeps under ``"auto"`` (two or
+more active contacts), the step is first finished by the compiled NSGS-then-Newton of
+:func:`lcp.timestepping.planar_multi_kernels.solve_planar` (AutoSolver's algorithm, from zero where
+the Python solver warm-starts: the two solves differ within the solver's tolerance, and the branch
+refinement below, the same as the Python step's, makes both exact on the branch, so the runs agree
+to rounding; counted in ``stats.kernel_multi_steps``, with no note; the bead column's 23 to 198
+such steps now cost 0.3-0.4 ms less each, warm: benchmarks/compiled_routes.py). Where that fails
+its test, or the compiled step cannot finish otherwise (the closed form finds no admissible case,
+or the branch sweeps do not converge), that one step is handed to the Python solver (with the
+loop's fallbacks: the same one-step problem, solver object and exact branch refinement) and the
+compiled loop resumes after it. Every such step is counted in ``stats.fallbacks`` and named in the
+message: no step is silently wrong.
 
 A control schedule on a constant drift with a constant B (``StepAssembly.control_matrix``: a
-pushed block, a controlled chain) runs here too, with one contact or more: the kernel adds S B int u
+pushed block, a controlled chain, a pushed body without contact) runs here too, with any number of
+contacts: the kernel adds S B int u
 over each step (the impulses computed before the run) to the drift's increment, both by NumPy's
 products of the assembly's dense matrices (:mod:`lcp.timestepping.control_kernels`), as the Python
 loop's ``StepAssembly.at``.
@@ -36,6 +44,7 @@ import weakref
 import numpy as np
 
 from lcp.contact.problem import MODE_NAMES, ContactProblem, ModeArray
+from lcp.contact.solver_base import StepSolution
 from lcp.numerics.jit import HAVE_NUMBA, njit
 from lcp.timestepping.activation import CLOSE_ULPS, EPS, OPEN_ULPS
 from lcp.timestepping.compiled_kernels import (BRANCH_MAX_SWEEPS, BUFFER_FULL, DONE, NONFINITE,
@@ -52,25 +61,50 @@ __all__ = ["AUTO_MAX_SWEEPS", "BRANCH_MAX_SWEEPS", "applicable", "control_arrays
 #: (NSGS then semismooth Newton), which handles slowly converging problems better
 AUTO_MAX_SWEEPS = 500
 
+#: the message of a step whose stopped sweeps the compiled Newton finish solved
+NEWTON_MESSAGE = "compiled NSGS-Newton"
+
 
 def applicable(asm, solver, options) -> bool:
     """Whether the compiled loop runs this simulation: numba installed; a constant planar system
     (affine time-independent forces, no control schedule) with at least two contacts, or a
     controlled constant one (a control schedule on a constant drift with a constant B:
-    ``asm.control_matrix``) with at least one; the solver ``"auto"`` or ``"nsgs"`` (as a name or as
-    a plain instance) without an ``error_tol``."""
+    ``asm.control_matrix``) with any number of contacts (none: the kernel's free steps alone, the
+    same arithmetic as the Python loop's), or a constant one without contact (a dense S or a
+    constant increment: the Python loop's products, :func:`control_arrays`), or with one contact
+    under ``"nsgs"`` (the Python loop's to rounding, as with several); the solver ``"auto"`` or
+    ``"nsgs"`` (as a name or as a plain instance) without an ``error_tol``."""
     from lcp.contact.solvers import AutoSolver, NsgsSolver
 
     sys_ = asm.sys
     controlled = getattr(asm, "control_matrix", None) is not None
-    if not (HAVE_NUMBA and sys_.n_contacts >= (1 if controlled else 2) and not sys_.is_spatial
+    one_nsgs = sys_.n_contacts == 1 and type(solver) is NsgsSolver  # "auto" has the compiled step's closed form
+    if not (HAVE_NUMBA and (controlled or sys_.n_contacts != 1 or one_nsgs) and not sys_.is_spatial
             and asm.matrices_constant and (controlled or (sys_.is_constant and asm.schedule is None))):
         return False
+    if sys_.n_contacts == 0 and not controlled and not (asm.dv_const is not None or isinstance(asm.S, np.ndarray)):
+        return False  # no contact, a sparse S: the CSR sums would not be the Python loop's bits
     if type(solver) is AutoSolver:
         return solver.iterative.error_tol is None
     if type(solver) is NsgsSolver:
         return solver.error_tol is None and solver.compiled
     return False
+
+
+def newton_params(solver):
+    """(largest count, NSGS sweeps, Newton iterations, rounds) of the plain ``"auto"`` solver's
+    NewtonSolver (compiled sweeps, no error target, the same residual_tol), for the steps whose
+    compiled sweeps did not converge (:func:`lcp.timestepping.planar_multi_kernels.solve_planar`);
+    None for any other solver (the Python solver takes those steps)."""
+    from lcp.contact.solvers import AutoSolver, NewtonSolver
+
+    if type(solver) is not AutoSolver or solver.error_tol is not None:
+        return None
+    it = solver.iterative
+    if (type(it) is not NewtonSolver or not it.compiled or it.error_tol is not None
+            or it.residual_tol != solver.residual_tol):
+        return None
+    return np.array([0, it.sweeps, it.newton_iter, it.max_rounds], dtype=np.int64)
 
 
 def _csr(A):
@@ -253,12 +287,17 @@ def control_arrays(asm, n_steps):
     impulses are ``StepAssembly.control_increment``'s, elementwise on all steps at once (the same
     bits)."""
     B = getattr(asm, "control_matrix", None)
-    if B is None:
-        return None, None
     h, th = float(asm.h), float(asm.theta)
-    t = np.arange(n_steps) * h
-    sch = asm.schedule
-    imp = np.ascontiguousarray(sch.integral(t + h) - sch.integral(t), dtype=float)
+    if B is None:
+        if not (asm.m == 0 and asm.dv_const is None and isinstance(asm.S, np.ndarray)):
+            return None, None
+        # a constant system without contact or control: the same dense products with no control
+        # column, so that its steps are the Python loop's bits (the CSR sums are not BLAS's)
+        B, imp = np.zeros((asm.n, 0)), np.zeros((n_steps, 0))
+    else:
+        t = np.arange(n_steps) * h
+        sch = asm.schedule
+        imp = np.ascontiguousarray(sch.integral(t + h) - sch.integral(t), dtype=float)
     e2, e1 = np.zeros((0, 0)), np.zeros(0)
 
     def dense(X):
@@ -295,9 +334,31 @@ class _PythonStep:
     def __init__(self, asm, solver, fallback):
         self.asm, self.solver, self.fallback = asm, solver, fallback
         self.cache, self.fallbacks = {}, {}
+        self.newton = newton_params(solver)
+        self.newton_steps = 0
 
-    def solve(self, k, q, v, active, qa, stats):
-        """(p, modes, sol, fallback name or None) of step k; p is None when every solver failed."""
+    def _compiled_newton(self, pb, stats):
+        """The step's problem (two or more contacts) solved by the compiled NSGS-then-Newton of
+        :func:`lcp.timestepping.planar_multi_kernels.solve_planar` (AutoSolver's algorithm, from
+        zero), or None where it does not apply or fails its test (the Python solver then takes it)."""
+        if self.newton is None or pb.k < 2:
+            return None
+        from lcp.timestepping.planar_multi_kernels import solve_planar
+
+        W = pb.W.toarray() if hasattr(pb.W, "toarray") else pb.W
+        ok, p, its, res = solve_planar(np.ascontiguousarray(W, dtype=float), np.ascontiguousarray(pb.q, dtype=float),
+                                       np.ascontiguousarray(pb.mu, dtype=float), float(self.solver.residual_tol),
+                                       self.newton)
+        if not ok:
+            return None
+        self.newton_steps += 1
+        sol = StepSolution(p, 0, NEWTON_MESSAGE, int(its), 0, float(res))
+        count_solve(stats, sol)
+        return sol
+
+    def solve(self, k, q, v, active, qa, stats, newton=False):
+        """(p, modes, sol, fallback name or None) of step k; p is None when every solver failed.
+        ``newton``: try the compiled Newton finish first (the kernel's sweeps stopped)."""
         asm, solver = self.asm, self.solver
         m, h = asm.m, asm.h
         dvf, SHt, W, _, H = asm.at(k * h, q, v)
@@ -309,6 +370,10 @@ class _PythonStep:
             local = self.cache[key] = (idx, H[idx], SHt[:, idx], template)
         idx, Ha, SHta, template = local
         pb = template.with_q(qa)
+        sol = self._compiled_newton(pb, stats) if newton else None
+        if sol is not None:
+            stats.max_residual = max(stats.max_residual, sol.residual)
+            return self._finish(v, pb, sol.p, active, H, SHta, Ha, dvf) + (sol, None)
         sol = solver.solve(pb)
         count_solve(stats, sol)
         used = None
@@ -320,17 +385,21 @@ class _PythonStep:
             used = used or "lemke"
         stats.ambiguous_steps += int(sol.ambiguous)
         stats.max_residual = max(stats.max_residual, sol.residual)
-        p = sol.p
+        return self._finish(v, pb, sol.p, active, H, SHta, Ha, dvf) + (sol, used)
+
+    def _finish(self, v, pb, p, active, H, SHta, Ha, dvf):
+        """(p refined on the branch of its modes, the modes), the Python loop's arithmetic."""
+        m = self.asm.m
         md = pb.modes(p)
         dv = dvf + SHta @ p
         r = Ha @ (v + dv)
-        e = asm.sys.e[active]
+        e = self.asm.sys.e[active]
         if np.any(e):
             r[: active.size] += e * np.minimum(H[:m][active] @ v, 0.0)
         dp = pb.with_q(r).solve_branch(md)
         if dp is not None and math.isfinite(float(dp.sum())):
             p = p + dp
-        return p, md, sol, used
+        return p, md
 
 
 def moreau_jean_loop(asm, q0, v0, n_steps: int, every: int, solver, fallback: bool,
@@ -420,13 +489,16 @@ def moreau_jean_loop(asm, q0, v0, n_steps: int, every: int, solver, fallback: bo
         why = (f"branch refinement sweeps did not converge after {BRANCH_MAX_SWEEPS} sweeps" if its < 0 else
                f"compiled NSGS stopped after {its} sweeps (residual {fstate[1]:.3g})" if not (use_enum and na == 1)
                else "closed form: no admissible case")
-        p, md, sol, used = py.solve(k, q, v, active, qa[:2 * na].copy(), stats)
+        # where NSGS stopped, the compiled Newton finish first (AutoSolver's algorithm; steps counted
+        # in stats.kernel_multi_steps), the Python solver where it fails
+        p, md, sol, used = py.solve(k, q, v, active, qa[:2 * na].copy(), stats, newton=its >= 0 and na >= 2)
         if p is None:
             status = -1
             message = f"{STATUS_MESSAGES[-1]} Step {k} (t = {k * h:.10g}), solver '{solver.name}': {sol.message}"
             break
-        handed += 1
-        first_hand = first_hand or (k, why)
+        if sol.message != NEWTON_MESSAGE:
+            handed += 1
+            first_hand = first_hand or (k, why)
         if used is not None:
             n_fb += 1
             first_fb = first_fb or (k, sol.message if used == "lemke" else why, used)
@@ -446,6 +518,7 @@ def moreau_jean_loop(asm, q0, v0, n_steps: int, every: int, solver, fallback: bo
     for code in range(4):
         stats.mode_counts[MODE_NAMES[code]] += int(istate[5 + code])
     stats.fallbacks = handed
+    stats.kernel_multi_steps = py.newton_steps
     if handed:
         k1, why = first_hand
         message += (f" {handed} step(s) were solved by the Python solver '{solver.name}' instead of the compiled "

@@ -65,6 +65,8 @@ def constant_control_dv(ctl, u, h, q, v, t1, dvf):
         tc = dense_mv(Td, c)
         for a in range(n):
             dvf[a] = dvf[a] + tc[a]
+    if Bd.shape[1] == 0:  # no control (a constant system without contact): the drift's arithmetic alone
+        return
     su = dense_mv(Sd, dense_mv(Bd, u))
     for a in range(n):
         dvf[a] = dvf[a] + su[a]

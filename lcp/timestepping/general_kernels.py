@@ -431,7 +431,8 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
     ``cone_multi`` active disk-law contacts are solved here (:func:`lcp.timestepping.multi_kernels.cone_multi_step`,
     at most ``max_sweeps`` NSGS sweeps; 0: none); ``planar_multi`` = (largest count, sweeps, Newton
     iterations, rounds): steps with 2 to ``planar_multi[0]`` active planar contacts are solved here
-    (:func:`lcp.timestepping.planar_multi_kernels.planar_multi_step`; 0: none); ``fstate`` = [max
+    (:func:`lcp.timestepping.planar_multi_kernels.planar_multi_step`; 0: none), and with one where
+    there is no closed form (``"nsgs"``) and no bilateral constraint; ``fstate`` = [max
     residual, worst violation after a projection, violation of a failed projection]; ``lin`` the force check's
     linearisation (t, q, v, F, K, C; t NaN: none). When the reason is not DONE the state (q, v,
     sums, loaded) is that at the start of the returned step; for NEEDS_PYTHON the buffers hold its
@@ -614,7 +615,9 @@ def run_general(cfunc, argp, resp, iw, w, a_t, a_q, a_v, o_vf, o_S, o_SHt, o_W, 
             elif ((2 <= na <= cone_multi
                    and cone_multi_step(act, na, m, n, r, o_W, o_H, o_SHt, o_b1, moving, v, vfree, dvf, uNm, mu, e,
                                        dims, toff, res_tol, max_sweeps, istate, fstate, dv, pmul, mdmul))
-                  or (2 <= na <= planar_multi[0]
+                  # one contact: "nsgs" by name, without bilateral constraints (with them its problem
+                  # may be redundant, the split of its impulses the solver's: the Python loop's then)
+                  or ((2 if closed_form or nb > 0 else 1) <= na <= planar_multi[0]
                       and planar_multi_step(act, na, m, n, r, o_W, o_H, o_SHt, o_b1, moving, v, vfree, dvf, uNm, mu,
                                             e, res_tol, planar_multi, istate, fstate, dv, pmul, mdmul))):
                 record_multi(act, na, m, tk, h, row, pmul, mdmul, dims, toff, e, o_gap, uNm, uNf, loaded, ploaded,

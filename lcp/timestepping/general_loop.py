@@ -17,9 +17,11 @@ contact under the disk law's ``"auto"``/``"local"`` (local solve, branch refinem
 correction), two to 40 active disk-law contacts under ``"auto"`` (NSGS, branch refinement, the
 solver's acceptance test, the all-stick correction: :mod:`lcp.timestepping.multi_kernels`; the Python
 loop's results to the solver's tolerance, counted in ``stats.kernel_multi_steps``), two to 40 active
-planar contacts under ``"auto"`` or ``"nsgs"`` (the Python solver's NSGS rounds and Newton, its tests,
+planar contacts under ``"auto"`` or ``"nsgs"`` (and one under ``"nsgs"`` by name on a system without
+bilateral constraints) (the Python solver's NSGS rounds and Newton, its tests,
 modes and branch refinement: :mod:`lcp.timestepping.planar_multi_kernels`; the Python loop's bits where no
-Newton iteration was needed, else to rounding; also counted in ``stats.kernel_multi_steps``; steps
+Newton iteration was needed, else to rounding; on constant matrices to rounding, the Python solver
+warm-starting there (:func:`_planar_multi`); also counted in ``stats.kernel_multi_steps``; steps
 handed back to Python are counted in ``stats.python_steps``), impacts, Kahan
 sums, the position update of Newton-Euler kinematics qdot = T(q) v
 (unit quaternions by the exponential map, as the Python loop), the position projection (its Newton update compiled from
@@ -30,10 +32,11 @@ solver objects, fallbacks and notes). The kernel's products are those NumPy comp
 results are the Python loop's (bit for bit on the tested scenes, to rounding at worst). Control
 schedules run here: with B(t) each step's correction of the control's impulse is computed before
 the run, with B(t, q) depending on q the kernel computes it each step from the control's compiled
-C function (:mod:`lcp.timestepping.compiled_control`); either is added as S c_k. Not run here (the
+C function (:mod:`lcp.timestepping.compiled_control`); either is added as S c_k (on constant
+matrices, a drift F(t), a B(t) or spatial contacts: to rounding, :func:`applicable`). Not run here (the
 Python loop then runs): a projection of moving contacts (the message says so), control schedules
-on systems with constant matrices (the constant compiled loop runs those with a constant drift and
-a constant B; else the message says why), ``scheme="order2"``, systems without numba or without a
+with a constant planar drift and a constant B (the constant compiled loop runs those; where it
+does not, the message says why), ``scheme="order2"``, systems without numba or without a
 C compiler (a :class:`RuntimeWarning` names the compiler).
 """
 from __future__ import annotations
@@ -67,15 +70,24 @@ _IMPACT_BUFFER = 4096
 
 def applicable(system, asm, proj) -> str | None:
     """None where the compiled general loop runs this simulation, else the reason it does not:
-    a constant system (the constant paths serve it), numba missing, a control schedule on constant
-    matrices (the Python loop's increment is then not the step Function's), a position
-    projection on moving contacts (``"projection"``: its opening test needs the contacts' rates at
-    the projected state)."""
+    a constant system (the constant paths serve it), numba missing, a control schedule on a
+    constant planar drift with a constant B (``"control"``: the constant compiled loop's, or the
+    Python loop's with a note), a position projection on moving contacts (``"projection"``: its
+    opening test needs the contacts' rates at the projected state).
+
+    A control schedule on constant matrices otherwise (a drift F(t), a B(t), spatial contacts) runs
+    here: the Python loop computes those steps by the assembly's S products (``StepAssembly.at``),
+    this loop by the step Function's generated C code plus S c_k, the same equations in another
+    rounding (measured: 4e-16 of max |q| and |v|, 7e-14 of the largest tangential impulse; as an
+    uncontrolled F(t) on constant matrices). Where contacts are redundant (two pucks joined by a
+    bar, both sticking along it) only the sum of their tangential impulses is determined: it
+    agrees to rounding, their split is the solver's in both loops (tests/test_compiled_routes.py)."""
     if system.is_constant:
         return "constant"
     if not HAVE_NUMBA:
         return "numba"
-    if getattr(system, "is_controlled", False) or (asm.schedule is not None and asm.matrices_constant):
+    if getattr(system, "is_controlled", False) or (asm.schedule is not None and asm.matrices_constant
+                                                   and asm.control_matrix is not None and not system.is_spatial):
         return "control"
     if proj is not None and system.contacts_depend_on_t:
         return "projection"
@@ -153,13 +165,17 @@ def _planar_multi(solver, asm) -> np.ndarray:
     """(largest number of active planar contacts solved in the kernel, NSGS sweeps, Newton iterations,
     rounds) of the plain ``"auto"`` solver (its NewtonSolver: compiled sweeps, no error target of its
     own, the same residual_tol) or ``"nsgs"`` (compiled, no error target: its sweeps, no Newton, one
-    round), on operators that change each step (no warm starts: constant matrices key the Python
-    solver's warm start by active set); zeros otherwise."""
+    round); zeros otherwise.
+
+    On constant matrices (a force of t, a control schedule) the Python solver warm-starts each
+    problem from the last impulses of the same active set, the kernel starts from zero: the two
+    solves differ within the solver's tolerance, and the branch refinement (the same in both) makes
+    them exact on the branch, so the runs agree to rounding there, not bit for bit (measured on
+    block chains of 3 to 30 blocks pushed by sin 3t: 1.2e-15 of max |v|, 6.7e-13 of the largest
+    tangential impulse, the same modes; tests/test_compiled_routes.py)."""
     from lcp.contact.solvers import AutoSolver, NewtonSolver, NsgsSolver
 
     off = np.zeros(4, dtype=np.int64)
-    if asm.matrices_constant:
-        return off
     if type(solver) is NsgsSolver:
         if not solver.compiled or solver.error_tol is not None:
             return off

@@ -80,12 +80,14 @@ class MoreauJeanOptions:
         (:mod:`lcp.timestepping.general_loop`: CasADi's C code of the step, a numba loop) where no
         moving contact is projected and a C compiler is found, with or without a control schedule
         (B(t) or B(t, q)); a control schedule on a constant drift with a constant B runs the
-        constant compiled loop (:mod:`lcp.timestepping.compiled_loop`, one contact or more). Where a
-        control schedule keeps the Python loop, the message says why; a run of fewer than 50,000 steps (at most one contact)
-        takes the Python loop while the general loop's numba kernel is not compiled on the machine
-        yet, and has it compiled in the background (short runs also while it is not loaded, up to
-        3,000 steps per process: :mod:`lcp.timestepping.first_compile`; ``LCP_COMPILE=always`` runs
-        it now).
+        constant compiled loop (:mod:`lcp.timestepping.compiled_loop`, with or without contacts), any
+        other schedule on constant matrices (a drift F(t), a B(t), spatial contacts) the compiled
+        general loop, to rounding. Where a
+        control schedule keeps the Python loop, the message says why; a run of fewer than 50,000 steps (at most one
+        contact) takes the Python loop while the general loop's numba kernel is not compiled on the
+        machine yet, and has it compiled in the background (short runs also while it is not loaded,
+        up to 3,000 steps per process: :mod:`lcp.timestepping.first_compile`; ``LCP_COMPILE=always``
+        runs it now).
     projection : {"auto", True, False}
         Project the positions onto the constraints after each step (:mod:`lcp.timestepping.projection`).
         ``"auto"``: only where a constraint is nonlinear in q or time-dependent (where the
@@ -248,7 +250,7 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions, asm=None) -> 
             return compiled_spatial.moreau_jean_spatial(asm, q0, v0, n_steps, every, solver, options.fallback)
     controlled = getattr(asm, "control_matrix", None) is not None  # a control on a constant drift, constant B
     if options.fast and proj is None and not spatial and (
-            (system.n_contacts >= 2 and system.is_constant) or (controlled and system.n_contacts >= 1)):
+            system.is_constant or controlled):
         # imported here: numba loads only where the compiled loop may run
         from lcp.timestepping import compiled_loop
 
@@ -296,10 +298,10 @@ def _control_note(asm, spatial) -> str:
         why = ("a control schedule on constant matrices runs compiled only where the drift F0 is constant "
                "and B does not depend on t or q")
     elif spatial:
-        why = "the compiled loops do not take a control schedule on spatial contacts"
+        why = "the compiled loops do not take a control schedule constant in time on spatial contacts"
     else:
-        why = ("the compiled loop of a controlled constant system needs a contact, the solver 'auto' or "
-               "'nsgs' without error_tol, and no projection")
+        why = ("the compiled loop of a controlled constant system needs the solver 'auto' or 'nsgs' without "
+               "error_tol, and no projection")
     return f" (Python loop: {why})"
 
 

@@ -44,7 +44,7 @@ from lcp.contact.nsgs import checks_blocked_dense, nsgs_sweeps, residual_blocked
 from lcp.numerics.jit import njit
 from lcp.timestepping.step_products import cols_f, matvec, rows
 
-__all__ = ["MODE_MARGIN", "planar_multi_step"]
+__all__ = ["MODE_MARGIN", "planar_multi_step", "solve_planar"]
 
 #: a step that took Newton iterations goes back to Python where a mode's test quantity lies within
 #: this fraction of its threshold (the rounding of another LU could then flip the mode)
@@ -342,10 +342,67 @@ def _solve(Wl, qa, mus, rho, scale, res_tol, sweeps, newton_iter, max_rounds):
 
 
 @njit(cache=True)
+def _modes(Wl, qa, rho, p, scale, newton_used, md, margin):
+    """The modes of the impulses p into md (ContactProblem.modes, rtol 1e-9 of each contact's
+    scale, contact_scales); False where Newton iterations were taken and a mode's test quantity
+    lies within ``margin`` (MODE_MARGIN, passed by the caller so that a test may change it) of its
+    threshold (another LU's rounding must not be able to choose another branch than the Python
+    solver's)."""
+    k = md.size
+    ap = np.abs(p)
+    aw = matvec(np.abs(Wl), ap)
+    u = matvec(Wl, p)
+    for j in range(k):
+        sN = max(max(abs(qa[j]) * rho[j], ap[j]), (COUPLING_FLOOR * rho[j]) * aw[j])
+        sT = max(max(abs(qa[k + j]) * rho[k + j], ap[k + j]), (COUPLING_FLOOR * rho[k + j]) * aw[k + j])
+        tol_p = 1e-9 * max(max(sN, sT), SCALE_FLOOR * scale)
+        uT = (u[k + j] + qa[k + j]) * rho[k + j]
+        if p[j] <= tol_p:
+            md[j] = 0
+        elif uT > tol_p:
+            md[j] = 2
+        elif uT < -tol_p:
+            md[j] = 3
+        else:
+            md[j] = 1
+        if newton_used:  # another LU's rounding must not be able to choose another branch
+            lim = margin * tol_p
+            if abs(p[j] - tol_p) <= lim or abs(abs(uT) - tol_p) <= lim:
+                return False
+    return True
+
+
+@njit(cache=True)
+def solve_planar(Wl, qa, mus, res_tol, pm):
+    """The solve of one planar contact problem (Wl, qa, mus) of two or more contacts as
+    :func:`planar_multi_step` solves it (``pm`` as there: AutoSolver's NSGS sweeps from zero, then
+    semismooth Newton; no warm start), for the constant compiled loop's steps whose sweeps did not
+    converge: (ok, p, iterations, residual); ok False where the solve or its test failed, or a mode
+    lies within MODE_MARGIN of its threshold after Newton iterations."""
+    n2 = qa.size
+    rho = np.empty(n2)
+    for a in range(n2):
+        d = Wl[a, a]
+        rho[a] = 1.0 / d if d > 0 else 1.0
+    scale = 0.0
+    for a in range(n2):
+        scale = max(scale, abs(qa[a]) * rho[a])
+    scale = max(scale, 1e-300)
+    if not math.isfinite(scale):
+        return False, np.zeros(n2), 0, np.nan
+    ok, p, its, res, newton_used = _solve(Wl, qa, mus, rho, scale, res_tol, pm[1], pm[2], pm[3])
+    if not ok:
+        return False, p, its, res
+    md = np.empty(mus.size, dtype=np.int64)
+    return _modes(Wl, qa, rho, p, scale, newton_used, md, MODE_MARGIN), p, its, res
+
+
+@njit(cache=True)
 def planar_multi_step(act, na, m, n, r, o_W, o_H, o_SHt, o_b1, moving, v, vfree, dvf, uNm, mu, e, res_tol, pm,
                       istate, fstate, dv, P, MDo):
-    """The contact solve of a step whose active contacts ``act[:na]`` (two or more) are planar,
-    under ``"auto"`` (module docstring); ``pm`` = (largest count, NSGS sweeps, Newton iterations,
+    """The contact solve of a step whose active contacts ``act[:na]`` (two or more; or one under
+    ``"nsgs"``, whose Python solver runs the same sweeps) are planar, under ``"auto"`` (module
+    docstring); ``pm`` = (largest count, NSGS sweeps, Newton iterations,
     rounds) of the solver (no Newton iterations and one round of its ``max_sweeps``: ``"nsgs"``).
     Fills dv (the step's velocity increment), P (the impulses, normals then tangents) and MDo (the
     modes); False where the Python side must solve the step."""
@@ -389,28 +446,9 @@ def planar_multi_step(act, na, m, n, r, o_W, o_H, o_SHt, o_b1, moving, v, vfree,
     ok, p, its, res, newton_used = _solve(Wl, qa, mus, rho, scale, res_tol, pm[1], pm[2], pm[3])
     if not ok:
         return False
-    # the modes (ContactProblem.modes, rtol 1e-9 of each contact's scale, contact_scales)
-    ap = np.abs(p)
-    aw = matvec(np.abs(Wl), ap)
-    u = matvec(Wl, p)
     md = np.empty(k, dtype=np.int64)
-    for j in range(k):
-        sN = max(max(abs(qa[j]) * rho[j], ap[j]), (COUPLING_FLOOR * rho[j]) * aw[j])
-        sT = max(max(abs(qa[k + j]) * rho[k + j], ap[k + j]), (COUPLING_FLOOR * rho[k + j]) * aw[k + j])
-        tol_p = 1e-9 * max(max(sN, sT), SCALE_FLOOR * scale)
-        uT = (u[k + j] + qa[k + j]) * rho[k + j]
-        if p[j] <= tol_p:
-            md[j] = 0
-        elif uT > tol_p:
-            md[j] = 2
-        elif uT < -tol_p:
-            md[j] = 3
-        else:
-            md[j] = 1
-        if newton_used:  # another LU's rounding must not be able to choose another branch
-            lim = MODE_MARGIN * tol_p
-            if abs(p[j] - tol_p) <= lim or abs(abs(uT) - tol_p) <= lim:
-                return False
+    if not _modes(Wl, qa, rho, p, scale, newton_used, md, MODE_MARGIN):
+        return False
     sp = np.dot(SHta, p)
     w = np.empty(n)
     for a in range(n):
