@@ -438,3 +438,18 @@ def test_constant_matrices_several_contacts_in_the_kernel(K, monkeypatch):
     assert len(calls) == 1 and fast.stats.python_steps == 0 and fast.stats.kernel_multi_steps == 1000
     close(fast, slow)
     assert slow.stats.mode_counts["stick"] > 0 and slow.stats.mode_counts["slide+"] > 0
+
+
+@pytest.mark.skipif(codegen.c_compiler() is None, reason="needs a C compiler")
+def test_large_constant_matrices_keep_the_python_loop(monkeypatch):
+    """Above CONSTANT_MATRICES_MAX_N velocities a system with constant matrices and a force of t
+    keeps the Python loop (its constant S is reused; the general loop would rebuild dense n x n
+    data each step, slower there): the same bits as fast=False, and the message says why."""
+    K = general_loop.CONSTANT_MATRICES_MAX_N // 2 + 1
+    system, q0, v0 = pushed_chain(K)
+    assert system.n > general_loop.CONSTANT_MATRICES_MAX_N
+    calls = counting(monkeypatch, general_loop, "run_general_loop")
+    fast = lcp.simulate(system, 0.05, h=1e-3, q0=q0, v0=v0)
+    slow = lcp.simulate(system, 0.05, h=1e-3, q0=q0, v0=v0, fast=False)
+    assert not calls and "constant matrices with more than" in fast.message
+    assert np.array_equal(fast.q, slow.q) and np.array_equal(fast.v, slow.v)

@@ -68,12 +68,24 @@ PROJECTION_NOTE = (" (Python loop: the compiled general loop does not project sy
 _IMPACT_BUFFER = 4096
 
 
+#: above this many velocities, a system with constant matrices (a force of t, a scheduled control)
+#: runs the Python loop: it reuses the assembly's constant S, while this loop rebuilds the dense
+#: n x n step data every step. Measured (block chains pushed by a force of t, 1e-3 s steps, one
+#: run): n = 60: 93 against 456 us/step; n = 100: 676 against 608; n = 200: 2144 against 1762.
+CONSTANT_MATRICES_MAX_N = 80
+
+#: the note of a run that keeps the Python loop for that reason
+LARGE_NOTE = (" (Python loop: constant matrices with more than {} velocities; it reuses their constant step "
+              "matrix, faster than the compiled general loop's dense per-step data)")
+
+
 def applicable(system, asm, proj) -> str | None:
     """None where the compiled general loop runs this simulation, else the reason it does not:
     a constant system (the constant paths serve it), numba missing, a control schedule on a
     constant planar drift with a constant B (``"control"``: the constant compiled loop's, or the
     Python loop's with a note), a position projection on moving contacts (``"projection"``: its
-    opening test needs the contacts' rates at the projected state).
+    opening test needs the contacts' rates at the projected state), constant matrices of more than
+    :data:`CONSTANT_MATRICES_MAX_N` velocities (``"large"``: the Python loop is faster there).
 
     A control schedule on constant matrices otherwise (a drift F(t), a B(t), spatial contacts) runs
     here: the Python loop computes those steps by the assembly's S products (``StepAssembly.at``),
@@ -91,6 +103,8 @@ def applicable(system, asm, proj) -> str | None:
         return "control"
     if proj is not None and system.contacts_depend_on_t:
         return "projection"
+    if asm.matrices_constant and system.n > CONSTANT_MATRICES_MAX_N:
+        return "large"
     return None
 
 

@@ -281,6 +281,8 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions, asm=None) -> 
                                                      options.fallback, proj, plib, klib)
         elif why == "projection":
             note = general_loop.PROJECTION_NOTE
+        elif why == "large":
+            note = general_loop.LARGE_NOTE.format(general_loop.CONSTANT_MATRICES_MAX_N)
         elif why == "control" and asm.schedule is not None:
             note = _control_note(asm, spatial)
     elif options.fast and asm.schedule is not None:  # a control constant in time: a constant system
