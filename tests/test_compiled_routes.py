@@ -396,6 +396,12 @@ def test_scheduled_redundant_spatial_pair_general_loop(monkeypatch):
     pt = np.max(np.abs(slow.p_T))
     sum_x = lambda r: r.p_T[:, 0] + r.p_T[:, 2]  # noqa: E731
     assert np.max(np.abs(sum_x(fast) - sum_x(slow))) <= 1e-12 * pt
+    # Coulomb's disk at every step, in both loops: the all-stick correction of a singular W used
+    # to move puck a's friction impulse to 2.5 mu p_N (contact_step.STICK_CORRECTION_MAX)
+    for res in (fast, slow):
+        for j, mu in enumerate((0.3, 0.5)):
+            tang = np.linalg.norm(res.p_T[:, 2 * j:2 * j + 2], axis=1)
+            assert np.all(tang <= mu * res.p_N[:, j] * (1 + 1e-12) + 1e-300), (j, np.max(tang / (mu * res.p_N[:, j])))
 
 
 @pytest.mark.parametrize("theta", [0.5, 1.0])

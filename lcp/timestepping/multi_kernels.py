@@ -31,6 +31,7 @@ from lcp.contact.spatial_nsgs import (
     solve_dense,
 )
 from lcp.numerics.jit import njit
+from lcp.timestepping.contact_step import STICK_CORRECTION_MAX
 
 __all__ = ["cone_multi_step", "cone_natural_map_error", "record_multi"]
 
@@ -214,6 +215,13 @@ def cone_multi_step(act, na, m, n, r, o_W, o_H, o_SHt, o_b1, moving, v, vfree, d
                 s = s + o_b1[ra]
             rl[a] = -(s + shift[a]) if a < k else -s
         dp, ok = solve_dense(Wl, rl)
+        if ok:  # a rounding correction only (contact_step.stick_correction_ok: same test)
+            dmax = 0.0
+            pmax = 0.0
+            for b in range(nl):
+                dmax = max(dmax, abs(dp[b]))
+                pmax = max(pmax, abs(pv[b]))
+            ok = dmax <= STICK_CORRECTION_MAX * pmax
         if ok:
             for b in range(nl):
                 pv[b] = pv[b] + dp[b]
