@@ -98,6 +98,15 @@ def cases():
             lambda fast, s=pushed, sc=sc: lcp.simulate(s, 1.0, h=1e-3, q0=sc.q0, v0=sc.v0, fast=fast), "chain")
     jp = lcp.scenes.jean_pratt(R=0.5)  # one contact, constant: "nsgs" by name (no closed form)
     out["Jean-Pratt, nsgs, 5 s"] = (lambda fast: lcp.simulate(jp, 5.0, h=1e-3, solver="nsgs", fast=fast), False)
+    # coupled spatial contacts of a constant system (two pucks joined by a bar): the Python loop
+    # before (compiled_spatial takes independent contacts only), the compiled general loop now
+    qp, vp = ca.SX.sym("q", 6), ca.SX.sym("v", 6)
+    bar = System(qp, vp, ca.SX.eye(6), ca.vertcat(2.0, 0, -9.81, 0, 0, -9.81), constraints=qp[3] - qp[0] - 1.0,
+                 contacts=[Contact(gap=qp[2], tangent=ca.vertcat(qp[0], qp[1]), mu=0.3),
+                           Contact(gap=qp[5], tangent=ca.vertcat(qp[3], qp[4]), mu=0.5)])
+    out["pucks joined by a bar, 1 s"] = (
+        lambda fast: lcp.simulate(bar, 1.0, h=1e-3, q0=[0, 0, 0, 1.0, 0, 0], v0=[1.0, 0.3, 0, 1.0, 0.3, 0], fast=fast),
+        False)
     for K, e in ((10, 0.5), (10, 0.9), (20, 0.5), (20, 0.9)):
         sc = bead_column(K, e=e)
         out[f"bead column K={K} e={e}"] = (lambda fast, sc=sc: lcp.simulate(sc, sc.t_end, h=1e-3, fast=fast), True)

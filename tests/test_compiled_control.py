@@ -248,8 +248,9 @@ def test_controlled_long_chain_sparse():
 
 
 def test_python_loop_note_solver_and_spatial():
-    """A controlled constant system the constant compiled loop does not take (solver "lemke"; a
-    spatial contact): the Python loop, and the message says why; the same numbers as fast=False."""
+    """A controlled constant system the constant compiled loop does not take: solver "lemke" keeps
+    the Python loop, and the message says why (the same numbers as fast=False); a spatial contact
+    under a one-piece schedule runs the compiled general loop, to rounding of the Python loop."""
     system = jean_pratt_block()
     sched = schedule("constant", C_ROWS)
     fast = lcp.simulate(system, 0.2, h=1e-3, q0=[0.0, 0.0], v0=[1.0, 0.0], control=sched, solver="lemke")
@@ -260,9 +261,16 @@ def test_python_loop_note_solver_and_spatial():
     q, v, u = ca.SX.sym("q", 3), ca.SX.sym("v", 3), ca.SX.sym("u", 1)
     puck = System(q, v, ca.SX.eye(3), ca.vertcat(u[0], 0, -9.81), control=u, control_bounds=(-9, 9),
                   contacts=[Contact(gap=q[2], tangent=ca.vertcat(q[0], q[1]), mu=0.3)])
-    res = lcp.simulate(puck, 0.2, h=1e-3, q0=np.zeros(3), v0=[1.0, 0.0, 0.0], control=ControlSchedule([0.0, 0.2], [2.0]))
-    assert res.success and ("(Python loop: the compiled loops do not take a control schedule constant in time on "
-                            "spatial contacts)") in res.message
+    # a one-piece schedule on a spatial contact: a constant spatial system, run by the compiled general
+    # loop (compiled_spatial takes no schedule), to rounding of the Python loop's constant S products
+    one = ControlSchedule([0.0, 0.2], [2.0])
+    res = lcp.simulate(puck, 0.2, h=1e-3, q0=np.zeros(3), v0=[1.0, 0.0, 0.0], control=one)
+    ref = lcp.simulate(puck, 0.2, h=1e-3, q0=np.zeros(3), v0=[1.0, 0.0, 0.0], control=one, fast=False)
+    assert res.success and res.message == ref.message and "Python loop" not in res.message
+    assert np.max(np.abs(res.q - ref.q)) <= 1e-13 and np.max(np.abs(res.v - ref.v)) <= 1e-13
+    # the slide under 2 N against mu g: v_x = 1 + (2 - 0.3 * 9.81) t while it slides
+    t = res.t
+    assert np.max(np.abs(res.v[:, 0] - (1.0 + (2.0 - 0.3 * 9.81) * t))) <= 1e-12
 
 
 @pytest.mark.parametrize("K", [1, 3])

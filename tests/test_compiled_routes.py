@@ -459,3 +459,34 @@ def test_large_constant_matrices_keep_the_python_loop(monkeypatch):
     slow = lcp.simulate(system, 0.05, h=1e-3, q0=q0, v0=v0, fast=False)
     assert not calls and "constant matrices with more than" in fast.message
     assert np.array_equal(fast.q, slow.q) and np.array_equal(fast.v, slow.v)
+
+
+@pytest.mark.skipif(codegen.c_compiler() is None, reason="needs a C compiler")
+def test_coupled_constant_spatial_contacts_general_loop(monkeypatch):
+    """A constant system whose spatial contacts are coupled (two pucks joined by a bar: W has
+    off-diagonal blocks, which compiled_spatial refuses) runs the compiled general loop, not the
+    Python loop: q, v, p_N and the determined sum of the x impulses to rounding, the disk at every
+    step in both loops, the slide's closed form while both pucks slide."""
+    q, v = ca.SX.sym("q", 6), ca.SX.sym("v", 6)
+    pair = System(q, v, ca.SX.eye(6), ca.vertcat(2.0, 0, -9.81, 0, 0, -9.81), constraints=q[3] - q[0] - 1.0,
+                  contacts=[Contact(gap=q[2], tangent=ca.vertcat(q[0], q[1]), mu=0.3, name="a"),
+                            Contact(gap=q[5], tangent=ca.vertcat(q[3], q[4]), mu=0.5, name="b")])
+    assert pair.is_constant
+    calls = counting(monkeypatch, general_loop, "run_general_loop")
+    kw = dict(q0=[0.0, 0.0, 0.0, 1.0, 0.0, 0.0], v0=[1.0, 0.3, 0.0, 1.0, 0.3, 0.0])
+    fast = lcp.simulate(pair, 1.0, h=1e-3, **kw)
+    slow = lcp.simulate(pair, 1.0, h=1e-3, fast=False, **kw)
+    assert len(calls) == 1 and fast.stats.python_steps == 0 and fast.message == slow.message
+    for name in ("q", "v", "p_N"):
+        x, y = getattr(fast, name), getattr(slow, name)
+        assert np.max(np.abs(x - y)) <= 1e-12 * np.max(np.abs(y)), name
+    sum_x = lambda r: r.p_T[:, 0] + r.p_T[:, 2]  # noqa: E731
+    # the solvers' tolerance: the kernel's NSGS starts from zero, the Python solver warm-starts
+    assert np.max(np.abs(sum_x(fast) - sum_x(slow))) <= 1e-11 * np.max(np.abs(sum_x(slow)))
+    for res in (fast, slow):
+        for j, mu in enumerate((0.3, 0.5)):
+            tang = np.linalg.norm(res.p_T[:, 2 * j:2 * j + 2], axis=1)
+            assert np.all(tang <= mu * res.p_N[:, j] * (1 + 1e-12) + 1e-300)
+    # both slide at first, friction against the motion: the speed falls
+    speed = np.hypot(fast.v[:, 0], fast.v[:, 1])
+    assert np.all(np.diff(speed[:50]) < 0)

@@ -94,8 +94,8 @@ def applicable(system, asm, proj) -> str | None:
     uncontrolled F(t) on constant matrices). Where contacts are redundant (two pucks joined by a
     bar, both sticking along it) only the sum of their tangential impulses is determined: it
     agrees to rounding, their split is the solver's in both loops (tests/test_compiled_routes.py)."""
-    if system.is_constant:
-        return "constant"
+    if system.is_constant and not system.is_spatial:  # constant spatial systems reach here only where
+        return "constant"                               # compiled_spatial does not take them
     if not HAVE_NUMBA:
         return "numba"
     if getattr(system, "is_controlled", False) or (asm.schedule is not None and asm.matrices_constant

@@ -257,8 +257,9 @@ def _run(system, q0, v0, t_end: float, options: MoreauJeanOptions, asm=None) -> 
         if compiled_loop.applicable(asm, solver, options):
             return compiled_loop.moreau_jean_loop(asm, q0, v0, n_steps, every, solver, options.fallback)
     note = ""
-    if options.fast and not system.is_constant:
-        # the compiled general loop: generated C step data, a numba loop (lcp.timestepping.general_loop)
+    if options.fast and (not system.is_constant or spatial):
+        # the compiled general loop: generated C step data, a numba loop (lcp.timestepping.general_loop);
+        # also constant spatial systems that compiled_spatial does not take (coupled contacts, other solvers)
         from lcp.timestepping import general_loop
 
         why = general_loop.applicable(system, asm, proj)
