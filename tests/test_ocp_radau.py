@@ -120,3 +120,34 @@ def test_refused_by_name(case, message):
     kw = {"integrator": "rk4"} if case == "name" else {"integrator": "radau", "stages": 5 if case == "stages" else 2}
     with pytest.raises(ValueError, match=message):
         OptimalControlProblem(sys_, 4, q0=q0, v0=[0.0, 0.0], **kw)
+
+
+def _fixed_phase_solved(r):
+    """The fixed-phase solve (the first pass's phases placed by the step lengths) succeeded by itself."""
+    fixed = [h for h in r.homotopy if h.sigma == 0.0]
+    return bool(fixed) and fixed[0].success and "failed first" not in r.message
+
+
+def test_fixed_phase_solve_succeeds_on_the_minimum_time_block():
+    from studies import optimal_control as so
+    sc, system = so.controlled_block()
+    pb = OptimalControlProblem(system, 12, q0=sc.q0, v0=sc.v0, T=0.5, free_time=True, T_bounds=(0.05, 5.0),
+                               steps="free", integrator="radau", stages=2, replay_tol=1e-6,
+                               terminal_cost=lambda T, q, v: T,
+                               terminal_constraints=lambda q, v: ca.vertcat(q[0] - 0.5, v[0]))
+    r = pb.solve()
+    assert r.success, r.message
+    assert _fixed_phase_solved(r), r.message
+    assert r.T == pytest.approx(so.min_time_bound(), rel=1e-6)
+
+
+def test_fixed_phase_solve_succeeds_on_the_minimum_effort_block():
+    # stick, slide, stick from rest to rest 0.5 m in 1 s (continuous optimum 86.905749 N^2 s)
+    sc = lcp.scenes.jean_pratt(v0=0.0)
+    pb = OptimalControlProblem(sc, 6, control_matrix=tangential_push(sc.system), u_min=-20, u_max=20, T=1.0,
+                               stage_cost=effort, steps="free", hold="affine", integrator="radau", stages=2,
+                               terminal_constraints=lambda q, v: ca.vertcat(q[0] - 0.5, v[0]))
+    r = pb.solve()
+    assert r.success, r.message
+    assert _fixed_phase_solved(r), r.message
+    assert r.cost == pytest.approx(86.905749, abs=1e-6)

@@ -189,6 +189,12 @@ class RadauTranscription(Transcription):
                 pT = h * sum(self.b[j] * (blks[j]["bp"] - blks[j]["bm"]) for j in range(s))
             st = pb.make_step(k, tk[k], h, qa, qs[k + 1], va, vs[k + 1], ua, ub, pN, pT)
             J = self._step_terms(J, st, us, k, h, ua, ub, z, sigma, pair_sizes)
+        if self.cross and m:
+            for k in range(1, N):  # the stick margins at node k under step k's control (fixed-phase bounds)
+                fs = self._stick_forces(stage_fn, tk[k], qs[k], vs[k], self.control_pair(us, k)[0])
+                for key, sign in (("wsp", -1.0), ("wsm", 1.0)):
+                    var = self._var(f"{key}{k}", m, -np.inf, np.inf, key=key)
+                    self._constrain(var - (mu * fs[:m] + sign * fs[m:]), 0.0, 0.0)
         if pb.terminal_cost is not None:
             J = J + _scalar(pb.terminal_cost(Tv, qs[-1], vs[-1]), "terminal_cost")
         if pb.terminal_constraints is not None:
@@ -214,18 +220,24 @@ class RadauTranscription(Transcription):
         the others): a contact that slides in step 0 must start sliding there, wl0 <= 0, through the
         pair (lam, wl) of :data:`STEP_CROSS` (relaxed as lam wl0 <= sigma: wl0 may be negative)."""
         sys, m = self.pb.system, self.pb.system.n_contacts
-        Mq, F, H = stage_fn(0.0, q0p, v0p, u0)
-        Hv = ca.mtimes(sys.H_expr, sys.v_sym)
-        drift = ca.Function("Hdot_v", [sys.q_sym, sys.v_sym], [ca.jtimes(Hv, sys.q_sym, sys.v_sym)])(q0p, v0p)
-        W = ca.mtimes(H, ca.solve(Mq, H.T))
-        # (a tiny Tikhonov term: redundant contacts, a box's corners on a floor, leave W singular;
-        # the stick forces are then not unique and this picks the smallest)
-        W = W + 1e-12 * ca.trace(W) * ca.DM.eye(2 * m)
-        f = -ca.solve(W, ca.mtimes(H, ca.solve(Mq, F)) + drift)
+        f = self._stick_forces(stage_fn, 0.0, q0p, v0p, u0)
         at_rest = np.abs(sys.contact_jacobian(self.pb.q0)[m:] @ self.pb.v0) == 0.0
         wl0 = self._var("wl0", m, -np.inf, np.inf, key="wl0")
         self._constrain(wl0 - ca.DM(at_rest.astype(float)) * (ca.DM(sys.mu) * f[:m] - ca.fabs(f[m:])), 0.0, 0.0)
         return wl0
+
+    def _stick_forces(self, stage_fn, t, q, v, u):
+        """The contact forces (normal, tangential) that keep every contact closed and stuck at (t, q, v)
+        under the control value u (the acceleration-level law, every contact stuck)."""
+        sys, m = self.pb.system, self.pb.system.n_contacts
+        Mq, F, H = stage_fn(t, q, v, u)
+        Hv = ca.mtimes(sys.H_expr, sys.v_sym)
+        drift = ca.Function("Hdot_v", [sys.q_sym, sys.v_sym], [ca.jtimes(Hv, sys.q_sym, sys.v_sym)])(q, v)
+        W = ca.mtimes(H, ca.solve(Mq, H.T))
+        # (a tiny Tikhonov term: redundant contacts, a box's corners on a floor, leave W singular;
+        # the stick forces are then not unique and this picks the smallest)
+        W = W + 1e-12 * ca.trace(W) * ca.DM.eye(2 * m)
+        return -ca.solve(W, ca.mtimes(H, ca.solve(Mq, F)) + drift)
 
     def _step_terms(self, J, st, us, k, h, ua, ub, z, sigma, pair_sizes):
         """The step's cost terms and the user's path constraints and pairs (as the theta transcription)."""
@@ -359,8 +371,17 @@ def fixed_mode_bounds(tr, x):
     i0 = tr.ix["wl0"].reshape(-1)
     ubx[i0[slides[0]]] = 0.0
     if tr.pb.N > 1:
-        iwl = _blocks(tr, x, "wl")[0]
-        ubx[iwl[:-1, -1][slides[1:]]] = 0.0
+        # after a stick, the stick force under the sliding step's own control, at the node, must
+        # reach the cone in the slide's direction (wsp, wsm <= 0). The step's control may jump at
+        # the node: requiring the previous step's last slack wl to vanish instead (the homotopy's
+        # pair) forces the stick step to ramp its control to the cone, measured as a minimum-length
+        # step of wasted effort per stick-to-slide switch (and as infeasible for a constant hold).
+        loaded = np.max(_blocks(tr, x, "pN")[1], axis=1) > np.max(_blocks(tr, x, "wN")[1], axis=1)
+        starts = slides[1:] & ~slides[:-1] & loaded[1:]  # (N - 1, m)
+        neg = np.max(_blocks(tr, x, "bm")[1], axis=1) > np.max(_blocks(tr, x, "bp")[1], axis=1)
+        isp, ism = tr.ix["wsp"].reshape(-1, tr.pb.system.n_contacts), tr.ix["wsm"].reshape(-1, tr.pb.system.n_contacts)
+        ubx[isp[starts & ~neg[1:]]] = 0.0
+        ubx[ism[starts & neg[1:]]] = 0.0
         for a, w in STEP_CROSS[:-1]:
             ia, xa = _blocks(tr, x, a)
             iw, xw = _blocks(tr, x, w)
@@ -414,8 +435,12 @@ def diagnose(tr, x) -> dict:
     if tr.cross and N > 1:
         for a, w in STEP_CROSS:
             xa, xw = _blocks(tr, x, a)[1], _blocks(tr, x, w)[1]
+            prev = xw[:-1, -1:]
+            if (a, w) == ("lam", "wl"):  # or the stick force under step k's control reached the cone
+                margin = np.minimum(x[tr.ix["wsp"]], x[tr.ix["wsm"]]).reshape(N - 1, 1, m)
+                prev = np.minimum(prev, np.maximum(margin, 0.0))
             cr_a.append(xa[1:].ravel())
-            cr_w.append(np.repeat(xw[:-1, -1:], s, axis=1).ravel())
+            cr_w.append(np.repeat(prev, s, axis=1).ravel())
     own_a, own_w, cr_a, cr_w = (np.concatenate(z) if z else np.zeros(0) for z in (own_a, own_w, cr_a, cr_w))
     k_worst = int(np.argmax(step_res))
     where = "" if not np.any(step_res > 0) else (
