@@ -174,6 +174,8 @@ class RadauTranscription(Transcription):
             pN = pT = ca.SX.zeros(0, 1)
             if m:
                 a, w = [], []
+                if self.cross and k:  # the stick-to-slide pair's gate (see fixed_mode_bounds)
+                    prev = {**prev, "wl": self._var(f"gate{k}", m, 1.0, 1.0, key="gate") * prev["wl"]}
                 for j in range(s):  # each stage's own pairs; with free steps every other stage's slacks
                     # too (one mode per step: uniform steps keep a switch inside a step possible)
                     for l_ in (range(s) if self.cross else (j,)):
@@ -207,6 +209,9 @@ class RadauTranscription(Transcription):
         self.stage_eval = ca.Function("radau_eval", [self.nlp["x"], self.nlp["p"]],
                                       [ca.vertcat(*dyn), ca.horzcat(*stage_out)])
         self.aux = ca.Function("aux", [self.nlp["x"], self.nlp["p"]], [ca.horzcat(*vs[:-1])])
+        if self.cross and m:  #: (x, p) -> wl0 (the start's stick margin; see fixed_mode_bounds)
+            self.margin0 = ca.Function("margin0", [self.nlp["x"], self.nlp["p"]], [self._margin0])
+            del self._margin0
         self.ix = {key: np.array(val) for key, val in self.ix.items()}
         self.lbx, self.ubx = np.concatenate(self._lbx), np.concatenate(self._ubx)
         self.lbg = np.concatenate(self._lbg) if self._lbg else np.zeros(0)
@@ -223,7 +228,8 @@ class RadauTranscription(Transcription):
         f = self._stick_forces(stage_fn, 0.0, q0p, v0p, u0)
         at_rest = np.abs(sys.contact_jacobian(self.pb.q0)[m:] @ self.pb.v0) == 0.0
         wl0 = self._var("wl0", m, -np.inf, np.inf, key="wl0")
-        self._constrain(wl0 - ca.DM(at_rest.astype(float)) * (ca.DM(sys.mu) * f[:m] - ca.fabs(f[m:])), 0.0, 0.0)
+        self._margin0 = ca.DM(at_rest.astype(float)) * (ca.DM(sys.mu) * f[:m] - ca.fabs(f[m:]))
+        self._constrain(wl0 - self._margin0, 0.0, 0.0)
         return wl0
 
     def _stick_forces(self, stage_fn, t, q, v, u):
@@ -368,20 +374,36 @@ def fixed_mode_bounds(tr, x):
     # a step that slides after a stick starts at the cone: its stick-to-slide pair fixes the slack
     # (wl0 at t = 0, the previous step's last wl after it) by the step's mode, not by comparing a
     # speed with a force (a slide that starts slowly would otherwise be frozen at rest)
+    # a slide in step 0 from a rest whose stick margin at t = 0 is positive under the guess's control
+    # cannot start at t = 0 (the theta first pass's modes are means over its steps: its step 0
+    # slides when the force reaches the cone within it, the motor's current building up): step 0
+    # sticks instead, and the slide starts at node 1, placed by the step lengths
+    P = np.concatenate([[0.0], tr.pb.q0, tr.pb.v0])
+    late = slides[0] & (np.array(tr.margin0(x, P), dtype=float).ravel() > 0.0)
+    if np.any(late):
+        ilam, iwl = _blocks(tr, x, "lam")[0][0], _blocks(tr, x, "wl")[0][0]  # (s, m)
+        ubx[ilam[:, late]] = 0.0
+        ubx[iwl[:, late]] = tr.ubx[iwl[:, late]]
+        slides = slides.copy()
+        slides[0] &= ~late
     i0 = tr.ix["wl0"].reshape(-1)
     ubx[i0[slides[0]]] = 0.0
     if tr.pb.N > 1:
         # after a stick, the stick force under the sliding step's own control, at the node, must
-        # reach the cone in the slide's direction (wsp, wsm <= 0). The step's control may jump at
-        # the node: requiring the previous step's last slack wl to vanish instead (the homotopy's
-        # pair) forces the stick step to ramp its control to the cone, measured as a minimum-length
-        # step of wasted effort per stick-to-slide switch (and as infeasible for a constant hold).
+        # reach the cone in the slide's direction (wsp, wsm <= 0), and the homotopy's pair (lam of
+        # step k against the previous step's last wl, gated by a variable held at 1) is switched
+        # off (gate 0): the control may jump at the node, and requiring wl = 0 at the end of the
+        # stick step forces that step to ramp its control up to the cone (wasted effort on a
+        # minimum-length step per stick-to-slide switch; with a constant hold the whole stick step
+        # at the cone)
         loaded = np.max(_blocks(tr, x, "pN")[1], axis=1) > np.max(_blocks(tr, x, "wN")[1], axis=1)
         starts = slides[1:] & ~slides[:-1] & loaded[1:]  # (N - 1, m)
         neg = np.max(_blocks(tr, x, "bm")[1], axis=1) > np.max(_blocks(tr, x, "bp")[1], axis=1)
         isp, ism = tr.ix["wsp"].reshape(-1, tr.pb.system.n_contacts), tr.ix["wsm"].reshape(-1, tr.pb.system.n_contacts)
         ubx[isp[starts & ~neg[1:]]] = 0.0
         ubx[ism[starts & neg[1:]]] = 0.0
+        ig = tr.ix["gate"].reshape(-1, tr.pb.system.n_contacts)
+        lbx[ig[starts]] = ubx[ig[starts]] = 0.0
         for a, w in STEP_CROSS[:-1]:
             ia, xa = _blocks(tr, x, a)
             iw, xw = _blocks(tr, x, w)
