@@ -151,3 +151,27 @@ def test_fixed_phase_solve_succeeds_on_the_minimum_effort_block():
     assert r.success, r.message
     assert _fixed_phase_solved(r), r.message
     assert r.cost == pytest.approx(86.905749, abs=1e-6)
+
+
+def test_fixed_phase_solve_after_a_hold_at_rest_reaches_the_optimum():
+    # move out, hold at rest on [t_a, t_b], move back (the velocity law): the slide back starts by a
+    # jump of the control at the pinned node, and the first pass leaves a stick step after the hold
+    # that the fixed-phase solve can only shrink to the minimum length until it is merged into the slide
+    from studies import optimal_control as so
+    sc, system = so.controlled_block()
+    N, T, t_a, t_b, d = 12, 1.2, 0.4, 0.6, 0.3
+    k_a, k_b = round(N * t_a / T), round(N * t_b / T)
+
+    def at_rest(s):
+        if k_a - 1 <= s.k < k_b:
+            return ca.vertcat(s.q1[0] - d, s.v1[0])
+        return ca.SX.zeros(0, 1)
+
+    pb = OptimalControlProblem(system, N, q0=sc.q0, v0=sc.v0, T=T, stage_cost=effort, hold="affine", steps="free",
+                               node_times={k_a: t_a, k_b: t_b}, path_equalities=at_rest, replay_tol=1e-6,
+                               integrator="radau", stages=2, terminal_constraints=lambda q, v: ca.vertcat(q[0], v[0]))
+    r = pb.solve()
+    assert r.success, r.message
+    assert _fixed_phase_solved(r), r.message
+    ref = so.move_effort(t_a, d) + so.move_effort(T - t_b, d, backward=True)
+    assert abs(r.cost - ref) <= 1e-6 * ref, (r.cost, ref)
