@@ -29,7 +29,11 @@ between all stages of a step (a multiplier of stage j against the slack of every
 the same step), so a step is one mode, and between every stage of step k and the last stage of
 step k - 1 (as the theta transcription's cross pairs), so that the switches fall on nodes and the
 step lengths place them; the fixed-phase solve (:func:`fixed_mode_bounds`) then fixes one member
-of each pair for all stages of a step at once. Uniform steps keep each stage's own pairs only (a
+of each pair for all stages of a step at once. At a stick-to-slide switch it replaces the stick-to-slide
+pair of :data:`STEP_CROSS` (which wants the stick force at the cone at the end of the stick step) by
+the stick force at the node under the sliding step's own control (``wsp``, ``wsm``): the control may
+jump at a node. A slide in step 0 that cannot start at t = 0 is preceded by a stick step, and a phase
+left on minimum-length steps is merged into its neighbour (:func:`squeezed_phases`). Uniform steps keep each stage's own pairs only (a
 switch may fall inside a step, between stages, as in plain collocation).
 
 The impulse of a step handed to the costs and the replay is h_k sum_j b_j f_kj (b the last row of
@@ -59,7 +63,9 @@ RADAU_STAGES = (1, 2, 3, 4)
 #: cross pairs between steps (step k's member, step k - 1's last stage's member): the theta
 #: transcription's, and (lam, wl): a contact that slides in step k after sticking in step k - 1
 #: starts sliding only where its stick force has reached the cone (wl = 0 at the node; the last
-#: stage is the node, whereas the theta step's wl is a mean over its step)
+#: stage is the node, whereas the theta step's wl is a mean over its step); for k >= 1 its slack is
+#: multiplied by a variable ``gate`` held at 1, which the fixed-phase bounds set to 0 where they
+#: bound the stick margin at the node instead
 STEP_CROSS = (("pN", "wN"), ("bp", "wp"), ("bm", "wm"), ("wl", "lam"), ("lam", "wl"))
 
 
@@ -355,7 +361,8 @@ def fixed_mode_bounds(tr, x):
     """Variable bounds with the mode of every step frozen as at ``x``: for each pair and contact of a
     step, the member that is smaller over the step's stages (its largest value) is fixed at zero at
     every stage (the within-step cross complementarity makes a step one mode); with free steps also
-    the smaller of step k's multiplier and step k - 1's last-stage slack."""
+    the smaller of step k's multiplier and step k - 1's last-stage slack, and at a stick-to-slide
+    switch the stick margin at the node under the sliding step's control (see the comments)."""
     lbx, ubx = tr.lbx.copy(), tr.ubx.copy()
     if not tr.pb.system.n_contacts:
         return lbx, ubx
