@@ -120,3 +120,58 @@ def test_refused_by_name(case, message):
     kw = {"integrator": "rk4"} if case == "name" else {"integrator": "radau", "stages": 5 if case == "stages" else 2}
     with pytest.raises(ValueError, match=message):
         OptimalControlProblem(sys_, 4, q0=q0, v0=[0.0, 0.0], **kw)
+
+
+def _fixed_phase_solved(r):
+    """The fixed-phase solve (the first pass's phases placed by the step lengths) succeeded by itself:
+    no fallback to the homotopy (whose message would say that the fixed-phase solve failed first)."""
+    return "(Fixed-phase solve: the guess's mode sequence." in r.message and "failed first" not in r.message
+
+
+def test_fixed_phase_solve_succeeds_on_the_minimum_time_block():
+    from studies import optimal_control as so
+    sc, system = so.controlled_block()
+    pb = OptimalControlProblem(system, 12, q0=sc.q0, v0=sc.v0, T=0.5, free_time=True, T_bounds=(0.05, 5.0),
+                               steps="free", integrator="radau", stages=2, replay_tol=1e-6,
+                               terminal_cost=lambda T, q, v: T,
+                               terminal_constraints=lambda q, v: ca.vertcat(q[0] - 0.5, v[0]))
+    r = pb.solve()
+    assert r.success, r.message
+    assert _fixed_phase_solved(r), r.message
+    assert r.T == pytest.approx(so.min_time_bound(), rel=1e-6)
+
+
+def test_fixed_phase_solve_succeeds_on_the_minimum_effort_block():
+    # stick, slide, stick from rest to rest 0.5 m in 1 s (continuous optimum 86.905749 N^2 s)
+    sc = lcp.scenes.jean_pratt(v0=0.0)
+    pb = OptimalControlProblem(sc, 6, control_matrix=tangential_push(sc.system), u_min=-20, u_max=20, T=1.0,
+                               stage_cost=effort, steps="free", hold="affine", integrator="radau", stages=2,
+                               terminal_constraints=lambda q, v: ca.vertcat(q[0] - 0.5, v[0]))
+    r = pb.solve()
+    assert r.success, r.message
+    assert _fixed_phase_solved(r), r.message
+    assert r.cost == pytest.approx(86.905749, abs=1e-6)
+
+
+def test_fixed_phase_solve_after_a_hold_at_rest_reaches_the_optimum():
+    # move out, hold at rest on [t_a, t_b], move back (the velocity law): the slide back starts by a
+    # jump of the control at the pinned node, and the first pass leaves a stick step after the hold
+    # that the fixed-phase solve can only shrink to the minimum length until it is merged into the slide
+    from studies import optimal_control as so
+    sc, system = so.controlled_block()
+    N, T, t_a, t_b, d = 12, 1.2, 0.4, 0.6, 0.3
+    k_a, k_b = round(N * t_a / T), round(N * t_b / T)
+
+    def at_rest(s):
+        if k_a - 1 <= s.k < k_b:
+            return ca.vertcat(s.q1[0] - d, s.v1[0])
+        return ca.SX.zeros(0, 1)
+
+    pb = OptimalControlProblem(system, N, q0=sc.q0, v0=sc.v0, T=T, stage_cost=effort, hold="affine", steps="free",
+                               node_times={k_a: t_a, k_b: t_b}, path_equalities=at_rest, replay_tol=1e-6,
+                               integrator="radau", stages=2, terminal_constraints=lambda q, v: ca.vertcat(q[0], v[0]))
+    r = pb.solve()
+    assert r.success, r.message
+    assert _fixed_phase_solved(r), r.message
+    ref = so.move_effort(t_a, d) + so.move_effort(T - t_b, d, backward=True)
+    assert abs(r.cost - ref) <= 1e-6 * ref, (r.cost, ref)

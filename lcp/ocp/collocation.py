@@ -29,7 +29,11 @@ between all stages of a step (a multiplier of stage j against the slack of every
 the same step), so a step is one mode, and between every stage of step k and the last stage of
 step k - 1 (as the theta transcription's cross pairs), so that the switches fall on nodes and the
 step lengths place them; the fixed-phase solve (:func:`fixed_mode_bounds`) then fixes one member
-of each pair for all stages of a step at once. Uniform steps keep each stage's own pairs only (a
+of each pair for all stages of a step at once. At a stick-to-slide switch it replaces the stick-to-slide
+pair of :data:`STEP_CROSS` (which wants the stick force at the cone at the end of the stick step) by
+the stick force at the node under the sliding step's own control (``wsp``, ``wsm``): the control may
+jump at a node. A slide in step 0 that cannot start at t = 0 is preceded by a stick step, and a phase
+left on minimum-length steps is merged into its neighbour (:func:`squeezed_phases`). Uniform steps keep each stage's own pairs only (a
 switch may fall inside a step, between stages, as in plain collocation).
 
 The impulse of a step handed to the costs and the replay is h_k sum_j b_j f_kj (b the last row of
@@ -59,7 +63,9 @@ RADAU_STAGES = (1, 2, 3, 4)
 #: cross pairs between steps (step k's member, step k - 1's last stage's member): the theta
 #: transcription's, and (lam, wl): a contact that slides in step k after sticking in step k - 1
 #: starts sliding only where its stick force has reached the cone (wl = 0 at the node; the last
-#: stage is the node, whereas the theta step's wl is a mean over its step)
+#: stage is the node, whereas the theta step's wl is a mean over its step); for k >= 1 its slack is
+#: multiplied by a variable ``gate`` held at 1, which the fixed-phase bounds set to 0 where they
+#: bound the stick margin at the node instead
 STEP_CROSS = (("pN", "wN"), ("bp", "wp"), ("bm", "wm"), ("wl", "lam"), ("lam", "wl"))
 
 
@@ -174,6 +180,8 @@ class RadauTranscription(Transcription):
             pN = pT = ca.SX.zeros(0, 1)
             if m:
                 a, w = [], []
+                if self.cross and k:  # the stick-to-slide pair's gate (see fixed_mode_bounds)
+                    prev = {**prev, "wl": self._var(f"gate{k}", m, 1.0, 1.0, key="gate") * prev["wl"]}
                 for j in range(s):  # each stage's own pairs; with free steps every other stage's slacks
                     # too (one mode per step: uniform steps keep a switch inside a step possible)
                     for l_ in (range(s) if self.cross else (j,)):
@@ -189,6 +197,12 @@ class RadauTranscription(Transcription):
                 pT = h * sum(self.b[j] * (blks[j]["bp"] - blks[j]["bm"]) for j in range(s))
             st = pb.make_step(k, tk[k], h, qa, qs[k + 1], va, vs[k + 1], ua, ub, pN, pT)
             J = self._step_terms(J, st, us, k, h, ua, ub, z, sigma, pair_sizes)
+        if self.cross and m:
+            for k in range(1, N):  # the stick margins at node k under step k's control (fixed-phase bounds)
+                fs = self._stick_forces(stage_fn, tk[k], qs[k], vs[k], self.control_pair(us, k)[0])
+                for key, sign in (("wsp", -1.0), ("wsm", 1.0)):
+                    var = self._var(f"{key}{k}", m, -np.inf, np.inf, key=key)
+                    self._constrain(var - (mu * fs[:m] + sign * fs[m:]), 0.0, 0.0)
         if pb.terminal_cost is not None:
             J = J + _scalar(pb.terminal_cost(Tv, qs[-1], vs[-1]), "terminal_cost")
         if pb.terminal_constraints is not None:
@@ -201,6 +215,9 @@ class RadauTranscription(Transcription):
         self.stage_eval = ca.Function("radau_eval", [self.nlp["x"], self.nlp["p"]],
                                       [ca.vertcat(*dyn), ca.horzcat(*stage_out)])
         self.aux = ca.Function("aux", [self.nlp["x"], self.nlp["p"]], [ca.horzcat(*vs[:-1])])
+        if self.cross and m:  #: (x, p) -> wl0 (the start's stick margin; see fixed_mode_bounds)
+            self.margin0 = ca.Function("margin0", [self.nlp["x"], self.nlp["p"]], [self._margin0])
+            del self._margin0
         self.ix = {key: np.array(val) for key, val in self.ix.items()}
         self.lbx, self.ubx = np.concatenate(self._lbx), np.concatenate(self._ubx)
         self.lbg = np.concatenate(self._lbg) if self._lbg else np.zeros(0)
@@ -214,18 +231,25 @@ class RadauTranscription(Transcription):
         the others): a contact that slides in step 0 must start sliding there, wl0 <= 0, through the
         pair (lam, wl) of :data:`STEP_CROSS` (relaxed as lam wl0 <= sigma: wl0 may be negative)."""
         sys, m = self.pb.system, self.pb.system.n_contacts
-        Mq, F, H = stage_fn(0.0, q0p, v0p, u0)
+        f = self._stick_forces(stage_fn, 0.0, q0p, v0p, u0)
+        at_rest = np.abs(sys.contact_jacobian(self.pb.q0)[m:] @ self.pb.v0) == 0.0
+        wl0 = self._var("wl0", m, -np.inf, np.inf, key="wl0")
+        self._margin0 = ca.DM(at_rest.astype(float)) * (ca.DM(sys.mu) * f[:m] - ca.fabs(f[m:]))
+        self._constrain(wl0 - self._margin0, 0.0, 0.0)
+        return wl0
+
+    def _stick_forces(self, stage_fn, t, q, v, u):
+        """The contact forces (normal, tangential) that keep every contact closed and stuck at (t, q, v)
+        under the control value u (the acceleration-level law, every contact stuck)."""
+        sys, m = self.pb.system, self.pb.system.n_contacts
+        Mq, F, H = stage_fn(t, q, v, u)
         Hv = ca.mtimes(sys.H_expr, sys.v_sym)
-        drift = ca.Function("Hdot_v", [sys.q_sym, sys.v_sym], [ca.jtimes(Hv, sys.q_sym, sys.v_sym)])(q0p, v0p)
+        drift = ca.Function("Hdot_v", [sys.q_sym, sys.v_sym], [ca.jtimes(Hv, sys.q_sym, sys.v_sym)])(q, v)
         W = ca.mtimes(H, ca.solve(Mq, H.T))
         # (a tiny Tikhonov term: redundant contacts, a box's corners on a floor, leave W singular;
         # the stick forces are then not unique and this picks the smallest)
         W = W + 1e-12 * ca.trace(W) * ca.DM.eye(2 * m)
-        f = -ca.solve(W, ca.mtimes(H, ca.solve(Mq, F)) + drift)
-        at_rest = np.abs(sys.contact_jacobian(self.pb.q0)[m:] @ self.pb.v0) == 0.0
-        wl0 = self._var("wl0", m, -np.inf, np.inf, key="wl0")
-        self._constrain(wl0 - ca.DM(at_rest.astype(float)) * (ca.DM(sys.mu) * f[:m] - ca.fabs(f[m:])), 0.0, 0.0)
-        return wl0
+        return -ca.solve(W, ca.mtimes(H, ca.solve(Mq, F)) + drift)
 
     def _step_terms(self, J, st, us, k, h, ua, ub, z, sigma, pair_sizes):
         """The step's cost terms and the user's path constraints and pairs (as the theta transcription)."""
@@ -287,6 +311,9 @@ class RadauTranscription(Transcription):
     def fixed_mode_bounds_law(self, x):
         return fixed_mode_bounds(self, x)
 
+    def squeezed_phases_law(self, x):
+        return squeezed_phases(self, x)
+
     def diagnose_law(self, x) -> dict:
         return diagnose(self, x)
 
@@ -334,7 +361,8 @@ def fixed_mode_bounds(tr, x):
     """Variable bounds with the mode of every step frozen as at ``x``: for each pair and contact of a
     step, the member that is smaller over the step's stages (its largest value) is fixed at zero at
     every stage (the within-step cross complementarity makes a step one mode); with free steps also
-    the smaller of step k's multiplier and step k - 1's last-stage slack."""
+    the smaller of step k's multiplier and step k - 1's last-stage slack, and at a stick-to-slide
+    switch the stick margin at the node under the sliding step's control (see the comments)."""
     lbx, ubx = tr.lbx.copy(), tr.ubx.copy()
     if not tr.pb.system.n_contacts:
         return lbx, ubx
@@ -356,11 +384,36 @@ def fixed_mode_bounds(tr, x):
     # a step that slides after a stick starts at the cone: its stick-to-slide pair fixes the slack
     # (wl0 at t = 0, the previous step's last wl after it) by the step's mode, not by comparing a
     # speed with a force (a slide that starts slowly would otherwise be frozen at rest)
+    # a slide in step 0 from a rest whose stick margin at t = 0 is positive under the guess's control
+    # cannot start at t = 0 (the theta first pass's modes are means over its steps: its step 0
+    # slides when the force reaches the cone within it, the motor's current building up): step 0
+    # sticks instead, and the slide starts at node 1, placed by the step lengths
+    P = np.concatenate([[0.0], tr.pb.q0, tr.pb.v0])
+    late = slides[0] & (np.array(tr.margin0(x, P), dtype=float).ravel() > 0.0)
+    if np.any(late):
+        ilam, iwl = _blocks(tr, x, "lam")[0][0], _blocks(tr, x, "wl")[0][0]  # (s, m)
+        ubx[ilam[:, late]] = 0.0
+        ubx[iwl[:, late]] = tr.ubx[iwl[:, late]]
+        slides = slides.copy()
+        slides[0] &= ~late
     i0 = tr.ix["wl0"].reshape(-1)
     ubx[i0[slides[0]]] = 0.0
     if tr.pb.N > 1:
-        iwl = _blocks(tr, x, "wl")[0]
-        ubx[iwl[:-1, -1][slides[1:]]] = 0.0
+        # after a stick, the stick force under the sliding step's own control, at the node, must
+        # reach the cone in the slide's direction (wsp, wsm <= 0), and the homotopy's pair (lam of
+        # step k against the previous step's last wl, gated by a variable held at 1) is switched
+        # off (gate 0): the control may jump at the node, and requiring wl = 0 at the end of the
+        # stick step forces that step to ramp its control up to the cone (wasted effort on a
+        # minimum-length step per stick-to-slide switch; with a constant hold the whole stick step
+        # at the cone)
+        loaded = np.max(_blocks(tr, x, "pN")[1], axis=1) > np.max(_blocks(tr, x, "wN")[1], axis=1)
+        starts = slides[1:] & ~slides[:-1] & loaded[1:]  # (N - 1, m)
+        neg = np.max(_blocks(tr, x, "bm")[1], axis=1) > np.max(_blocks(tr, x, "bp")[1], axis=1)
+        isp, ism = tr.ix["wsp"].reshape(-1, tr.pb.system.n_contacts), tr.ix["wsm"].reshape(-1, tr.pb.system.n_contacts)
+        ubx[isp[starts & ~neg[1:]]] = 0.0
+        ubx[ism[starts & neg[1:]]] = 0.0
+        ig = tr.ix["gate"].reshape(-1, tr.pb.system.n_contacts)
+        lbx[ig[starts]] = ubx[ig[starts]] = 0.0
         for a, w in STEP_CROSS[:-1]:
             ia, xa = _blocks(tr, x, a)
             iw, xw = _blocks(tr, x, w)
@@ -368,6 +421,42 @@ def fixed_mode_bounds(tr, x):
             ubx[ia[1:].transpose(0, 2, 1)[a_small]] = 0.0
             ubx[iw[:-1, -1][~a_small]] = 0.0
     return lbx, ubx
+
+
+def _signature(tr, x):
+    """(N, m, 4) booleans: which member of each pair of :data:`PAIRS` is the larger over a step's stages."""
+    return np.stack([np.max(_blocks(tr, x, a)[1], axis=1) > np.max(_blocks(tr, x, w)[1], axis=1)
+                     for a, w in PAIRS], axis=-1)
+
+
+def squeezed_phases(tr, x):
+    """A start for another fixed-phase solve, or None: every step at its lower length bound whose mode
+    differs from a neighbour's takes that neighbour's contact variables (the following step's first).
+
+    The first pass's modes are means over its uniform steps: a switch inside one of its steps may
+    leave a step of a phase that the optimum does not have, which the fixed-phase solve can only
+    shrink to the minimum length (measured: the Jean-Pratt move-and-hold at N = 40 slid back one
+    minimum step late, 0.103 above the optimum)."""
+    pb, m = tr.pb, tr.pb.system.n_contacts
+    if pb.steps != "free" or not m or pb.N < 2:
+        return None
+    ih = tr.ix["h"].reshape(-1)
+    at_lo = x[ih] <= tr.lbx[ih] * (1.0 + 1e-6)
+    sig = _signature(tr, x)
+    x_new, changed = x.copy(), False
+    for k in np.flatnonzero(at_lo):
+        for nb in (k + 1, k - 1):
+            if not 0 <= nb < pb.N:
+                continue
+            diff = np.any(sig[k] != sig[nb], axis=-1)  # (m,)
+            if np.any(diff):
+                for a_w in PAIRS:
+                    for nm in a_w:
+                        idx = _blocks(tr, x, nm)[0]
+                        x_new[idx[k][:, diff]] = x[idx[nb][:, diff]]
+                changed = True
+                break
+    return x_new if changed else None
 
 
 def diagnose(tr, x) -> dict:
@@ -414,8 +503,12 @@ def diagnose(tr, x) -> dict:
     if tr.cross and N > 1:
         for a, w in STEP_CROSS:
             xa, xw = _blocks(tr, x, a)[1], _blocks(tr, x, w)[1]
+            prev = xw[:-1, -1:]
+            if (a, w) == ("lam", "wl"):  # or the stick force under step k's control reached the cone
+                margin = np.minimum(x[tr.ix["wsp"]], x[tr.ix["wsm"]]).reshape(N - 1, 1, m)
+                prev = np.minimum(prev, np.maximum(margin, 0.0))
             cr_a.append(xa[1:].ravel())
-            cr_w.append(np.repeat(xw[:-1, -1:], s, axis=1).ravel())
+            cr_w.append(np.repeat(prev, s, axis=1).ravel())
     own_a, own_w, cr_a, cr_w = (np.concatenate(z) if z else np.zeros(0) for z in (own_a, own_w, cr_a, cr_w))
     k_worst = int(np.argmax(step_res))
     where = "" if not np.any(step_res > 0) else (

@@ -239,7 +239,35 @@ def run_fixed_modes(tr, x0, P0, options: HomotopyOptions, cache: dict):
     P0 = P0.copy()
     P0[0] = 0.0
     solver = ipopt_solver(tr, options, False, cache)
-    x, f, diag, st, dt = _polish(tr, np.asarray(x0, dtype=float), None, None, P0, solver)
+    x, f, diag, st, dt, iterations = _fixed_solve(tr, np.asarray(x0, dtype=float), P0, solver)
+    ok = bool(st["success"]) or st["return_status"] == "Solved_To_Acceptable_Level"
+    squeezed = getattr(tr, "squeezed_phases_law", None)  # (Radau collocation: lcp.ocp.collocation)
+    x_alt = squeezed(x) if ok and squeezed is not None else None
+    merged = ""
+    if x_alt is not None:  # a phase left on minimum-length steps: once more without it, kept if better
+        x2, f2, diag2, st2, dt2, it2 = _fixed_solve(tr, x_alt, P0, solver)
+        dt, iterations = dt + dt2, iterations + it2
+        ok2 = bool(st2["success"]) or st2["return_status"] == "Solved_To_Acceptable_Level"
+        if ok2 and f2 < f and diag2["residual"] <= max(diag["residual"], options.tol) and \
+                diag2["cross"] <= max(diag["cross"], options.tol):
+            merged = f" A phase left on minimum-length steps was merged into its neighbour (cost was {f:.10g})."
+            x, f, diag, st = x2, f2, diag2, st2
+    history = [HomotopyStage(0.0, iterations, diag["residual"], diag["max_product"], f,
+                             st["return_status"], ok, dt)]
+    if not ok:
+        msg = (f"{OCP_STATUS_MESSAGES[-1]} The fixed-phase solve (the guess's mode sequence): IPOPT returned "
+               f"{st['return_status']} (dynamics residual {diag['dynamics']:.3g}).")
+        return x, f, diag, -1, msg, history
+    if diag["residual"] > options.tol or diag["cross"] > options.tol:
+        msg = (f"{OCP_STATUS_MESSAGES[-2]} Residual {diag['residual']:.3g}, cross {diag['cross']:.3g} > "
+               f"tol = {options.tol:.3g} after the fixed-phase solve{_at(diag)}.")
+        return x, f, diag, -2, msg, history
+    return x, f, diag, 0, f"{OCP_STATUS_MESSAGES[0]} (Fixed-phase solve: the guess's mode sequence.{merged})", history
+
+
+def _fixed_solve(tr, x0, P0, solver):
+    """One fixed-phase solve from ``x0`` (the modes of ``x0``), repeated once from an acceptable point."""
+    x, f, diag, st, dt = _polish(tr, x0, None, None, P0, solver)
     iterations = int(st["iter_count"])
     if st["return_status"] == "Solved_To_Acceptable_Level":
         # IPOPT's acceptable level is looser than its tolerance (the dynamics to ~1e-8, a replay miss of
@@ -251,18 +279,7 @@ def run_fixed_modes(tr, x0, P0, options: HomotopyOptions, cache: dict):
         iterations += int(st2["iter_count"])
         if st2["return_status"] == "Solve_Succeeded":
             x, f, diag, st = x2, f2, diag2, st2
-    ok = bool(st["success"]) or st["return_status"] == "Solved_To_Acceptable_Level"
-    history = [HomotopyStage(0.0, iterations, diag["residual"], diag["max_product"], f,
-                             st["return_status"], ok, dt)]
-    if not ok:
-        msg = (f"{OCP_STATUS_MESSAGES[-1]} The fixed-phase solve (the guess's mode sequence): IPOPT returned "
-               f"{st['return_status']} (dynamics residual {diag['dynamics']:.3g}).")
-        return x, f, diag, -1, msg, history
-    if diag["residual"] > options.tol or diag["cross"] > options.tol:
-        msg = (f"{OCP_STATUS_MESSAGES[-2]} Residual {diag['residual']:.3g}, cross {diag['cross']:.3g} > "
-               f"tol = {options.tol:.3g} after the fixed-phase solve{_at(diag)}.")
-        return x, f, diag, -2, msg, history
-    return x, f, diag, 0, f"{OCP_STATUS_MESSAGES[0]} (Fixed-phase solve: the guess's mode sequence.)", history
+    return x, f, diag, st, dt, iterations
 
 
 def run_phases(tr, x0, P0, options: HomotopyOptions, cache: dict):
