@@ -103,7 +103,7 @@ def applicable(system, asm, proj) -> str | None:
         return "control"
     if proj is not None and system.contacts_depend_on_t:
         return "projection"
-    if asm.matrices_constant and system.n > CONSTANT_MATRICES_MAX_N:
+    if getattr(asm, "matrices_constant", False) and system.n > CONSTANT_MATRICES_MAX_N:
         return "large"
     return None
 
