@@ -31,6 +31,7 @@ import functools
 import hashlib
 import os
 from pathlib import Path
+import re
 import sys
 import sysconfig
 import tempfile
@@ -105,9 +106,8 @@ def _default_dir() -> Path:
     return folder
 
 
-#: where the package's numba kernels live (package-relative folders): every module of these folders
-#: counts for :func:`kernel_sources_tag`, and of ``lem`` the modules that use numba
-_KERNEL_FOLDERS = (("lcp", "contact"), ("lcp", "numerics"), ("lcp", "sweeps"), ("lcp", "timestepping"))
+#: the packages whose modules may hold numba kernels
+_KERNEL_PACKAGES = ("lcp", "lem")
 
 
 @functools.lru_cache(maxsize=1)
@@ -117,17 +117,27 @@ def kernel_sources_tag() -> str:
     numba checks a cached kernel against its own file's time stamp only: a kernel whose callee (a
     kernel of another module) or whose global constant (inlined at compile time) changed would be
     loaded stale, silently computing with the old code. The cache therefore lives in a folder named
-    by this digest, which any change to a kernel module changes (reading and hashing the sources
-    costs about 3 ms once per process). Old folders are left for the user to delete.
+    by this digest, taken over every module that uses numba and every module of the package those
+    import from (their callees and constants); other edits keep the compiled kernels. Reading and
+    hashing them costs a few ms once per process. Old folders are left for the user to delete.
     """
     root = Path(__file__).resolve().parents[2]
     digest = hashlib.sha256()
     try:
-        files = [p for parts in _KERNEL_FOLDERS for p in sorted(root.joinpath(*parts).glob("*.py"))]
-        files += [p for p in sorted(root.joinpath("lem").glob("*.py")) if b"njit" in p.read_bytes()]
-        for path in files:
-            digest.update(path.name.encode())
-            digest.update(path.read_bytes())
+        sources = {p: p.read_bytes() for pkg in _KERNEL_PACKAGES for p in root.joinpath(pkg).rglob("*.py")}
+        chosen = set()
+        for path, text in sources.items():
+            if b"njit" not in text:
+                continue
+            chosen.add(path)
+            for mod in re.findall(rb"^\s*from\s+((?:lcp|lem)(?:\.\w+)+)\s+import", text, re.M):
+                base = root.joinpath(*mod.decode().split("."))
+                for cand in (base.with_suffix(".py"), base / "__init__.py"):
+                    if cand in sources:
+                        chosen.add(cand)
+        for path in sorted(chosen):
+            digest.update(str(path.relative_to(root)).encode())
+            digest.update(sources[path])
     except OSError:  # sources not readable (a zipped install): one folder per process start instead
         digest.update(str(os.getpid()).encode())
     return digest.hexdigest()[:16]
