@@ -397,7 +397,7 @@ def test_scheduled_redundant_spatial_pair_general_loop(monkeypatch):
     sum_x = lambda r: r.p_T[:, 0] + r.p_T[:, 2]  # noqa: E731
     assert np.max(np.abs(sum_x(fast) - sum_x(slow))) <= 1e-12 * pt
     # Coulomb's disk at every step, in both loops: the all-stick correction of a singular W used
-    # to move puck a's friction impulse to 2.5 mu p_N (contact_step.STICK_CORRECTION_MAX)
+    # to move puck a's friction impulse to 2.5 mu p_N (contact_step.in_cones)
     for res in (fast, slow):
         for j, mu in enumerate((0.3, 0.5)):
             tang = np.linalg.norm(res.p_T[:, 2 * j:2 * j + 2], axis=1)

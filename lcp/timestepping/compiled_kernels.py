@@ -43,6 +43,7 @@ from lcp.timestepping.activation import LIST_MAX_CONTACTS
 from lcp.contact.law import SCALE_FLOOR
 from lcp.contact.kernels import contact_residual, contact_scale, local_planar, row_absdot, row_dot
 from lcp.numerics.jit import njit
+from lcp.timestepping.contact_step import CONE_RTOL
 from lcp.timestepping.control_kernels import constant_control_dv, dense_mv
 
 __all__ = ["BRANCH_MAX_SWEEPS", "BRANCH_DIRECT_MAX", "DONE", "NEEDS_PYTHON", "NONFINITE", "BUFFER_FULL",
@@ -669,6 +670,19 @@ def run_steps(k0, k_end, every, mode, fv, ct, h, th, close_tol, open_tol, res_to
                         for t in range(na):
                             j = act[t]
                             finite = finite and math.isfinite(dpi[2 * j]) and math.isfinite(dpi[2 * j + 1])
+                        # the refined impulse in every cone (contact_step.in_cones, the same test): on
+                        # the singular branch of redundant contacts the refinement may move their split out
+                        if finite:
+                            big = 0.0
+                            for t in range(na):
+                                j = act[t]
+                                big = max(big, abs(r[2 * j] + dpi[2 * j]), abs(r[2 * j + 1] + dpi[2 * j + 1]))
+                            tol = CONE_RTOL * big
+                            for t in range(na):
+                                j = act[t]
+                                pn = r[2 * j] + dpi[2 * j]
+                                if pn < -tol or abs(r[2 * j + 1] + dpi[2 * j + 1]) > mu[j] * pn + tol:
+                                    finite = False
                         if finite:
                             _shtp(Cp, Ci, Cx, act, na, m, dpi, t1)
                             for t in range(na):

@@ -16,23 +16,41 @@ import numpy as np
 from lcp.contact.problem import STICK, ContactProblem
 from lcp.contact.solvers import make_solver
 
-__all__ = ["STICK_CORRECTION_MAX", "ContactStep", "count_solve", "fallback_for", "retry_with_fallback",
-           "stick_correction_ok"]
+__all__ = ["CONE_RTOL", "ContactStep", "count_solve", "fallback_for", "in_cones", "retry_with_fallback"]
 
-#: largest all-stick correction accepted, relative to the largest impulse. The correction removes
-#: the rounding a solve leaves in the stuck velocities (cond(W) eps of the impulse: 1e-8 with an
-#: ill-conditioned mass matrix). Where contacts are redundant (two pucks joined by a bar, both
-#: stuck along it) W is singular to rounding and the solve returns a null-space component of the
-#: size of the impulses themselves: it moved a puck's friction impulse to 2.5 times mu p_N, a
-#: Coulomb violation with a "solved" residual, before this bound.
-STICK_CORRECTION_MAX = 1e-6
+#: tolerance of :func:`in_cones`, relative to the largest impulse
+CONE_RTOL = 1e-12
 
 
-def stick_correction_ok(dp, p) -> bool:
-    """Whether the all-stick correction ``dp`` of the impulse ``p`` is a rounding correction
-    (:data:`STICK_CORRECTION_MAX`); the compiled loops apply the same test."""
-    return bool(np.max(np.abs(dp), initial=0.0) <= STICK_CORRECTION_MAX * np.max(np.abs(p), initial=0.0))
+def in_cones(p, mu, dims) -> bool:
+    """Whether every contact's impulse in ``p`` (the k normal impulses, then ``dims[j]`` tangential
+    components per contact) lies in its Coulomb cone: p_N >= 0 and |p_T| <= mu p_N, within
+    :data:`CONE_RTOL` of the largest impulse. The compiled loops apply the same test.
 
+    The refinement after a solve (the planar branch solve, the spatial all-stick correction)
+    removes the rounding the solve leaves in the velocities. Where contacts are redundant (two
+    pucks joined by a bar, a rod lying on both ends, both stuck) its matrix is singular to
+    rounding and its solution has a null-space component: it only moves the split of the
+    redundant impulses, which is harmless while every contact stays in its cone, but it moved a
+    puck's friction impulse to 2.46 mu p_N under a "solved" residual (and a block's to 2.9 mu p_N
+    after Lemke). A refined impulse outside a cone is therefore dropped for the solver's own.
+    """
+    k = len(dims)
+    tol = CONE_RTOL * float(np.max(np.abs(p), initial=0.0))
+    off = k
+    for j in range(k):
+        pn = float(p[j])
+        if pn < -tol:
+            return False
+        if dims[j] == 1:
+            pt = abs(float(p[off]))
+        else:
+            a, b = float(p[off]), float(p[off + 1])
+            pt = math.sqrt(a * a + b * b)
+        off += int(dims[j])
+        if pt > float(mu[j]) * pn + tol:
+            return False
+    return True
 
 
 def fallback_for(solver, k: int):
@@ -208,7 +226,7 @@ class ContactStep:
                 if ea is not None:
                     r[: active.size] += shift
                 dp = pb.solve_linear(pb.W, -r)
-                if dp is not None and stick_correction_ok(dp, p):
+                if dp is not None and in_cones(p + dp, pb.mu, pb.dims):
                     p = p + dp
                     dv = dv + SHta @ dp
         else:
@@ -222,7 +240,7 @@ class ContactStep:
             if ea is not None:
                 r[: active.size] += shift
             dp = pb.with_q(r).solve_branch(md)
-            if dp is not None and math.isfinite(float(dp.sum())):
+            if dp is not None and math.isfinite(float(dp.sum())) and in_cones(p + dp, pb.mu, np.ones(active.size, dtype=np.int64)):
                 p = p + dp
                 dv = dv + SHta @ dp
         return dv, p, md, cols, sol

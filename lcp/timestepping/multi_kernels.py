@@ -31,7 +31,7 @@ from lcp.contact.spatial_nsgs import (
     solve_dense,
 )
 from lcp.numerics.jit import njit
-from lcp.timestepping.contact_step import STICK_CORRECTION_MAX
+from lcp.timestepping.contact_step import CONE_RTOL
 
 __all__ = ["cone_multi_step", "cone_natural_map_error", "record_multi"]
 
@@ -215,13 +215,23 @@ def cone_multi_step(act, na, m, n, r, o_W, o_H, o_SHt, o_b1, moving, v, vfree, d
                 s = s + o_b1[ra]
             rl[a] = -(s + shift[a]) if a < k else -s
         dp, ok = solve_dense(Wl, rl)
-        if ok:  # a rounding correction only (contact_step.stick_correction_ok: same test)
-            dmax = 0.0
-            pmax = 0.0
+        if ok:  # the corrected impulse in every cone (contact_step.in_cones: the same test)
+            big = 0.0
             for b in range(nl):
-                dmax = max(dmax, abs(dp[b]))
-                pmax = max(pmax, abs(pv[b]))
-            ok = dmax <= STICK_CORRECTION_MAX * pmax
+                big = max(big, abs(pv[b] + dp[b]))
+            tol = CONE_RTOL * big
+            off = k
+            for i in range(k):
+                pn = pv[i] + dp[i]
+                if dl[i] == 1:
+                    pt = abs(pv[off] + dp[off])
+                else:
+                    ta = pv[off] + dp[off]
+                    tb = pv[off + 1] + dp[off + 1]
+                    pt = math.sqrt(ta * ta + tb * tb)
+                off += dl[i]
+                if pn < -tol or pt > mus[i] * pn + tol:
+                    ok = False
         if ok:
             for b in range(nl):
                 pv[b] = pv[b] + dp[b]

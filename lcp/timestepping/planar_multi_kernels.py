@@ -42,6 +42,7 @@ import numpy as np
 from lcp.contact.law import COUPLING_FLOOR, SCALE_FLOOR
 from lcp.contact.nsgs import checks_blocked_dense, nsgs_sweeps, residual_blocked_dense
 from lcp.numerics.jit import njit
+from lcp.timestepping.contact_step import CONE_RTOL
 from lcp.timestepping.step_products import cols_f, matvec, rows
 
 __all__ = ["MODE_MARGIN", "planar_multi_step", "solve_planar"]
@@ -490,7 +491,17 @@ def planar_multi_step(act, na, m, n, r, o_W, o_H, o_SHt, o_b1, moving, v, vfree,
         tot = 0.0
         for a in range(n2):
             tot += dp[a]
-        if math.isfinite(tot):
+        # the refined impulse in every cone (contact_step.in_cones: the same test)
+        big = 0.0
+        for a in range(n2):
+            big = max(big, abs(p[a] + dp[a]))
+        tol = CONE_RTOL * big
+        inside = True
+        for j in range(k):
+            pn = p[j] + dp[j]
+            if pn < -tol or abs(p[k + j] + dp[k + j]) > mus[j] * pn + tol:
+                inside = False
+        if math.isfinite(tot) and inside:
             for a in range(n2):
                 p[a] = p[a] + dp[a]
             sp = np.dot(SHta, dp)
