@@ -1,4 +1,5 @@
-"""Checks shared by the tests: a Moreau-Jean result against the Jean-Pratt exact solution."""
+"""Checks shared by the tests: a Moreau-Jean result against the Jean-Pratt exact solution, and a
+call counter for asserting which route a simulation took."""
 import numpy as np
 
 
@@ -22,3 +23,16 @@ def jean_pratt_errors(scene, res):
     N_rel = float(np.max(np.abs(res.p_N[clean, 0] - PN[clean]) / PN[clean])) if clean.any() else 0.0
     B = scene.B if np.isfinite(scene.B) else 0.0
     return dict(x=x_err, bound=B * h * h / 8, y=y, N_rel=N_rel, residual=res.stats.max_residual)
+
+
+def counting(monkeypatch, module, name):
+    """Replace ``module.name`` by a wrapper that records each call; returns the list of records."""
+    calls = []
+    real = getattr(module, name)
+
+    def counted(*a, **k):
+        calls.append(1)
+        return real(*a, **k)
+
+    monkeypatch.setattr(module, name, counted)
+    return calls

@@ -24,6 +24,7 @@ from lcp.model.system import Contact, System
 from lcp.numerics.jit import HAVE_NUMBA
 from lcp.timestepping import codegen, compiled_loop, general_loop
 from lcp.timestepping.assembly import StepAssembly
+from tests.helpers import counting
 
 pytestmark = pytest.mark.skipif(not HAVE_NUMBA or codegen.c_compiler() is None,
                                 reason="needs numba and a C compiler")
@@ -109,18 +110,6 @@ Q_CASES = {"pendulum": (pendulum, [0.0, -1.0], [2.0, 0.0]),
            "rod": (rod, [0.0, 0.5 * np.sin(0.5), 0.5], [0.5, 0.0, 0.0]),
            "thruster": (thruster, [0.0, 0.0, 0.3, 1.0, 0.0, 0.0, 0.0], [0.3, 0.0, 0.0, 0.5, 0.2, 0.0])}
 C_ROWS = [[[3.0, 0.0], [-2.0, 5.0]], [[-8.0, 30.0], [0.0, 25.0]], [[30.0, 0.0], [10.0, 0.0]]]
-
-
-def counting(monkeypatch, module, name):
-    calls = []
-    real = getattr(module, name)
-
-    def counted(*a, **k):
-        calls.append(1)
-        return real(*a, **k)
-
-    monkeypatch.setattr(module, name, counted)
-    return calls
 
 
 def same(a, b):

@@ -39,6 +39,7 @@ from lcp.numerics.jit import HAVE_NUMBA
 from lcp.scenes.bead_column import bead_column
 from lcp.timestepping import codegen, compiled_loop, general_loop, planar_multi_kernels
 from lcp.timestepping.assembly import StepAssembly
+from tests.helpers import counting
 
 pytestmark = pytest.mark.skipif(not HAVE_NUMBA, reason="needs numba")
 
@@ -78,18 +79,6 @@ def schedule(hold, values, nu):
     if hold == "linear":
         return ControlSchedule(TIMES, np.vstack([values[:, 0], values[-1:, 1]]), hold="linear")
     return AffineSchedule(TIMES, values.reshape(-1, nu))
-
-
-def counting(monkeypatch, module, name):
-    calls = []
-    real = getattr(module, name)
-
-    def counted(*a, **k):
-        calls.append(1)
-        return real(*a, **k)
-
-    monkeypatch.setattr(module, name, counted)
-    return calls
 
 
 def same(a, b):

@@ -22,9 +22,9 @@ __all__ = ["CONE_RTOL", "ContactStep", "count_solve", "fallback_for", "in_cones"
 CONE_RTOL = 1e-12
 
 
-def in_cones(p, mu, dims) -> bool:
+def in_cones(p, mu, dims=None) -> bool:
     """Whether every contact's impulse in ``p`` (the k normal impulses, then ``dims[j]`` tangential
-    components per contact) lies in its Coulomb cone: p_N >= 0 and |p_T| <= mu p_N, within
+    components per contact; one each where ``dims`` is None: a planar problem) lies in its Coulomb cone: p_N >= 0 and |p_T| <= mu p_N, within
     :data:`CONE_RTOL` of the largest impulse. The compiled loops apply the same test.
 
     The refinement after a solve (the planar branch solve, the spatial all-stick correction)
@@ -35,19 +35,20 @@ def in_cones(p, mu, dims) -> bool:
     puck's friction impulse to 2.46 mu p_N under a "solved" residual (and a block's to 2.9 mu p_N
     after Lemke). A refined impulse outside a cone is therefore dropped for the solver's own.
     """
-    k = len(dims)
+    k = len(mu) if dims is None else len(dims)
     tol = CONE_RTOL * float(np.max(np.abs(p), initial=0.0))
     off = k
     for j in range(k):
         pn = float(p[j])
         if pn < -tol:
             return False
-        if dims[j] == 1:
+        d = 1 if dims is None else int(dims[j])
+        if d == 1:
             pt = abs(float(p[off]))
         else:
             a, b = float(p[off]), float(p[off + 1])
             pt = math.sqrt(a * a + b * b)
-        off += int(dims[j])
+        off += d
         if pt > float(mu[j]) * pn + tol:
             return False
     return True
@@ -240,7 +241,7 @@ class ContactStep:
             if ea is not None:
                 r[: active.size] += shift
             dp = pb.with_q(r).solve_branch(md)
-            if dp is not None and math.isfinite(float(dp.sum())) and in_cones(p + dp, pb.mu, np.ones(active.size, dtype=np.int64)):
+            if dp is not None and math.isfinite(float(dp.sum())) and in_cones(p + dp, pb.mu):
                 p = p + dp
                 dv = dv + SHta @ dp
         return dv, p, md, cols, sol
