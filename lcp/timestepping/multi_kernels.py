@@ -33,7 +33,7 @@ from lcp.contact.spatial_nsgs import (
 from lcp.numerics.jit import njit
 from lcp.timestepping.contact_step import CONE_RTOL
 
-__all__ = ["cone_multi_step", "cone_natural_map_error", "record_multi"]
+__all__ = ["cone_multi_step", "cone_natural_map_error", "record_multi", "store_solve"]
 
 _EPS = 2.220446049250313e-16
 
@@ -240,16 +240,23 @@ def cone_multi_step(act, na, m, n, r, o_W, o_H, o_SHt, o_b1, moving, v, vfree, d
                 for b in range(nl):
                     s += o_SHt[a + idx[b] * n] * dp[b]
                 dv[a] = dv[a] + s
+    store_solve(istate, fstate, sweeps, res, pv, nl, md, k, P, MDo)
+    return True
+
+
+@njit(cache=True)
+def store_solve(istate, fstate, iterations, res, p, nl, md, k, P, MDo):
+    """A kernel's solved step in the loop's counters (solver calls, iterations, their maximum,
+    kernel-solved steps, largest residual) and its impulses and modes into P and MDo."""
     istate[2] += 1
-    istate[3] += sweeps
-    istate[4] = max(istate[4], sweeps)
+    istate[3] += iterations
+    istate[4] = max(istate[4], iterations)
     istate[18] += 1
     fstate[0] = max(fstate[0], res)
     for a in range(nl):
-        P[a] = pv[a]
+        P[a] = p[a]
     for i in range(k):
         MDo[i] = md[i]
-    return True
 
 
 @njit(cache=True)

@@ -10,9 +10,11 @@ compiled sweeps of :func:`lcp.contact.nsgs.nsgs_sweeps`, then semismooth Newton,
 the acceptance test of :meth:`lcp.contact.solver_base.OneStepSolver.solve`, the modes
 (:meth:`lcp.contact.problem.ContactProblem.modes`) and the branch refinement (the dense
 :meth:`~lcp.contact.planar_branches.PlanarBranches.solve_branch`). The step's bookkeeping is
-:func:`lcp.timestepping.multi_kernels.record_multi`'s. Imports NumPy, numba
-(:mod:`lcp.numerics.jit`), the compiled kernels of :mod:`lcp.contact.nsgs` and the products of
-:mod:`lcp.timestepping.step_products`; never the loops, the Python solvers or anything above
+:func:`lcp.timestepping.multi_kernels.record_multi`'s (its counters and stores:
+:func:`~lcp.timestepping.multi_kernels.store_solve`). Imports NumPy, numba
+(:mod:`lcp.numerics.jit`), the compiled kernels of :mod:`lcp.contact.nsgs`, the products of
+:mod:`lcp.timestepping.step_products`, ``store_solve`` and the cone tolerance of
+:mod:`lcp.timestepping.contact_step`; never the loops, the Python solvers or anything above
 :mod:`lcp.timestepping`.
 
 The arithmetic is the Python route's, operation for operation (the same sweeps kernel on the same
@@ -43,6 +45,7 @@ from lcp.contact.law import COUPLING_FLOOR, SCALE_FLOOR
 from lcp.contact.nsgs import checks_blocked_dense, nsgs_sweeps, residual_blocked_dense
 from lcp.numerics.jit import njit
 from lcp.timestepping.contact_step import CONE_RTOL
+from lcp.timestepping.multi_kernels import store_solve
 from lcp.timestepping.step_products import cols_f, matvec, rows
 
 __all__ = ["MODE_MARGIN", "planar_multi_step", "solve_planar"]
@@ -507,13 +510,5 @@ def planar_multi_step(act, na, m, n, r, o_W, o_H, o_SHt, o_b1, moving, v, vfree,
             sp = np.dot(SHta, dp)
             for a in range(n):
                 dv[a] = dv[a] + sp[a]
-    istate[2] += 1
-    istate[3] += its
-    istate[4] = max(istate[4], its)
-    istate[18] += 1
-    fstate[0] = max(fstate[0], res)
-    for a in range(n2):
-        P[a] = p[a]
-    for i in range(k):
-        MDo[i] = md[i]
+    store_solve(istate, fstate, its, res, p, n2, md, k, P, MDo)
     return True
