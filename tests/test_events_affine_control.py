@@ -251,7 +251,7 @@ def test_ocp_replay_in_one_integration_matches_the_restarted_one():
     """An affine-hold OCP solution replayed over the whole schedule at once (closed form) equals
     the replay restarted at every node, and its per-interval pieces keep their layout."""
     from lcp.ocp import OptimalControlProblem, effort, replay
-    from lcp.ocp.replay import _closed_form_system, _replay_event_pieces
+    from lcp.ocp.replay import _closed_form_system, event_pieces
 
     sc, system = block(0.5, 0.0)
     ocp = OptimalControlProblem(system, 6, q0=sc.q0, v0=sc.v0, T=1.0, stage_cost=effort, hold="affine",
@@ -261,7 +261,7 @@ def test_ocp_replay_in_one_integration_matches_the_restarted_one():
     assert _closed_form_system(res, {"n_eval": 5}) is not None
     assert _closed_form_system(res, {"n_eval": 5, "rtol": 1e-12}) is None  # other options: restarted
     rp = replay(res, method="event", n_eval=5)
-    q_r, v_r, pieces_r = _replay_event_pieces(res, n_eval=5, rtol=1e-12)
+    q_r, v_r, pieces_r = event_pieces(res, n_eval=5, rtol=1e-12)
     assert np.max(np.abs(rp.q - q_r)) <= 1e-13 and np.max(np.abs(rp.v - v_r)) <= 1e-13
     assert len(rp.pieces) == len(pieces_r) == 6
     for a, b, h in zip(rp.pieces, pieces_r, np.diff(res.t)):

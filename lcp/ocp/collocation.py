@@ -53,7 +53,6 @@ import casadi as ca
 import numpy as np
 
 from lcp.contact.problem import ContactProblem
-from lcp.ocp.pairs import add_pairs
 from lcp.ocp.transcription import PAIRS, Transcription
 
 __all__ = ["RADAU_STAGES", "RadauTranscription", "fixed_mode_bounds", "radau_tableau"]
@@ -203,12 +202,7 @@ class RadauTranscription(Transcription):
                 for key, sign in (("wsp", -1.0), ("wsm", 1.0)):
                     var = self._var(f"{key}{k}", m, -np.inf, np.inf, key=key)
                     self._constrain(var - (mu * fs[:m] + sign * fs[m:]), 0.0, 0.0)
-        if pb.terminal_cost is not None:
-            J = J + _scalar(pb.terminal_cost(Tv, qs[-1], vs[-1]), "terminal_cost")
-        if pb.terminal_constraints is not None:
-            self._constrain(ca.vec(ca.SX(pb.terminal_constraints(qs[-1], vs[-1]))), 0.0, 0.0)
-        if z is not None:
-            J = J + z
+        J = self._terminal_terms(J, Tv, qs, vs, z)
         g = ca.vertcat(*self._g) if self._g else ca.SX.zeros(0, 1)
         self.nlp = {"x": ca.vertcat(*self._x), "f": J, "g": g, "p": ca.vertcat(sigma, q0p, v0p)}
         #: (x, p) -> (the collocation residuals, the stages' (t, h, Q, V) as columns)
@@ -250,25 +244,6 @@ class RadauTranscription(Transcription):
         # the stick forces are then not unique and this picks the smallest)
         W = W + 1e-12 * ca.trace(W) * ca.DM.eye(2 * m)
         return -ca.solve(W, ca.mtimes(H, ca.solve(Mq, F)) + drift)
-
-    def _step_terms(self, J, st, us, k, h, ua, ub, z, sigma, pair_sizes):
-        """The step's cost terms and the user's path constraints and pairs (as the theta transcription)."""
-        pb = self.pb
-        if pb.stage_cost is not None:
-            J = J + h * _scalar(pb.stage_cost(st), "stage_cost")
-        if pb.control_rate_weight and pb.hold == "affine":
-            J = J + pb.control_rate_weight * ca.sumsqr(ub - ua) / h
-        elif pb.control_rate_weight and k + 1 < len(us):
-            J = J + pb.control_rate_weight * ca.sumsqr(us[k + 1] - us[k]) / h
-        if pb.path_constraints is not None:
-            self._constrain(ca.vec(ca.SX(pb.path_constraints(st))), -np.inf, 0.0)
-        if pb.path_equalities is not None:
-            self._constrain(ca.vec(ca.SX(pb.path_equalities(st))), 0.0, 0.0)
-        if pb.complementarity:
-            add_pairs(pb.complementarity, k, st, sigma, self._var, self._constrain, pair_sizes)
-        if pb.max_cost is not None:
-            self._constrain(_scalar(pb.max_cost(st), "max_cost") - z, -np.inf, 0.0)
-        return J
 
     # ------------------------------------------------------------------ numbers out of x
     def _stage_forces(self, x):
@@ -316,13 +291,6 @@ class RadauTranscription(Transcription):
 
     def diagnose_law(self, x) -> dict:
         return diagnose(self, x)
-
-
-def _scalar(expr, name):
-    x = ca.SX(expr)
-    if x.numel() != 1:
-        raise ValueError(f"{name} must return a scalar, got shape {x.shape}")
-    return x
 
 
 def fill_x0(tr, x0, gs, steps) -> None:

@@ -25,7 +25,7 @@ from lcp.model.control import ControlSchedule
 from lcp.ocp.pairs import pair_violation
 from lcp.ocp.results import OCPResult, ReplayCheck, ReplayResult
 
-__all__ = ["replay", "replay_check"]
+__all__ = ["event_pieces", "replay", "replay_check"]
 
 
 def _event_available() -> bool:
@@ -124,13 +124,13 @@ def _replay_event_whole(result: OCPResult, sysw, n_eval: int = 1000):
     return sim.q[idx], sim.v[idx], _cut(sim, t, [int(n_eval)] * (len(t) - 1))
 
 
-def _replay_event_pieces(result: OCPResult, **options):
+def event_pieces(result: OCPResult, restart: bool = False, **options):
     """Event-driven replay: (q, v) at the nodes, the piece results. One integration over the whole
     schedule when its phases have closed forms (exact, so a restart at the nodes changes nothing
-    but the cost); else restarted at every node with that interval's schedule."""
+    but the cost) unless ``restart``; else restarted at every node with that interval's schedule."""
     from lcp.simulation import simulate
 
-    sysw = _closed_form_system(result, options)
+    sysw = None if restart else _closed_form_system(result, options)
     if sysw is not None:
         return _replay_event_whole(result, sysw, **options)
     pb = result.problem
@@ -197,7 +197,7 @@ def replay(result: OCPResult, refine: int = 10, method: str = "moreau-jean", sol
     pb = result.problem
     N = len(result.t) - 1
     if method == "event":
-        q, v, pieces = _replay_event_pieces(result, **method_options)
+        q, v, pieces = event_pieces(result, **method_options)
         sim, h = pieces[-1], float("nan")
     else:
         pieces = []

@@ -17,11 +17,13 @@ from lcp.ocp.complementarity import run_homotopy, run_phases
 from lcp.ocp.guess import event_guess, resample, x0_from_guess
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions
 from lcp.ocp.replay import replay_check
-from lcp.ocp.results import OCPGuess, OCPResult
+from lcp.ocp.results import HomotopyStage, OCPGuess, OCPResult
+from lcp.ocp.shooting import INTEGRATOR_TOL, NotShootable, solve_shooting
 from lcp.ocp.spatial import SpatialTranscription
 from lcp.ocp.transcription import Transcription
 
-__all__ = ["bound_steps_note", "default_starts", "first_pass", "guess_from", "piecewise_uniform", "result_of",
+__all__ = ["bound_steps_note", "default_starts", "first_pass", "guess_from", "piecewise_uniform", "polished",
+           "result_of",
            "solve_problem", "unbounded_note"]
 
 
@@ -82,7 +84,41 @@ def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
             alt.message += (f" (The relaxed tail's solution, cost {cost:.10g}, failed its replay: "
                             f"{res.message})")
             return alt
+    if res.status < 0 and problem.replay_tol is not None and np.all(np.isfinite(res.u)):
+        return polished(problem, res, t0)
     return res
+
+
+def polished(problem, res, t0) -> OCPResult:
+    """The exact-phase shooting polish (:mod:`lcp.ocp.shooting`) of a result that failed (its
+    replay, or the solve): the phase sequence of the event replay of its control, solved again with
+    each phase integrated exactly. Returned when it succeeds and its replay is within tolerance;
+    else ``res`` with a note saying why not."""
+    try:
+        x, cost, diag, st, dt, tr = solve_shooting(problem, res)
+    except NotShootable as exc:
+        res.message += f" (Exact-phase shooting not tried: {exc}.)"
+        return res
+    except RuntimeError as exc:  # the replay that gives the phases, or an integrator, failed
+        res.message += f" (Exact-phase shooting failed: {exc})"
+        return res
+    ok = st["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    stage = HomotopyStage(0.0, int(st["iter_count"]), diag["residual"], 0.0, cost, st["return_status"], ok, dt)
+    segments = sum(len(s) for s in tr.plan)
+    how = (f"exact-phase shooting on the event replay's {segments} phases (CVODES, rtol "
+           f"{INTEGRATOR_TOL['reltol']:.0e}), started from the transcription's control")
+    if not ok or diag["dynamics"] > 1e-8 or diag["residual"] > 1e-8:
+        res.message += (f" (Exact-phase shooting failed: IPOPT returned {st['return_status']}, defect "
+                        f"{diag['dynamics']:.2e}, mode conditions violated by {diag['residual']:.2e}.)")
+        return res
+    out = result_of(problem, x, cost, diag, 0, f"{OCP_STATUS_MESSAGES[0]} (Solved by {how}.)",
+                    res.homotopy + [stage], time.perf_counter() - t0, tr=tr)
+    out = _checked(problem, out, "shooting")
+    if not out.success:
+        res.message += f" (Exact-phase shooting: {out.message})"
+        return res
+    out.message += f" The transcription's result: {res.message}"
+    return out
 
 
 def _checked(problem, res, method):
@@ -187,11 +223,12 @@ def bound_steps_note(problem, res) -> str:
             f"be held at a local optimum; compare with method='homotopy'.")
 
 
-def result_of(problem, x, cost, diag, status, message, history, solve_time) -> OCPResult:
-    T, hs, q, v, u, pN, pT = problem.transcription.unpack(x)
+def result_of(problem, x, cost, diag, status, message, history, solve_time, tr=None) -> OCPResult:
+    tr = problem.transcription if tr is None else tr
+    T, hs, q, v, u, pN, pT = tr.unpack(x)
     t = np.concatenate([[0.0], np.cumsum(hs)])
     t[-1] = T
-    peak = float(x[problem.transcription.ix["z"]].ravel()[0]) if problem.max_cost is not None else float("nan")
+    peak = float(x[tr.ix["z"]].ravel()[0]) if problem.max_cost is not None else float("nan")
     return OCPResult(t=t, q=q, v=v, u=u, control=problem.schedule(t, u), hold=problem.hold, steps=hs,
                      p_N=pN, p_T=pT, modes=diag["modes"], T=T, h=T / problem.N, cost=cost, peak=peak,
                      complementarity_residual=diag["residual"], lcp_residual=diag["lcp"],

@@ -292,26 +292,8 @@ class Transcription:
                     self._constrain(prod + sigma, 0.0, np.inf)
                     gS = blk["wN"]
             st = pb.make_step(k, tk[k], h, qa, qb, va, vb, ua, ub, pN, pT)
-            if pb.stage_cost is not None:
-                J = J + h * _scalar(pb.stage_cost(st), "stage_cost")
-            if pb.control_rate_weight and affine:
-                J = J + pb.control_rate_weight * ca.sumsqr(ub - ua) / h
-            elif pb.control_rate_weight and k + 1 < len(us):
-                J = J + pb.control_rate_weight * ca.sumsqr(us[k + 1] - us[k]) / h
-            if pb.path_constraints is not None:
-                self._constrain(ca.vec(ca.SX(pb.path_constraints(st))), -np.inf, 0.0)
-            if pb.path_equalities is not None:
-                self._constrain(ca.vec(ca.SX(pb.path_equalities(st))), 0.0, 0.0)
-            if pb.complementarity:  # the user's pairs, relaxed with the contacts' (lcp.ocp.pairs)
-                add_pairs(pb.complementarity, k, st, sigma, self._var, self._constrain, pair_sizes)
-            if pb.max_cost is not None:
-                self._constrain(_scalar(pb.max_cost(st), "max_cost") - z, -np.inf, 0.0)
-        if pb.terminal_cost is not None:
-            J = J + _scalar(pb.terminal_cost(Tv, qs[-1], vs[-1]), "terminal_cost")
-        if pb.terminal_constraints is not None:
-            self._constrain(ca.vec(ca.SX(pb.terminal_constraints(qs[-1], vs[-1]))), 0.0, 0.0)
-        if z is not None:
-            J = J + z
+            J = self._step_terms(J, st, us, k, h, ua, ub, z, sigma, pair_sizes)
+        J = self._terminal_terms(J, Tv, qs, vs, z)
         g = ca.vertcat(*self._g) if self._g else ca.SX.zeros(0, 1)
         self.nlp = {"x": ca.vertcat(*self._x), "f": J, "g": g, "p": ca.vertcat(sigma, q0p, v0p)}
         #: (x, p) -> the velocity after each node's impulse (n, N): the start of each step
@@ -324,6 +306,34 @@ class Transcription:
         self.lbg = np.concatenate(self._lbg) if self._lbg else np.zeros(0)
         self.ubg = np.concatenate(self._ubg) if self._ubg else np.zeros(0)
         del self._x, self._g, self._lbx, self._ubx, self._lbg, self._ubg, self._nx
+
+    def _step_terms(self, J, st, us, k, h, ua, ub, z, sigma, pair_sizes):
+        """The step's cost terms and the user's path constraints and pairs (every transcription's)."""
+        pb = self.pb
+        if pb.stage_cost is not None:
+            J = J + h * _scalar(pb.stage_cost(st), "stage_cost")
+        if pb.control_rate_weight and pb.hold == "affine":
+            J = J + pb.control_rate_weight * ca.sumsqr(ub - ua) / h
+        elif pb.control_rate_weight and k + 1 < len(us):
+            J = J + pb.control_rate_weight * ca.sumsqr(us[k + 1] - us[k]) / h
+        if pb.path_constraints is not None:
+            self._constrain(ca.vec(ca.SX(pb.path_constraints(st))), -np.inf, 0.0)
+        if pb.path_equalities is not None:
+            self._constrain(ca.vec(ca.SX(pb.path_equalities(st))), 0.0, 0.0)
+        if pb.complementarity:  # the user's pairs, relaxed with the contacts' (lcp.ocp.pairs)
+            add_pairs(pb.complementarity, k, st, sigma, self._var, self._constrain, pair_sizes)
+        if pb.max_cost is not None:
+            self._constrain(_scalar(pb.max_cost(st), "max_cost") - z, -np.inf, 0.0)
+        return J
+
+    def _terminal_terms(self, J, Tv, qs, vs, z):
+        """The terminal cost and constraints, and the epigraph variable of max_cost."""
+        pb = self.pb
+        if pb.terminal_cost is not None:
+            J = J + _scalar(pb.terminal_cost(Tv, qs[-1], vs[-1]), "terminal_cost")
+        if pb.terminal_constraints is not None:
+            self._constrain(ca.vec(ca.SX(pb.terminal_constraints(qs[-1], vs[-1]))), 0.0, 0.0)
+        return J if z is None else J + z
 
     def control_pair(self, us, k):
         """The control at the start and at the end of step k (lists of per-row symbols or arrays)."""
@@ -403,10 +413,14 @@ class Transcription:
         u = np.vstack([x[i] for i in ix["u"]]).reshape(-1, pb.nu)
         if m:
             pN = steps[:, None] * x[ix["pN"]].reshape(N, m)
-            pT = steps[:, None] * (x[ix["bp"]] - x[ix["bm"]]).reshape(N, m)
+            pT = steps[:, None] * self._mean_friction(x).reshape(N, m)
         else:
             pN = pT = np.zeros((N, 0))
         return T, steps, q, v, u, pN, pT
+
+    def _mean_friction(self, x):
+        """The mean friction force of each step and contact, flat (step-major)."""
+        return x[self.ix["bp"]] - x[self.ix["bm"]]
 
     def impulses(self, x):
         """The impulses (P_N, P_T) at the start node of each step, shape (N, m) each."""

@@ -1,0 +1,438 @@
+"""Exact-phase multiple shooting: the optimal control on a fixed sequence of contact modes.
+
+The transcriptions (:mod:`lcp.ocp.transcription`, :mod:`lcp.ocp.collocation`) find the contact
+phases and a control near the optimum, but their steps carry a discretisation error: the event
+replay of their control misses their own final state (nosnoc's motor at N = 30: 0.50 with the
+theta step, 4.6e-4 with Radau IIA). This module removes that error. It takes the sequence of
+smooth phases that the event method finds when it replays the transcription's control (each
+control interval k split into segments j of one contact mode each, with their switch times), and
+solves the optimal control problem again with that sequence fixed:
+
+- each segment is integrated by CVODES to a tolerance of 1e-12 (the event method's DOP853 replay
+  uses rtol 1e-12), in the mode's dynamics: with C the closed contacts, S the sticking ones and
+  s_j = +1 (slide+, u_T > 0) or -1 (slide-) on the sliding ones,
+
+      M a = F + B u + sum_{j in C} (H_Nj' - s_j mu_j H_Tj' [j slides]) lambda_Nj + sum_{j in S} H_Tj' lambda_Tj,
+      H_Nj a + (dH_Nj/dt) v = 0 (j in C),     H_Tj a + (dH_Tj/dt) v = 0 (j in S),
+
+  (bilateral constraints as closed frictionless contacts), and the impulses of a control
+  interval are the integrals of the forces (quadratures);
+- the segment durations are unknowns (summing to the interval's length, itself an unknown with
+  free steps): the switch times move;
+- each mode is kept admissible at both ends of its segment (lambda_N >= 0 on a closed contact,
+  |lambda_T| <= mu lambda_N on a sticking one, s u_T >= 0 on a sliding one, g >= 0 on an open
+  one at the segment's end), and each switch is one the event method takes: a stop (slide to
+  stick or reversal) at u_T = 0, a slip from stick with the tangential acceleration along the
+  slide, a lift-off with the free normal acceleration >= 0;
+- the costs, constraints and control holds are the problem's own (its ``Step`` callables on the
+  interval's end states and impulses).
+
+The solution is then exact up to the integrator's tolerance: its replay repeats it (misses of
+1e-9 and below where the transcription missed by 1e-1 to 1e-4). It is a local optimum for that
+phase sequence: a phase the optimum does not have can only shrink to zero length.
+
+Not modelled (:class:`NotShootable` says which): impacts and touch-downs (a contact that closes
+inside the horizon), spatial contacts, the user's complementarity pairs, contacts or constraints
+that move with t, kinematic maps.
+
+Imports CasADi, NumPy, the contact modes, the replay and the theta transcription (whose NLP
+bookkeeping it reuses); it must not import the solve or the problem (they call it).
+"""
+from __future__ import annotations
+
+import time
+
+import casadi as ca
+import numpy as np
+
+from lcp.contact.modes import OPEN, SLIDE_NEG, SLIDE_POS, STICK
+from lcp.ocp.replay import event_pieces
+from lcp.ocp.transcription import Transcription
+
+__all__ = ["INTEGRATOR_TOL", "NotShootable", "PhaseShooting", "phase_plan", "solve_shooting"]
+
+#: the event method's mode names -> codes
+MODE_CODES = {"open": OPEN, "stick": STICK, "slide+": SLIDE_POS, "slide-": SLIDE_NEG}
+#: CVODES tolerances (the event replay integrates with DOP853 at rtol 1e-12)
+INTEGRATOR_TOL = {"reltol": 1e-12, "abstol": 1e-13}
+
+
+class NotShootable(ValueError):
+    """The problem or its phase sequence has something the shooting does not model."""
+
+
+def phase_plan(result):
+    """The phase sequence of the event replay of a solution's control: for each control interval
+    a list of (modes, duration), modes a tuple of codes (one per contact), durations summing to
+    the interval's length. Raises :class:`NotShootable` on impacts and touch-downs."""
+    pieces = event_pieces(result, restart=True)[2]
+    plan = []
+    for k, sim in enumerate(pieces):
+        if sim.impulses:
+            imp = sim.impulses[0]
+            raise NotShootable(f"the replay has an impulse ({imp.kind}) on contact {imp.contact} at "
+                               f"t = {result.t[k] + imp.t:.6g}: impacts are not modelled")
+        segs = []
+        for ph in sim.phases:
+            dur = float(ph.t1 - ph.t0)
+            modes = tuple(MODE_CODES[nm] for nm in ph.modes)
+            if dur <= 0.0:
+                continue
+            if segs and segs[-1][0] == modes:
+                segs[-1] = (modes, segs[-1][1] + dur)
+            else:
+                segs.append((modes, dur))
+        h = float(result.t[k + 1] - result.t[k])
+        if not segs:
+            raise NotShootable(f"the replay of interval {k} has no smooth phase")
+        total = sum(d for _, d in segs)
+        segs = [(md, d * h / total) for md, d in segs]  # round-off in the phase times
+        plan.append(segs)
+    previous = None
+    for k, segs in enumerate(plan):
+        for md, _ in segs:
+            if previous is not None:
+                for j, (a, b) in enumerate(zip(previous, md)):
+                    if a == OPEN and b != OPEN:
+                        raise NotShootable(f"contact {j} closes in interval {k} (t = {result.t[k]:.6g} to "
+                                           f"{result.t[k + 1]:.6g}): touch-downs are not modelled")
+            previous = md
+    return plan
+
+
+def refuse(problem) -> None:
+    """NotShootable when the problem has what the shooting does not model."""
+    sys = problem.system
+    if sys.is_spatial:
+        raise NotShootable("spatial contacts are not modelled")
+    if problem.complementarity:
+        raise NotShootable("the user's complementarity pairs are not modelled")
+    t = sys.t_sym
+    if ca.depends_on(ca.vertcat(sys.gap_expr, ca.vec(sys.H_expr), sys.constraints_expr), t):
+        raise NotShootable("contacts or constraints that move with t are not modelled")
+
+
+class PhaseShooting(Transcription):
+    """The NLP of an :class:`~lcp.ocp.OptimalControlProblem` on a fixed phase sequence (module
+    docstring). Same interface as :class:`~lcp.ocp.transcription.Transcription` (``nlp``, ``ix``,
+    bounds, :meth:`unpack`); ``plan`` as :func:`phase_plan` returns it."""
+
+    def __init__(self, pb, plan):
+        refuse(pb)
+        if len(plan) != pb.N:
+            raise ValueError(f"plan has {len(plan)} intervals, the problem {pb.N}")
+        self.plan = [[(tuple(int(c) for c in md), float(d)) for md, d in segs] for segs in plan]
+        self._modes_fns, self._integrators, self._ng = {}, {}, 0
+        super().__init__(pb)
+
+    # ------------------------------------------------------------------ the modes' dynamics
+    def mode_function(self, modes) -> ca.Function:
+        """(t, q, v, u) -> (a, lambda_N (m), lambda_T (m), normal and tangential accelerations
+        H a + dH/dt v (2 m)) in the given modes."""
+        if modes in self._modes_fns:
+            return self._modes_fns[modes]
+        sys = self.pb.system
+        n, m, nb = sys.n, sys.n_contacts, sys.n_bilateral
+        t, q, v = sys.t_sym, sys.q_sym, sys.v_sym
+        u = ca.SX.sym("u", self.pb.nu)
+        H = sys.H_expr if m else ca.SX.zeros(0, n)
+        Hdot_v = ca.mtimes(ca.jacobian(ca.mtimes(H, v), q), v) if m else ca.SX.zeros(0, 1)
+        cols, rows, rhs = [], [], []
+        closed = [j for j in range(m) if modes[j] != OPEN]
+        stick = [j for j in range(m) if modes[j] == STICK]
+        mu = np.asarray(sys.mu, dtype=float)
+        for j in closed:
+            col = H[j, :].T
+            if modes[j] in (SLIDE_POS, SLIDE_NEG):  # friction -s mu lambda_N along the tangent
+                s = 1.0 if modes[j] == SLIDE_POS else -1.0
+                col = col - s * mu[j] * H[m + j, :].T
+            cols.append(col)
+            rows.append(H[j, :])
+            rhs.append(-Hdot_v[j])
+        for j in stick:
+            cols.append(H[m + j, :].T)
+            rows.append(H[m + j, :])
+            rhs.append(-Hdot_v[m + j])
+        if nb:
+            G = ca.jacobian(sys.constraints_expr, q)
+            Gdot_v = ca.mtimes(ca.jacobian(ca.mtimes(G, v), q), v)
+            for i in range(nb):
+                cols.append(G[i, :].T)
+                rows.append(G[i, :])
+                rhs.append(-Gdot_v[i])
+        F = sys.force_expr + ca.mtimes(sys.control_matrix_expr, u)
+        r = len(cols)
+        if r:
+            K = ca.vertcat(ca.horzcat(sys.mass_expr, -ca.horzcat(*cols)), ca.horzcat(ca.vertcat(*[rw for rw in rows]),
+                                                                                      ca.SX.zeros(r, r)))
+            y = ca.solve(K, ca.vertcat(F, *rhs))
+        else:
+            y = ca.solve(sys.mass_expr, F)
+        a = y[:n]
+        lamN, lamT = [ca.SX(0)] * m, [ca.SX(0)] * m
+        for i, j in enumerate(closed):
+            lamN[j] = y[n + i]
+            if modes[j] in (SLIDE_POS, SLIDE_NEG):
+                lamT[j] = -(1.0 if modes[j] == SLIDE_POS else -1.0) * mu[j] * y[n + i]
+        for i, j in enumerate(stick):
+            lamT[j] = y[n + len(closed) + i]
+        acc = ca.mtimes(H, a) + Hdot_v if m else ca.SX.zeros(0, 1)
+        fn = ca.Function(f"mode_{''.join(map(str, modes))}", [t, q, v, u],
+                         [a, ca.vertcat(*lamN) if m else ca.SX.zeros(0, 1),
+                          ca.vertcat(*lamT) if m else ca.SX.zeros(0, 1), acc])
+        self._modes_fns[modes] = fn
+        return fn
+
+    def integrator(self, modes) -> ca.Function:
+        """CVODES over one segment in the given modes: x0 = (q, v), p = (t_seg, d, t_k, h_k, u_a,
+        u_b) -> xf, qf = the integrals of lambda_N and lambda_T over the segment. The control is
+        u_a + (t - t_k) / h_k (u_b - u_a) (the hold's value on interval k)."""
+        if modes in self._integrators:
+            return self._integrators[modes]
+        sys, nu = self.pb.system, self.pb.nu
+        n = sys.n
+        x = ca.SX.sym("x", 2 * n)
+        p = ca.SX.sym("p", 4 + 2 * nu)
+        tau = ca.SX.sym("tau")
+        t_seg, d, t_k, h_k = p[0], p[1], p[2], p[3]
+        ua, ub = p[4:4 + nu], p[4 + nu:]
+        t = t_seg + tau * d
+        u = ua + (t - t_k) / h_k * (ub - ua)
+        a, lamN, lamT, _ = self.mode_function(modes)(t, x[:n], x[n:], u)
+        dae = {"x": x, "p": p, "t": tau, "ode": d * ca.vertcat(x[n:], a), "quad": d * ca.vertcat(lamN, lamT)}
+        opts = {**INTEGRATOR_TOL, "max_num_steps": 100000}
+        F = ca.integrator(f"seg_{''.join(map(str, modes))}", "cvodes", dae, 0.0, 1.0, opts)
+        self._integrators[modes] = F
+        return F
+
+    # ------------------------------------------------------------------ build
+    def _build(self):
+        pb = self.pb
+        sys, N, n, nu = pb.system, pb.N, pb.system.n, pb.nu
+        m = sys.n_contacts
+        mu = np.asarray(sys.mu, dtype=float)
+        sigma, q0p, v0p = ca.SX.sym("sigma"), ca.SX.sym("q0", n), ca.SX.sym("v0", n)
+        Tv = self._var("T", 1, *pb.T_bounds, key="T") if pb.free_time else ca.SX(pb.T)
+        z = self._var("z", 1, -np.inf, np.inf, key="z") if pb.max_cost is not None else None
+        if pb.steps == "free":
+            lo, hi = pb.step_bounds
+            Tlo, Thi = (pb.T_bounds if pb.free_time else (pb.T, pb.T))
+            hs = [self._var(f"h{k}", 1, lo * Tlo / N, hi * Thi / N, key="h") for k in range(N)]
+            self._constrain(ca.sum1(ca.vertcat(*hs)) - Tv, 0.0, 0.0)
+        else:
+            fr = pb.step_fractions
+            hs = [Tv / N] * N if fr is None else [Tv * float(f) for f in fr]
+        n_u = {"constant": N, "linear": N + 1, "affine": 2 * N}[pb.hold]
+        us = [self._var(f"u{k}", nu, pb.u_min, pb.u_max, key="u") for k in range(n_u)]
+        qs, vs = [q0p], [v0p]
+        for k in range(1, N + 1):
+            qs.append(self._var(f"q{k}", n, -np.inf, np.inf, key="q"))
+            vs.append(self._var(f"v{k}", n, -np.inf, np.inf, key="v"))
+        tk = [ca.SX(0)]
+        for k in range(N):
+            tk.append(tk[-1] + hs[k])
+        if pb.steps == "free" or pb.free_time:
+            for k, tval in pb.node_times.items():
+                self._constrain(tk[k] - tval, 0.0, 0.0)
+        gap = ca.Function("gap", [sys.q_sym], [sys.gap_expr]) if m else None
+        Hfn = ca.Function("H", [sys.q_sym], [sys.H_expr]) if m else None
+        J, pair_sizes = ca.SX(0), {}
+        prev_modes = None
+        self._calls, self._defect_rows = [], []
+        for k in range(N):
+            h = hs[k]
+            ua, ub = self.control_pair(us, k)
+            segs = self.plan[k]
+            S = len(segs)
+            if S > 1:
+                ds = [self._var(f"d{k}_{j}", 1, 0.0, np.inf, key="d") for j in range(S)]
+                self._constrain(ca.sum1(ca.vertcat(*ds)) - h, 0.0, 0.0)
+            else:
+                ds = [h]
+            x = ca.vertcat(qs[k], vs[k])
+            t_seg = tk[k]
+            impN, impT = ca.SX.zeros(m, 1), ca.SX.zeros(m, 1)
+            for j, (modes, _) in enumerate(segs):
+                if j < S - 1:
+                    xe = ca.vertcat(self._var(f"Qs{k}_{j}", n, -np.inf, np.inf, key="Qs"),
+                                    self._var(f"Vs{k}_{j}", n, -np.inf, np.inf, key="Vs"))
+                else:
+                    xe = ca.vertcat(qs[k + 1], vs[k + 1])
+                xf, qf = self._call(modes, x, ca.vertcat(t_seg, ds[j], tk[k], h, ua, ub))
+                self._defect_rows.append(np.arange(self._ng, self._ng + 2 * n))
+                self._constrain(xf - xe, 0.0, 0.0)
+                if m:
+                    impN, impT = impN + qf[:m], impT + qf[m:]
+                t_end = t_seg + ds[j]
+                u_s = ua + (t_seg - tk[k]) / h * (ub - ua)
+                u_e = ua + (t_end - tk[k]) / h * (ub - ua)
+                if m:
+                    self._admissible(modes, prev_modes, t_seg, x, u_s, t_end, xe, u_e, mu, gap, Hfn, k)
+                prev_modes, x, t_seg = modes, xe, t_end
+            pN = self._var(f"pN{k}", m, -np.inf, np.inf, key="pN")  # mean forces over the interval
+            fT = self._var(f"fT{k}", m, -np.inf, np.inf, key="fT")
+            if m:
+                self._constrain(ca.vertcat(h * pN - impN, h * fT - impT), 0.0, 0.0)
+            st = pb.make_step(k, tk[k], h, qs[k], qs[k + 1], vs[k], vs[k + 1], ua, ub, h * pN, h * fT)
+            J = self._step_terms(J, st, us, k, h, ua, ub, z, sigma, pair_sizes)
+        J = self._terminal_terms(J, Tv, qs, vs, z)
+        g = ca.vertcat(*self._g) if self._g else ca.SX.zeros(0, 1)
+        X, P = ca.vertcat(*self._x), ca.vertcat(sigma, q0p, v0p)
+        # the integrators can only be called on MX: the NLP is built in SX with their outputs as
+        # symbols, then evaluated in MX with the integrator calls in place of those symbols
+        outs = ca.vertcat(*[ca.vertcat(c[2], c[3]) for c in self._calls])
+        ins = ca.Function("shooting_inputs", [X, P], [ca.vertcat(*[ca.vertcat(c[1], c[4]) for c in self._calls])])
+        jg = ca.Function("shooting_nlp", [X, P, outs], [J, g])
+        Xm, Pm = ca.MX.sym("x", X.shape[0]), ca.MX.sym("p", P.shape[0])
+        args = ins(Xm, Pm)
+        results, row = [], 0
+        for modes, x_in, _, _, p_in in self._calls:
+            a, b = row, row + x_in.shape[0]
+            c = b + p_in.shape[0]
+            out = self.integrator(modes)(x0=args[a:b], p=args[b:c])
+            results += [out["xf"], out["qf"]]
+            row = c
+        Jm, gm = jg(Xm, Pm, ca.vertcat(*results))
+        self.nlp = {"x": Xm, "f": Jm, "g": gm, "p": Pm}
+        self.g_fn = ca.Function("shooting_g", [Xm, Pm], [gm])
+        self.defect_rows = np.concatenate(self._defect_rows) if self._defect_rows else np.zeros(0, dtype=int)
+        self.ix = {key: np.array(val) for key, val in self.ix.items()}
+        self.lbx, self.ubx = np.concatenate(self._lbx), np.concatenate(self._ubx)
+        self.lbg = np.concatenate(self._lbg) if self._lbg else np.zeros(0)
+        self.ubg = np.concatenate(self._ubg) if self._ubg else np.zeros(0)
+        self.n_constraints = int(self.lbg.size)
+        del self._x, self._g, self._lbx, self._ubx, self._lbg, self._ubg, self._nx
+
+    def _admissible(self, modes, prev, t0, x0, u0, t1, x1, u1, mu, gap, Hfn, k):
+        """The segment's mode kept admissible at both ends, and its switch from the previous mode."""
+        n, m = self.pb.system.n, self.pb.system.n_contacts
+        fn = self.mode_function(modes)
+        _, N0, T0, A0 = fn(t0, x0[:n], x0[n:], u0)
+        _, N1, T1, _ = fn(t1, x1[:n], x1[n:], u1)
+        H0, H1 = Hfn(x0[:n]), Hfn(x1[:n])
+        uT0, uT1 = ca.mtimes(H0[m:, :], x0[n:]), ca.mtimes(H1[m:, :], x1[n:])
+        first = prev is None
+        q_start = np.asarray(self.pb.q0, dtype=float)
+        v_start = np.asarray(self.pb.v0, dtype=float)
+        for j in range(m):
+            md = modes[j]
+            pm = md if first else prev[j]
+            if md != OPEN:
+                self._constrain(ca.vertcat(N0[j], N1[j]), 0.0, np.inf)
+            if md == STICK:
+                self._constrain(ca.vertcat(mu[j] * N0[j] - T0[j], mu[j] * N0[j] + T0[j],
+                                           mu[j] * N1[j] - T1[j], mu[j] * N1[j] + T1[j]), 0.0, np.inf)
+                if pm in (SLIDE_POS, SLIDE_NEG):  # a stop
+                    self._constrain(uT0[j], 0.0, 0.0)
+            elif md in (SLIDE_POS, SLIDE_NEG):
+                s = 1.0 if md == SLIDE_POS else -1.0
+                self._constrain(ca.vertcat(s * uT0[j], s * uT1[j]), 0.0, np.inf)
+                at_rest = pm == STICK or (first and abs(float(self._uT(q_start, v_start)[j])) <= 1e-12)
+                if pm in (SLIDE_POS, SLIDE_NEG) and pm != md:  # a reversal passes through rest
+                    self._constrain(uT0[j], 0.0, 0.0)
+                    at_rest = True
+                if at_rest:  # slipping from rest: the tangential acceleration along the slide
+                    self._constrain(s * A0[m + j], 0.0, np.inf)
+            else:  # open: the gap stays open; a lift-off accelerates away from the surface
+                self._constrain(gap(x1[:n])[j], 0.0, np.inf)
+                if pm != OPEN or (first and float(self.pb.system.gaps(q_start)[j]) <= 1e-12):
+                    self._constrain(A0[j], 0.0, np.inf)
+
+    def _constrain(self, expr, lo, hi):
+        super()._constrain(expr, lo, hi)
+        self._ng += self._g[-1].shape[0]
+
+    def _call(self, modes, x, p):
+        """Symbols standing for the segment integrator's (xf, qf) at (x, p) (see ``_build``)."""
+        n, m, i = self.pb.system.n, self.pb.system.n_contacts, len(self._calls)
+        xf, qf = ca.SX.sym(f"xf{i}", 2 * n), ca.SX.sym(f"qf{i}", 2 * m)
+        self._calls.append((modes, x, xf, qf, p))
+        return xf, qf
+
+    def _uT(self, q, v):
+        sys = self.pb.system
+        return sys.contact_jacobian(q)[sys.n_contacts:] @ v
+
+    # ------------------------------------------------------------------ numbers
+    def _mean_friction(self, x):
+        return x[self.ix["fT"]]
+
+    def impulses(self, x):
+        """No impulses at the nodes: zeros of shape (N, 0)."""
+        return np.zeros((self.pb.N, 0)), np.zeros((self.pb.N, 0))
+
+    def modes(self):
+        """(N, m) int8: each interval's mode at its start."""
+        return np.array([segs[0][0] for segs in self.plan], dtype=np.int8).reshape(self.pb.N, -1)
+
+    def initial_point(self, result) -> np.ndarray:
+        """The NLP variables of ``result``'s control and steps, the states integrated segment by
+        segment through the plan (single shooting): feasible but for the terminal conditions."""
+        pb, ix = self.pb, self.ix
+        n, m = pb.system.n, pb.system.n_contacts
+        x = np.zeros(self.lbx.size)
+        t = np.asarray(result.t, dtype=float)
+        if pb.free_time:
+            x[ix["T"]] = result.T
+        if pb.steps == "free":
+            x[ix["h"].ravel()] = np.diff(t)
+        u = np.asarray(result.u, dtype=float)
+        for i, idx in enumerate(ix["u"]):
+            x[idx] = u[i]
+        if pb.max_cost is not None:
+            x[ix["z"]] = result.peak if np.isfinite(result.peak) else 0.0
+        xs = np.concatenate([pb.q0, pb.v0])
+        d_i, s_i = 0, 0
+        for k, segs in enumerate(self.plan):
+            h = t[k + 1] - t[k]
+            ua, ub = self.control_pair(list(u), k)
+            t_seg = t[k]
+            iN, iT = np.zeros(m), np.zeros(m)
+            for j, (modes, dur) in enumerate(segs):
+                if len(segs) > 1:
+                    x[ix["d"][d_i]] = dur
+                    d_i += 1
+                out = self.integrator(modes)(x0=xs, p=np.concatenate([[t_seg, dur, t[k], h], ua, ub]))
+                xs = np.array(out["xf"]).ravel()
+                if m:
+                    qf = np.array(out["qf"]).ravel()
+                    iN, iT = iN + qf[:m], iT + qf[m:]
+                if j < len(segs) - 1:
+                    x[ix["Qs"][s_i]], x[ix["Vs"][s_i]] = xs[:n], xs[n:]
+                    s_i += 1
+                t_seg += dur
+            x[ix["q"][k]], x[ix["v"][k]] = xs[:n], xs[n:]
+            x[ix["pN"][k]], x[ix["fT"][k]] = iN / h, iT / h
+        return x
+
+    def diagnose(self, x) -> dict:
+        """``dynamics``: the largest continuity defect between segments; ``residual``: the
+        largest violation of the other constraints (the modes' admissibility and switches, the
+        user's constraints); ``modes``: each interval's modes at its start."""
+        P = np.concatenate([[0.0], self.pb.q0, self.pb.v0])
+        g = np.array(self.g_fn(x, P)).ravel()
+        viol = np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0)
+        other = np.ones(g.size, dtype=bool)
+        other[self.defect_rows] = False
+        return {"dynamics": float(np.max(viol[self.defect_rows], initial=0.0)),
+                "residual": float(np.max(viol[other], initial=0.0)), "modes": self.modes(),
+                "lcp": float("nan"), "conflicts": 0, "max_product": 0.0, "cross": 0.0}
+
+
+def solve_shooting(pb, result, options: dict | None = None):
+    """The shooting polish of ``result`` (module docstring): (x, cost, diag, IPOPT's stats, time,
+    the NLP). IPOPT with a limited-memory Hessian (the integrators give first derivatives only),
+    from the replay's own trajectory. Raises :class:`NotShootable` where it does not apply."""
+    plan = phase_plan(result)
+    t0 = time.perf_counter()
+    tr = PhaseShooting(pb, plan)
+    x0 = tr.initial_point(result)
+    ip = {"print_level": 0, "sb": "yes", "tol": 1e-10, "constr_viol_tol": 1e-10, "max_iter": 500,
+          "hessian_approximation": "limited-memory", "mu_strategy": "adaptive", "bound_relax_factor": 0.0,
+          **(options or {})}
+    solver = ca.nlpsol("shooting", "ipopt", tr.nlp, {"print_time": False, "show_eval_warnings": False,
+                                                      "ipopt": ip})
+    P = np.concatenate([[0.0], pb.q0, pb.v0])
+    sol = solver(x0=np.clip(x0, tr.lbx, tr.ubx), lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg, p=P)
+    x = np.array(sol["x"]).ravel()
+    return x, float(sol["f"]), tr.diagnose(x), solver.stats(), time.perf_counter() - t0, tr
