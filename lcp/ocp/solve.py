@@ -89,36 +89,49 @@ def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
     return res
 
 
+#: shooting rounds: each starts from the phase sequence of the event replay of the previous
+#: round's control (a slide of the cart-pole that grazed zero velocity inside a phase stuck in
+#: the replay: the next round has that stick phase)
+SHOOTING_ROUNDS = 3
+
+
 def polished(problem, res, t0) -> OCPResult:
     """The exact-phase shooting polish (:mod:`lcp.ocp.shooting`) of a result that failed (its
     replay, or the solve): the phase sequence of the event replay of its control, solved again with
-    each phase integrated exactly. Returned when it succeeds and its replay is within tolerance;
-    else ``res`` with a note saying why not."""
-    try:
-        x, cost, diag, st, dt, tr = solve_shooting(problem, res)
-    except NotShootable as exc:
-        res.message += f" (Exact-phase shooting not tried: {exc}.)"
-        return res
-    except RuntimeError as exc:  # the replay that gives the phases, or an integrator, failed
-        res.message += f" (Exact-phase shooting failed: {exc})"
-        return res
-    ok = st["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
-    stage = HomotopyStage(0.0, int(st["iter_count"]), diag["residual"], 0.0, cost, st["return_status"], ok, dt)
-    segments = sum(len(s) for s in tr.plan)
-    how = (f"exact-phase shooting on the event replay's {segments} phases (CVODES, rtol "
-           f"{INTEGRATOR_TOL['reltol']:.0e}), started from the transcription's control")
-    if not ok or diag["dynamics"] > 1e-8 or diag["residual"] > 1e-8:
-        res.message += (f" (Exact-phase shooting failed: IPOPT returned {st['return_status']}, defect "
-                        f"{diag['dynamics']:.2e}, mode conditions violated by {diag['residual']:.2e}.)")
-        return res
-    out = result_of(problem, x, cost, diag, 0, f"{OCP_STATUS_MESSAGES[0]} (Solved by {how}.)",
-                    res.homotopy + [stage], time.perf_counter() - t0, tr=tr)
-    out = _checked(problem, out, "shooting")
-    if not out.success:
-        res.message += f" (Exact-phase shooting: {out.message})"
-        return res
-    out.message += f" The transcription's result: {res.message}"
-    return out
+    each phase integrated exactly; repeated from the replay of the new control while that replay
+    finds other phases (at most :data:`SHOOTING_ROUNDS` rounds). Returned when it succeeds and its
+    replay is within tolerance; else ``res`` with a note saying why not."""
+    start, notes = res, []
+    for rnd in range(SHOOTING_ROUNDS):
+        try:
+            x, cost, diag, st, dt, tr = solve_shooting(problem, start)
+        except NotShootable as exc:
+            notes.append(f"not tried: {exc}" if rnd == 0 else f"round {rnd + 1} not tried: {exc}")
+            break
+        except RuntimeError as exc:  # the replay that gives the phases, or an integrator, failed
+            notes.append(f"round {rnd + 1} failed: {exc}")
+            break
+        ok = st["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+        stage = HomotopyStage(0.0, int(st["iter_count"]), diag["residual"], 0.0, cost, st["return_status"], ok, dt)
+        segments = sum(len(s) for s in tr.plan)
+        if not ok or diag["dynamics"] > 1e-8 or diag["residual"] > 1e-8:
+            notes.append(f"round {rnd + 1} ({segments} phases) failed: IPOPT returned {st['return_status']}, "
+                         f"defect {diag['dynamics']:.2e}, mode conditions violated by {diag['residual']:.2e}")
+            break
+        how = (f"exact-phase shooting on the {segments} phases of the event replay of the "
+               f"{'transcription' if rnd == 0 else f'shooting round {rnd}'}'s control (CVODES, rtol "
+               f"{INTEGRATOR_TOL['reltol']:.0e}; round {rnd + 1})")
+        out = result_of(problem, x, cost, diag, 0, f"Solved by {how}: every mode condition holds to "
+                        f"{max(diag['residual'], 1e-16):.1e}, the phases join to {max(diag['dynamics'], 1e-16):.1e}.",
+                        start.homotopy + [stage], time.perf_counter() - t0, tr=tr)
+        out = _checked(problem, out, "shooting")
+        if out.success:
+            out.message += f" The transcription's result: {res.message}"
+            return out
+        notes.append(f"round {rnd + 1} ({segments} phases, cost {cost:.10g}): {out.message}")
+        start = out
+    res.message += f" (Exact-phase shooting: {'; '.join(notes)})"
+    return res
 
 
 def _checked(problem, res, method):

@@ -1,0 +1,107 @@
+"""Exact-phase shooting (lcp.ocp.shooting): the phase sequence of the event replay, integrated exactly."""
+import casadi as ca
+import numpy as np
+import pytest
+
+import lcp
+from lcp.contact.modes import SLIDE_POS, STICK
+from lcp.ocp import OptimalControlProblem, effort
+from lcp.ocp.shooting import NotShootable, PhaseShooting, phase_plan, solve_shooting
+from lcp.ocp.replay import event_pieces
+from studies._ocp_models import EXAMPLES
+
+
+@pytest.fixture(scope="module")
+def motor_transcribed():
+    """nosnoc's motor at N = 30, solved by the transcription only (its replay misses by 0.5)."""
+    pb = EXAMPLES["motor"]().make(30)
+    pb.replay_tol = None
+    return pb, pb.solve()
+
+
+def test_plan_follows_the_event_replay(motor_transcribed):
+    """The plan's segments are the replay's phases, and integrating them from the transcription's
+    control repeats the replay (single shooting through the same modes)."""
+    pb, res = motor_transcribed
+    plan = phase_plan(res)
+    assert len(plan) == pb.N
+    assert plan[0][0][0] == (STICK,) and plan[0][1][0] == (SLIDE_POS,)  # the coil's force builds up first
+    for k, segs in enumerate(plan):
+        assert sum(d for _, d in segs) == pytest.approx(res.t[k + 1] - res.t[k], rel=1e-12)
+    tr = PhaseShooting(pb, plan)
+    x0 = tr.initial_point(res)
+    _, _, q, v, u, _, _ = tr.unpack(x0)
+    qr, vr, _ = event_pieces(res, restart=True)
+    assert np.max(np.abs(q - qr)) < 1e-9 and np.max(np.abs(v - vr)) < 1e-8
+    assert np.array_equal(u, res.u)
+    assert tr.diagnose(x0)["dynamics"] < 1e-8
+
+
+def test_motor_solved_to_its_replay(motor_transcribed):
+    """The default solve ends in the shooting: success with a replay miss far below 1e-6 (the
+    transcription's own: 0.5), the terminal conditions met, the modes admissible."""
+    pb, res = motor_transcribed
+    x, cost, diag, st, _, tr = solve_shooting(pb, res)
+    assert st["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    assert diag["dynamics"] < 1e-9 and diag["residual"] < 1e-9
+    pb2 = EXAMPLES["motor"]().make(30)
+    out = pb2.solve()
+    assert out.success, out.message
+    assert "exact-phase shooting" in out.message
+    assert out.replay.final_miss < 1e-7
+    assert out.cost == pytest.approx(cost, rel=1e-6)
+    assert abs(out.q[-1, 0] - 0.01) < 1e-9 and abs(out.v[-1, 0]) < 1e-9
+
+
+def _pushed_block(mu=0.3, T=1.0, N=6):
+    """A block (1 kg) on a floor, pushed from rest to rest 0.2 m further with least effort: a slide
+    that stops exactly at T (stick never admissible with |u| bound low)."""
+    q, v, u = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1)
+    sys = lcp.System(q, v, ca.SX.eye(2), ca.vertcat(u[0], -9.81),
+                     contacts=[lcp.Contact(gap=q[1], tangent=q[0], mu=mu)], control=u,
+                     control_bounds=(np.array([-20.0]), np.array([20.0])))
+    return OptimalControlProblem(sys, N, T=T, q0=np.zeros(2), v0=np.zeros(2), stage_cost=effort,
+                                 terminal_constraints=lambda qq, vv: ca.vertcat(qq[0] - 0.2, vv[0]))
+
+
+def test_switch_inside_a_uniform_step():
+    """Uniform steps cannot put the block's stop on a node: the transcription's replay misses, and
+    the shooting places the switch inside its step (a segment boundary)."""
+    pb = _pushed_block()
+    res = pb.solve()
+    assert res.success and "exact-phase shooting" in res.message, res.message
+    assert res.replay.final_miss < 1e-8
+    assert abs(res.q[-1, 0] - 0.2) < 1e-9 and abs(res.v[-1, 0]) < 1e-9
+    assert "misses" in res.message.split("The transcription's result:")[1]  # what the transcription did
+
+
+def test_exact_transcription_is_left_alone():
+    """The Jean-Pratt block on free steps: the transcription is exact, no shooting."""
+    from lcp.ocp import tangential_push
+    sc = lcp.scenes.jean_pratt(v0=0.0)
+    pb = OptimalControlProblem(sc, 4, control_matrix=tangential_push(sc.system), u_min=-20, u_max=20, T=0.5,
+                               free_time=True, T_bounds=(0.05, 2.0), steps="free", terminal_cost=lambda T, q, v: T,
+                               terminal_constraints=lambda q, v: ca.vertcat(q[0] - 0.2, v[0]))
+    res = pb.solve()
+    assert res.success and "shooting" not in res.message
+
+
+def test_refusals_name_what_is_not_modelled():
+    """Spatial contacts and the user's pairs are refused by name; an impact in the replay too."""
+    sc = lcp.scenes.jean_pratt(v0=0.0)
+    from lcp.ocp import tangential_push
+    pb = OptimalControlProblem(sc, 4, control_matrix=tangential_push(sc.system), u_min=-20, u_max=20, T=0.5,
+                               complementarity=[(lambda s: s.u0[0] + 20, lambda s: 20 - s.u0[0])])
+    with pytest.raises(NotShootable, match="complementarity"):
+        PhaseShooting(pb, [[((STICK,), 0.125)]] * 4)
+    ball = EXAMPLES["ball_bounce"]().make(12)
+    ball.replay_tol = None
+    res = ball.solve()
+    with pytest.raises(NotShootable, match="impulse"):
+        phase_plan(res)
+
+
+def test_plan_length_checked(motor_transcribed):
+    pb, res = motor_transcribed
+    with pytest.raises(ValueError, match="intervals"):
+        PhaseShooting(pb, phase_plan(res)[:-1])
