@@ -61,6 +61,16 @@ def test_a_slide_with_friction_is_exact_with_free_steps_and_the_affine_hold():
 
 def test_uniform_steps_with_friction_are_refused_by_the_replay_and_say_where():
     # (at N = 4 the optimizer's cost, 19.04, is even below J* = 19.43: not a motion of the system)
-    r = push(0.5, 8).solve()
+    r = push(0.5, 8).solve(shooting=False)
     assert r.status == -3 and not r.success and r.replay.final_miss > 1e-6
     assert "at node" in r.message and "contact 'floor'" in r.message
+
+
+def test_uniform_steps_with_friction_finished_by_the_shooting():
+    """By default the exact-phase shooting puts the stops inside their uniform steps: success,
+    replayed to 1e-8, and its cost (an exact motion under a piecewise-constant control) at or
+    above the continuous optimum J* = 19.43 (the transcription's 19.04 at N = 4 was below it)."""
+    r = push(0.5, 8).solve()
+    assert r.success and "exact-phase shooting" in r.message, r.message
+    assert r.replay.final_miss < 1e-8
+    assert r.cost >= 19.43

@@ -108,7 +108,7 @@ def test_the_gap_law_lifts_off_when_asked():
 def test_a_solve_that_misses_its_tolerance_says_which_step_and_contact():
     from tests.test_ocp import rest_problem
 
-    r = rest_problem(10, contact_law="velocity").solve(sigma0=1.0, sigma_min=1e-3, polish=False)
+    r = rest_problem(10, contact_law="velocity").solve(sigma0=1.0, sigma_min=1e-3, polish=False, shooting=False)
     assert r.status == -2
     assert "the Coulomb residual is largest in step" in r.message and "contact 'P'" in r.message
     k = int(r.message.split("largest in step ")[1].split(" ")[0])

@@ -237,7 +237,7 @@ class OptimalControlProblem:
 
     # ------------------------------------------------------------------ solve
     def solve(self, guess=None, options: HomotopyOptions | None = None, method: str = "auto",
-              **option_kw) -> OCPResult:
+              shooting: bool = True, **option_kw) -> OCPResult:
         """Solve from a guess, then replay the control (:attr:`OCPResult.replay`).
 
         Parameters
@@ -259,6 +259,12 @@ class OptimalControlProblem:
             fixed-phase iterate with sigma0 <= 1e-4 when that iterate already satisfies the dynamics
             and the Coulomb law (IPOPT stopped on a degenerate but nearly optimal point), else from
             the guess with ``options``.
+        shooting : bool
+            When the solve fails (its replay misses by more than ``replay_tol``, or the homotopy
+            or IPOPT fails), solve again on the phase sequence of the event replay of its control
+            with each phase integrated exactly (:mod:`lcp.ocp.shooting`; then from the solve's own
+            states and modes); kept when its replay is within ``replay_tol``, else ``message`` says
+            what each attempt found. False returns the transcription's own result.
         **option_kw
             Fields of :class:`HomotopyOptions` (instead of ``options``).
 
@@ -278,7 +284,9 @@ class OptimalControlProblem:
         >>> r.success, round(r.cost, 6), r.homotopy[-1].iterations < 200
         (True, 86.905749, True)
         """
-        return solve_problem(self, guess, options, method, option_kw)
+        if not isinstance(shooting, bool):
+            raise ValueError(f"shooting must be True or False, got {shooting!r}")
+        return solve_problem(self, guess, options, method, option_kw, shooting)
 
     def phase_guess(self, options: HomotopyOptions | None = None) -> OCPResult:
         """The phase sequence of a first pass: this problem on uniform steps with the constant hold

@@ -49,7 +49,7 @@ from lcp.contact.modes import OPEN, SLIDE_NEG, SLIDE_POS, STICK
 from lcp.ocp.replay import event_pieces
 from lcp.ocp.transcription import Transcription
 
-__all__ = ["INTEGRATOR_TOL", "NotShootable", "PhaseShooting", "phase_plan", "solve_shooting"]
+__all__ = ["INTEGRATOR_TOL", "NotShootable", "PhaseShooting", "phase_plan", "plan_of_modes", "refuse", "solve_shooting"]
 
 #: the event method's mode names -> codes
 MODE_CODES = {"open": OPEN, "stick": STICK, "slide+": SLIDE_POS, "slide-": SLIDE_NEG}
@@ -106,6 +106,21 @@ def phase_plan(result):
                         raise NotShootable(f"contact {j} closes in interval {k} (t = {result.t[k]:.6g} to "
                                            f"{result.t[k + 1]:.6g}): touch-downs are not modelled")
             previous = md
+    return plan
+
+
+def plan_of_modes(result):
+    """The phase sequence of a solution's own modes: one segment per interval in the interval's
+    mode, and where the mode changes at a node a first short segment in the previous mode (the
+    switch may move into the interval)."""
+    modes = [tuple(int(c) for c in row) for row in np.asarray(result.modes)]
+    plan = []
+    for k, md in enumerate(modes):
+        h = float(result.t[k + 1] - result.t[k])
+        if k and modes[k - 1] != md:
+            plan.append([(modes[k - 1], 1e-3 * h), (md, (1 - 1e-3) * h)])
+        else:
+            plan.append([(md, h)])
     return plan
 
 
@@ -375,9 +390,11 @@ class PhaseShooting(Transcription):
         """(N, m) int8: each interval's mode at its start."""
         return np.array([segs[0][0] for segs in self.plan], dtype=np.int8).reshape(self.pb.N, -1)
 
-    def initial_point(self, result) -> np.ndarray:
+    def initial_point(self, result, states: str = "integrated") -> np.ndarray:
         """The NLP variables of ``result``'s control and steps, the states integrated segment by
-        segment through the plan (single shooting): feasible but for the terminal conditions."""
+        segment through the plan (single shooting: feasible but for the terminal conditions), or
+        with ``states="result"`` the result's own node states (multiple shooting: defects where
+        the result's steps were inexact, the terminal conditions met)."""
         pb, ix = self.pb, self.ix
         n, m = pb.system.n, pb.system.n_contacts
         x = np.zeros(self.lbx.size)
@@ -402,7 +419,8 @@ class PhaseShooting(Transcription):
                 if len(segs) > 1:
                     x[ix["d"][d_i]] = dur
                     d_i += 1
-                out = self.integrator(modes)(x0=xs, p=np.concatenate([[t_seg, dur, t[k], h], ua, ub]))
+                start = xs if states == "integrated" or j else np.concatenate([result.q[k], result.v[k]])
+                out = self.integrator(modes)(x0=start, p=np.concatenate([[t_seg, dur, t[k], h], ua, ub]))
                 xs = np.array(out["xf"])[:, -1]
                 if m:
                     qf = np.array(out["qf"])[:, -1]
@@ -411,8 +429,12 @@ class PhaseShooting(Transcription):
                     x[ix["Qs"][s_i]], x[ix["Vs"][s_i]] = xs[:n], xs[n:]
                     s_i += 1
                 t_seg += dur
-            x[ix["q"][k]], x[ix["v"][k]] = xs[:n], xs[n:]
-            x[ix["pN"][k]], x[ix["fT"][k]] = iN / h, iT / h
+            if states == "integrated":
+                x[ix["q"][k]], x[ix["v"][k]] = xs[:n], xs[n:]
+                x[ix["pN"][k]], x[ix["fT"][k]] = iN / h, iT / h
+            else:
+                x[ix["q"][k]], x[ix["v"][k]] = result.q[k + 1], result.v[k + 1]
+                x[ix["pN"][k]], x[ix["fT"][k]] = result.p_N[k] / h, result.p_T[k] / h
         return x
 
     def diagnose(self, x) -> dict:
@@ -429,14 +451,15 @@ class PhaseShooting(Transcription):
                 "lcp": float("nan"), "conflicts": 0, "max_product": 0.0, "cross": 0.0}
 
 
-def solve_shooting(pb, result, options: dict | None = None):
+def solve_shooting(pb, result, options: dict | None = None, start: str = "replay"):
     """The shooting polish of ``result`` (module docstring): (x, cost, diag, IPOPT's stats, time,
     the NLP). IPOPT with a limited-memory Hessian (the integrators give first derivatives only),
     from the replay's own trajectory. Raises :class:`NotShootable` where it does not apply."""
-    plan = phase_plan(result)
+    refuse(pb)
+    plan = phase_plan(result) if start == "replay" else plan_of_modes(result)
     t0 = time.perf_counter()
     tr = PhaseShooting(pb, plan)
-    x0 = tr.initial_point(result)
+    x0 = tr.initial_point(result, "integrated" if start == "replay" else "result")
     ip = {"print_level": 0, "sb": "yes", "tol": 1e-10, "constr_viol_tol": 1e-10, "max_iter": 500,
           "hessian_approximation": "limited-memory", "mu_strategy": "adaptive", "bound_relax_factor": 0.0,
           **(options or {})}

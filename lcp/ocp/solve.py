@@ -18,7 +18,7 @@ from lcp.ocp.guess import event_guess, resample, x0_from_guess
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions
 from lcp.ocp.replay import replay_check
 from lcp.ocp.results import HomotopyStage, OCPGuess, OCPResult
-from lcp.ocp.shooting import INTEGRATOR_TOL, NotShootable, solve_shooting
+from lcp.ocp.shooting import INTEGRATOR_TOL, NotShootable, refuse, solve_shooting
 from lcp.ocp.spatial import SpatialTranscription
 from lcp.ocp.transcription import Transcription
 
@@ -27,7 +27,7 @@ __all__ = ["bound_steps_note", "default_starts", "first_pass", "guess_from", "pi
            "solve_problem", "unbounded_note"]
 
 
-def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
+def solve_problem(problem, guess, options, method, option_kw, shooting: bool = True) -> OCPResult:
     """The procedure of :meth:`OptimalControlProblem.solve <lcp.ocp.problem.OptimalControlProblem.solve>`."""
     own_sigma0 = options is not None or "sigma0" in option_kw  # the user's first relaxation: kept by every start
     if options is None:
@@ -84,7 +84,7 @@ def solve_problem(problem, guess, options, method, option_kw) -> OCPResult:
             alt.message += (f" (The relaxed tail's solution, cost {cost:.10g}, failed its replay: "
                             f"{res.message})")
             return alt
-    if res.status < 0 and problem.replay_tol is not None and np.all(np.isfinite(res.u)):
+    if shooting and res.status < 0 and problem.replay_tol is not None and np.all(np.isfinite(res.u)):
         return polished(problem, res, t0)
     return res
 
@@ -101,34 +101,52 @@ def polished(problem, res, t0) -> OCPResult:
     each phase integrated exactly; repeated from the replay of the new control while that replay
     finds other phases (at most :data:`SHOOTING_ROUNDS` rounds). Returned when it succeeds and its
     replay is within tolerance; else ``res`` with a note saying why not."""
-    start, notes = res, []
-    for rnd in range(SHOOTING_ROUNDS):
+    try:
+        refuse(problem)
+    except NotShootable as exc:
+        res.message += f" (Exact-phase shooting not tried: {exc}.)"
+        return res
+    notes = []
+    # first from the replay's phases (a feasible start), then once from the transcription's own
+    # states and modes (multiple shooting: its defects closed by IPOPT), which keeps a trajectory
+    # the open-loop replay leaves (the cart-pole's swing-up: the replay of Radau's control misses
+    # the upright by 17, the shooting from its states swings up at a cost 555.9)
+    queue = [("replay", r) for r in range(SHOOTING_ROUNDS)] + [("result", 0)]
+    start = res
+    while queue:
+        kind, rnd = queue.pop(0)
+        if kind == "result":
+            start = res
+        label = f"round {rnd + 1}" if kind == "replay" else "from the transcription's states"
         try:
-            x, cost, diag, st, dt, tr = solve_shooting(problem, start)
+            x, cost, diag, st, dt, tr = solve_shooting(problem, start, start=kind)
         except NotShootable as exc:
-            notes.append(f"not tried: {exc}" if rnd == 0 else f"round {rnd + 1} not tried: {exc}")
-            break
+            notes.append(f"{label} not tried: {exc}")
+            queue = [a for a in queue if a[0] != "replay"]
+            continue
         except RuntimeError as exc:  # the replay that gives the phases, or an integrator, failed
-            notes.append(f"round {rnd + 1} failed: {exc}")
-            break
+            notes.append(f"{label} failed: {exc}")
+            continue
         ok = st["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
         stage = HomotopyStage(0.0, int(st["iter_count"]), diag["residual"], 0.0, cost, st["return_status"], ok, dt)
         segments = sum(len(s) for s in tr.plan)
         if not ok or diag["dynamics"] > 1e-8 or diag["residual"] > 1e-8:
-            notes.append(f"round {rnd + 1} ({segments} phases) failed: IPOPT returned {st['return_status']}, "
+            notes.append(f"{label} ({segments} phases) failed: IPOPT returned {st['return_status']}, "
                          f"defect {diag['dynamics']:.2e}, mode conditions violated by {diag['residual']:.2e}")
-            break
-        how = (f"exact-phase shooting on the {segments} phases of the event replay of the "
-               f"{'transcription' if rnd == 0 else f'shooting round {rnd}'}'s control (CVODES, rtol "
-               f"{INTEGRATOR_TOL['reltol']:.0e}; round {rnd + 1})")
+            queue = [a for a in queue if a[0] != "replay"]  # the next rounds would start from the same replay
+            continue
+        source = ("the event replay of the " + ("transcription" if rnd == 0 else f"shooting round {rnd}")
+                  + "'s control" if kind == "replay" else "the transcription's own modes and states")
+        how = (f"exact-phase shooting on the {segments} phases of {source} (CVODES, rtol "
+               f"{INTEGRATOR_TOL['reltol']:.0e})")
         out = result_of(problem, x, cost, diag, 0, f"Solved by {how}: every mode condition holds to "
                         f"{max(diag['residual'], 1e-16):.1e}, the phases join to {max(diag['dynamics'], 1e-16):.1e}.",
-                        start.homotopy + [stage], time.perf_counter() - t0, tr=tr)
+                        res.homotopy + [stage], time.perf_counter() - t0, tr=tr)
         out = _checked(problem, out, "shooting")
         if out.success:
             out.message += f" The transcription's result: {res.message}"
             return out
-        notes.append(f"round {rnd + 1} ({segments} phases, cost {cost:.10g}): {out.message}")
+        notes.append(f"{label} ({segments} phases, cost {cost:.10g}): {out.message}")
         start = out
     res.message += f" (Exact-phase shooting: {'; '.join(notes)})"
     return res
