@@ -27,7 +27,7 @@ def test_plan_follows_the_event_replay(motor_transcribed):
     assert len(plan) == pb.N
     assert plan[0][0][0] == (STICK,) and plan[0][1][0] == (SLIDE_POS,)  # the coil's force builds up first
     for k, segs in enumerate(plan):
-        assert sum(d for _, d in segs) == pytest.approx(res.t[k + 1] - res.t[k], rel=1e-12)
+        assert sum(d for _, d, _ in segs) == pytest.approx(res.t[k + 1] - res.t[k], rel=1e-12)
     tr = PhaseShooting(pb, plan)
     x0 = tr.initial_point(res)
     _, _, q, v, u, _, _ = tr.unpack(x0)
@@ -87,21 +87,41 @@ def test_exact_transcription_is_left_alone():
 
 
 def test_refusals_name_what_is_not_modelled():
-    """Spatial contacts and the user's pairs are refused by name; an impact in the replay too."""
+    """Spatial contacts and the user's pairs are refused by name."""
     sc = lcp.scenes.jean_pratt(v0=0.0)
     from lcp.ocp import tangential_push
     pb = OptimalControlProblem(sc, 4, control_matrix=tangential_push(sc.system), u_min=-20, u_max=20, T=0.5,
                                complementarity=[(lambda s: s.u0[0] + 20, lambda s: 20 - s.u0[0])])
     with pytest.raises(NotShootable, match="complementarity"):
         PhaseShooting(pb, [[((STICK,), 0.125)]] * 4)
-    ball = EXAMPLES["ball_bounce"]().make(12)
-    ball.replay_tol = None
-    res = ball.solve()
-    with pytest.raises(NotShootable, match="impulse"):
-        phase_plan(res)
+    with pytest.raises(NotShootable, match="spatial"):
+        from lcp.ocp.shooting import refuse
+        refuse(EXAMPLES["point_on_plane"]().make(4))
 
 
 def test_plan_length_checked(motor_transcribed):
     pb, res = motor_transcribed
     with pytest.raises(ValueError, match="intervals"):
         PhaseShooting(pb, phase_plan(res)[:-1])
+
+
+def test_impact_starts_a_segment_and_its_law_holds():
+    """The ball bounced to a target (e = 0.5): the replay's impact starts a segment; the shooting
+    from it keeps Newton's law there (u_N+ = -e u_N-) and replays to 1e-8, at the transcription's
+    own cost (exact there: constant forces in flight)."""
+    ex = EXAMPLES["ball_bounce"]()
+    pb = ex.make(12)
+    res = pb.solve()
+    assert res.success and "shooting" not in res.message
+    plan = phase_plan(res)
+    hits = [(k, at) for k, segs in enumerate(plan) for _, _, at in segs if at]
+    assert len(hits) == 1 and hits[0][1][0][0] == 0
+    x, cost, diag, st, _, tr = solve_shooting(pb, res)
+    assert st["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    assert diag["dynamics"] < 1e-10 and diag["residual"] < 1e-10
+    assert cost == pytest.approx(res.cost, rel=1e-7)
+    PN = x[tr.ix["PN"]].ravel()
+    assert PN.size == 1 and PN[0] > 0
+    from lcp.ocp.solve import _checked, result_of
+    out = _checked(pb, result_of(pb, x, cost, diag, 0, "", [], 0.0, tr=tr), "shooting")
+    assert out.status == 0 and out.replay.final_miss < 1e-8

@@ -258,7 +258,7 @@ def replay_check(result: OCPResult, tol: float, refine: int = 50) -> ReplayCheck
             if pairs:  # the user's complementarity pairs on the replayed states (lcp.ocp.pairs)
                 viol = max(viol, pair_violation(pairs, st))
     return ReplayCheck(method=method, final_miss=final, node_miss=nodes, path_violation=viol, tol=tol,
-                       where=_where(result, rp, tol))
+                       where=_where(result, rp, tol), pieces=rp.pieces if method == "event" else None)
 
 
 def _replay_modes(rp, k):

@@ -156,6 +156,9 @@ class ReplayCheck:
     path_violation: float
     tol: float
     where: str = ""
+    #: the event replay's per-interval results (None for a Moreau-Jean replay): their phases give
+    #: the exact-phase shooting its phase sequence (:mod:`lcp.ocp.shooting`)
+    pieces: list | None = field(default=None, repr=False, compare=False)
 
     @property
     def ok(self) -> bool:

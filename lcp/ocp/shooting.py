@@ -31,8 +31,11 @@ The solution is then exact up to the integrator's tolerance: its replay repeats 
 1e-9 and below where the transcription missed by 1e-1 to 1e-4). It is a local optimum for that
 phase sequence: a phase the optimum does not have can only shrink to zero length.
 
-Not modelled (:class:`NotShootable` says which): impacts and touch-downs (a contact that closes
-inside the horizon), spatial contacts, the user's complementarity pairs, contacts or constraints
+Impacts: the replay's impacts start segments; there the velocity jumps by M^-1 H' P with the
+impulses P as unknowns under the event method's impact law in the replay's mode (the gap closed,
+an approach, Newton's u_N+ = -e u_N-, Coulomb's law on P_T: stick or slide), so the impact time
+moves with the segment durations. Not modelled (:class:`NotShootable` says which): a contact that
+closes without an impact, the Painleve fallback's impulses and accumulations, spatial contacts, the user's complementarity pairs, contacts or constraints
 that move with t, kinematic maps.
 
 Imports CasADi, NumPy, the contact modes, the replay and the theta transcription (whose NLP
@@ -72,39 +75,60 @@ class NotShootable(ValueError):
 
 def phase_plan(result):
     """The phase sequence of the event replay of a solution's control: for each control interval
-    a list of (modes, duration), modes a tuple of codes (one per contact), durations summing to
-    the interval's length. Raises :class:`NotShootable` on impacts and touch-downs."""
-    pieces = event_pieces(result, restart=True)[2]
-    plan = []
+    a list of segments (modes, duration, impacts), modes a tuple of codes (one per contact),
+    durations summing to the interval's length, impacts the impacts at the segment's start as
+    (contact, tangential mode, P_N, P_T) (the replay's impulses: the start of the shooting).
+    Raises :class:`NotShootable` on other impulses (the Painleve fallback, accumulations) and on a
+    contact that closes without an impact."""
+    rc = getattr(result, "replay", None)
+    pieces = rc.pieces if rc is not None and rc.pieces and len(rc.pieces) == len(result.t) - 1 else None
+    if pieces is None:  # (the replay check keeps its pieces: they are reused)
+        pieces = event_pieces(result, restart=True)[2]
+    mu = np.asarray(result.problem.system.mu, dtype=float)
+    plan, carried = [], []
     for k, sim in enumerate(pieces):
-        if sim.impulses:
-            imp = sim.impulses[0]
-            raise NotShootable(f"the replay has an impulse ({imp.kind}) on contact {imp.contact} at "
-                               f"t = {result.t[k] + imp.t:.6g}: impacts are not modelled")
-        segs = []
+        h = float(result.t[k + 1] - result.t[k])
+        hits = carried
+        carried = []
+        for imp in sim.impulses:
+            if imp.kind != "impact":
+                raise NotShootable(f"the replay has an impulse ({imp.kind}) on contact {imp.contact} at "
+                                   f"t = {result.t[k] + imp.t:.6g}: only impacts are modelled")
+            pT, pN, j = float(imp.P_T), float(imp.P_N), int(imp.contact)
+            if mu[j] == 0.0:  # frictionless: no tangential impulse, whatever the direction
+                tmode = OPEN
+            else:
+                tmode = STICK if abs(pT) < mu[j] * pN * (1 - 1e-6) else (SLIDE_POS if pT < 0 else SLIDE_NEG)
+            hit = (float(imp.t), (j, tmode, pN, pT))
+            (carried if imp.t >= h * (1 - 1e-12) else hits).append(hit if imp.t < h * (1 - 1e-12) else (0.0, hit[1]))
+        segs, t_at = [], 0.0
         for ph in sim.phases:
             dur = float(ph.t1 - ph.t0)
             modes = tuple(MODE_CODES[nm] for nm in ph.modes)
             if dur <= 0.0:
                 continue
-            if segs and segs[-1][0] == modes:
-                segs[-1] = (modes, segs[-1][1] + dur)
+            at = tuple(hit for t_i, hit in hits if abs(t_i - ph.t0) <= 1e-9 * h)
+            if segs and segs[-1][0] == modes and not at:
+                segs[-1] = (modes, segs[-1][1] + dur, segs[-1][2])
             else:
-                segs.append((modes, dur))
-        h = float(result.t[k + 1] - result.t[k])
+                segs.append((modes, dur, at))
+            t_at = ph.t1
+        placed = sum(len(sg[2]) for sg in segs)
+        if placed != len(hits):
+            raise NotShootable(f"an impact in interval {k} (t = {result.t[k]:.6g}) does not start a smooth phase")
         if not segs:
             raise NotShootable(f"the replay of interval {k} has no smooth phase")
-        total = sum(d for _, d in segs)
-        segs = [(md, d * h / total) for md, d in segs]  # round-off in the phase times
-        plan.append(segs)
+        total = sum(sg[1] for sg in segs)
+        plan.append([(md, d * h / total, at) for md, d, at in segs])  # round-off in the phase times
     previous = None
     for k, segs in enumerate(plan):
-        for md, _ in segs:
+        for md, _, at in segs:
             if previous is not None:
+                hit = {i[0] for i in at}
                 for j, (a, b) in enumerate(zip(previous, md)):
-                    if a == OPEN and b != OPEN:
-                        raise NotShootable(f"contact {j} closes in interval {k} (t = {result.t[k]:.6g} to "
-                                           f"{result.t[k + 1]:.6g}): touch-downs are not modelled")
+                    if a == OPEN and b != OPEN and j not in hit:
+                        raise NotShootable(f"contact {j} closes without an impact in interval {k} (t = "
+                                           f"{result.t[k]:.6g} to {result.t[k + 1]:.6g})")
             previous = md
     return plan
 
@@ -118,9 +142,9 @@ def plan_of_modes(result):
     for k, md in enumerate(modes):
         h = float(result.t[k + 1] - result.t[k])
         if k and modes[k - 1] != md:
-            plan.append([(modes[k - 1], 1e-3 * h), (md, (1 - 1e-3) * h)])
+            plan.append([(modes[k - 1], 1e-3 * h, ()), (md, (1 - 1e-3) * h, ())])
         else:
-            plan.append([(md, h)])
+            plan.append([(md, h, ())])
     return plan
 
 
@@ -145,7 +169,8 @@ class PhaseShooting(Transcription):
         refuse(pb)
         if len(plan) != pb.N:
             raise ValueError(f"plan has {len(plan)} intervals, the problem {pb.N}")
-        self.plan = [[(tuple(int(c) for c in md), float(d)) for md, d in segs] for segs in plan]
+        self.plan = [[(tuple(int(c) for c in sg[0]), float(sg[1]), tuple(sg[2]) if len(sg) > 2 else ())
+                      for sg in segs] for segs in plan]
         self._modes_fns, self._integrators, self._ng = {}, {}, 0
         super().__init__(pb)
 
@@ -276,7 +301,9 @@ class PhaseShooting(Transcription):
             x = ca.vertcat(qs[k], vs[k])
             t_seg = tk[k]
             impN, impT = ca.SX.zeros(m, 1), ca.SX.zeros(m, 1)
-            for j, (modes, _) in enumerate(segs):
+            for j, (modes, _, impacts) in enumerate(segs):
+                if impacts:  # the impacts at the segment's start: x is the state before them
+                    x = self._impact(x, impacts, k, j)
                 if j < S - 1:
                     xe = ca.vertcat(self._var(f"Qs{k}_{j}", n, -np.inf, np.inf, key="Qs"),
                                     self._var(f"Vs{k}_{j}", n, -np.inf, np.inf, key="Vs"))
@@ -348,7 +375,7 @@ class PhaseShooting(Transcription):
                     self._constrain(ca.vertcat(mu[j] * lamN[j] - lamT[j], mu[j] * lamN[j] + lamT[j]), 0.0, np.inf)
                     if i == 0 and pm in (SLIDE_POS, SLIDE_NEG):  # a stop
                         self._constrain(uT[j], 0.0, 0.0)
-                elif md in (SLIDE_POS, SLIDE_NEG):
+                elif md in (SLIDE_POS, SLIDE_NEG) and mu[j] > 0.0:  # (frictionless: any direction)
                     s = 1.0 if md == SLIDE_POS else -1.0
                     self._constrain(s * uT[j], 0.0, np.inf)
                     if i == 0:
@@ -362,6 +389,51 @@ class PhaseShooting(Transcription):
                     self._constrain(gap(x[:n])[j], 0.0, np.inf)
                 elif pm != OPEN or (first and float(self.pb.system.gaps(q_start)[j]) <= 1e-12):
                     self._constrain(acc[j], 0.0, np.inf)  # a lift-off accelerates away from the surface
+
+    def _impact(self, x, impacts, k, j):
+        """The velocity after the impacts at a segment's start, with the impact law as constraints:
+        the gap closed, an approach, Newton's restitution on the normal velocity, and Coulomb's law
+        on the tangential impulse in the replay's mode (stick: no tangential velocity after it;
+        slide: at the cone's bound against the velocity after it)."""
+        sys = self.pb.system
+        n, m = sys.n, sys.n_contacts
+        q, v = x[:n], x[n:]
+        H = ca.Function("H", [sys.q_sym], [sys.H_expr])(q)
+        Mq = ca.Function("M", [sys.t_sym, sys.q_sym], [sys.mass_expr])(0.0, q)
+        gap = ca.Function("gap", [sys.q_sym], [sys.gap_expr])(q)
+        mu, e = np.asarray(sys.mu, dtype=float), np.asarray(sys.e, dtype=float)
+        rhs = ca.SX.zeros(n, 1)
+        pairs = []
+        for c, tmode, _, _ in impacts:
+            PN = self._var(f"PN{k}_{j}_{c}", 1, 0.0, np.inf, key="PN")
+            PT = self._var(f"PT{k}_{j}_{c}", 1, -np.inf, np.inf, key="PT")
+            rhs = rhs + H[c, :].T * PN + H[m + c, :].T * PT
+            pairs.append((c, tmode, PN, PT))
+        vp = v + ca.solve(Mq, rhs)
+        for c, tmode, PN, PT in pairs:
+            uN_pre = ca.mtimes(H[c, :], v)
+            self._constrain(gap[c], 0.0, 0.0)
+            self._constrain(uN_pre, -np.inf, 0.0)
+            self._constrain(ca.mtimes(H[c, :], vp) + e[c] * uN_pre, 0.0, 0.0)
+            uT = ca.mtimes(H[m + c, :], vp)
+            if tmode == OPEN:  # frictionless
+                self._constrain(PT, 0.0, 0.0)
+            elif tmode == STICK:
+                self._constrain(uT, 0.0, 0.0)
+                self._constrain(ca.vertcat(mu[c] * PN - PT, mu[c] * PN + PT), 0.0, np.inf)
+            else:
+                s = 1.0 if tmode == SLIDE_POS else -1.0
+                self._constrain(PT + s * mu[c] * PN, 0.0, 0.0)
+                self._constrain(s * uT, 0.0, np.inf)
+        return ca.vertcat(q, vp)
+
+    def _impulse_dv(self, q, impacts):
+        """The velocity change of the given impulses (numbers: the initial point)."""
+        sys = self.pb.system
+        m = sys.n_contacts
+        H = sys.contact_jacobian(q)
+        rhs = sum(H[c] * pn + H[m + c] * pt for c, _, pn, pt in impacts)
+        return np.linalg.solve(sys.mass(q), rhs)
 
     def _constrain(self, expr, lo, hi):
         super()._constrain(expr, lo, hi)
@@ -409,13 +481,19 @@ class PhaseShooting(Transcription):
         if pb.max_cost is not None:
             x[ix["z"]] = result.peak if np.isfinite(result.peak) else 0.0
         xs = np.concatenate([pb.q0, pb.v0])
-        d_i, s_i = 0, 0
+        d_i, s_i, p_i = 0, 0, 0
         for k, segs in enumerate(self.plan):
             h = t[k + 1] - t[k]
             ua, ub = self.control_pair(list(u), k)
             t_seg = t[k]
             iN, iT = np.zeros(m), np.zeros(m)
-            for j, (modes, dur) in enumerate(segs):
+            for j, (modes, dur, impacts) in enumerate(segs):
+                if impacts:
+                    xs = xs.copy()
+                    xs[n:] = xs[n:] + self._impulse_dv(xs[:n], impacts)
+                    for j_c, _, pn, pt in impacts:
+                        x[ix["PN"][p_i]], x[ix["PT"][p_i]] = pn, pt
+                        p_i += 1
                 if len(segs) > 1:
                     x[ix["d"][d_i]] = dur
                     d_i += 1
