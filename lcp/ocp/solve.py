@@ -18,7 +18,7 @@ from lcp.ocp.guess import event_guess, resample, x0_from_guess
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions
 from lcp.ocp.replay import replay_check
 from lcp.ocp.results import HomotopyStage, OCPGuess, OCPResult
-from lcp.ocp.shooting import INTEGRATOR_TOL, NotShootable, refuse, solve_shooting
+from lcp.ocp.shooting import CHECK_TOL, NotShootable, refuse, solve_shooting
 from lcp.ocp.spatial import SpatialTranscription
 from lcp.ocp.transcription import Transcription
 
@@ -137,8 +137,8 @@ def polished(problem, res, t0) -> OCPResult:
             continue
         source = ("the event replay of the " + ("transcription" if rnd == 0 else f"shooting round {rnd}")
                   + "'s control" if kind == "replay" else "the transcription's own modes and states")
-        how = (f"exact-phase shooting on the {segments} phases of {source} (CVODES, rtol "
-               f"{INTEGRATOR_TOL['reltol']:.0e})")
+        how = (f"exact-phase shooting on the {segments} phases of {source} (the phases joined as "
+               f"CVODES integrates them at rtol {CHECK_TOL['reltol']:.0e})")
         out = result_of(problem, x, cost, diag, 0, f"Solved by {how}: every mode condition holds to "
                         f"{max(diag['residual'], 1e-16):.1e}, the phases join to {max(diag['dynamics'], 1e-16):.1e}.",
                         res.homotopy + [stage], time.perf_counter() - t0, tr=tr)
