@@ -71,3 +71,29 @@ def test_convex_obstacle():
     assert r.status == 0, r.message
     _on_curve(pb, r)
     assert r.replay.final_miss <= 1e-2
+
+
+@pytest.mark.slow
+def test_box_tipped_over_its_corner_from_a_tipping_guess():
+    """studies._ocp_models.box_tip at N = 20 from the event simulation of a push that tips the box
+    (4 N for 0.3 s): the box pivots on its bottom-right corner (stuck but for the last step before
+    the landing), its bottom-left corner lifts at once, the top-right corner lands at a node with
+    an impulse that stops the box, which then rests on its side. The Coulomb law reads the pivot's
+    velocity with the step's end Jacobian (with the start's the homotopy stalled at residual 0.87)."""
+    from lcp.ocp.guess import event_guess
+    from studies._ocp_models import box_tip
+
+    ex = box_tip()
+    pb = ex.make(20)
+    r = pb.solve(event_guess(pb, lambda t: 4.0 if t < 0.3 else 0.0, 1.0))
+    assert r.complementarity_residual <= 1e-8, r.message
+    gaps = np.array([pb.system.gaps(qk) for qk in r.q])
+    pivot, land = 1, 2
+    assert np.max(np.abs(gaps[:, pivot])) <= 1e-9  # the pivot stays on the floor
+    k_land = int(np.argmax(gaps[:, land] <= 1e-9))
+    assert 5 <= k_land < 20 and np.all(gaps[k_land:, land] <= 1e-9)
+    assert np.all(r.p_N[:k_land, land] == pytest.approx(0.0, abs=1e-9))
+    assert np.max(np.abs(r.v[k_land + 1:])) <= 1e-8  # at rest after the landing impulse
+    assert np.min(gaps[1:, 0]) > 0  # the bottom-left corner lifted at the start
+    # the step's second-order error: the replay misses, by a few mm, not by the box
+    assert r.replay.final_miss <= 2e-2

@@ -399,7 +399,7 @@ def diagnose_contacts(tr, x) -> dict:
         # normals at the step's ends and meets the velocity along the end's (lcp.ocp.transcription)
         HL, HF, rows = H.copy(), H.copy(), np.concatenate([tr.curved, m + tr.curved])
         H1 = blocks(tr.kin.map(N)((tk + hs)[None, :], q[1:].T)[1], 2 * m, n)
-        HL[:, tr.curved] = H1[:, tr.curved]
+        HL[:, rows] = H1[:, rows]
         HF[:, rows] = 0.5 * (H[:, rows] + H1[:, rows])
     Ht = np.concatenate([HF.transpose(0, 2, 1), np.zeros((N, nb, 2 * m))], axis=1)
     SHt = np.linalg.solve(KKT, Ht)[:, :n]
