@@ -97,3 +97,18 @@ def test_box_tipped_over_its_corner_from_a_tipping_guess():
     assert np.min(gaps[1:, 0]) > 0  # the bottom-left corner lifted at the start
     # the step's second-order error: the replay misses, by a few mm, not by the box
     assert r.replay.final_miss <= 2e-2
+
+
+@pytest.mark.slow
+def test_hopper_from_the_defaults_meets_the_coulomb_law():
+    """studies._ocp_models.hopper at N = 20 from solve()'s defaults: the Coulomb residual of the
+    returned point is at rounding level. The impulses at the nodes act along the node's own contact
+    Jacobian, so the diagnosis measures them with that Jacobian's Delassus operator (with the step's
+    mean Jacobian of the curved foot it read 0.016 at a touchdown that meets Newton's and Coulomb's
+    laws). The replay still misses by the step's error and the touchdowns' timing (8e-2)."""
+    from studies._ocp_models import hopper
+
+    pb = hopper().make(20)
+    r = pb.solve()
+    assert r.complementarity_residual <= 1e-8, r.message
+    assert r.dynamics_residual <= 1e-8

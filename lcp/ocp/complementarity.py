@@ -405,7 +405,10 @@ def diagnose_contacts(tr, x) -> dict:
     SHt = np.linalg.solve(KKT, Ht)[:, :n]
     W = HL @ SHt
     Mq = blocks(tr.kin.map(N)(tk[None, :], q[:-1].T)[0], n, n)
-    W0 = H @ np.linalg.solve(kkt(Mq, G), Ht)[:, :n]  # the impulses' Delassus operator
+    # the impulses' Delassus operator: a node's impulse acts along H(q_k) (not along the step's
+    # mean Jacobian of a curved contact)
+    H0t = np.concatenate([H.transpose(0, 2, 1), np.zeros((N, nb, 2 * m))], axis=1)
+    W0 = H @ np.linalg.solve(kkt(Mq, G), H0t)[:, :n]
     gaps = np.array([pb.system.gaps(qk) for qk in q])  # (N + 1, m)
     gtol = 1e-9 * max(1.0, float(np.max(np.abs(q))))
     uN_minus = np.einsum("kij,kj->ki", H[:, :m], vs)
