@@ -269,19 +269,16 @@ class Transcription:
             Wh, r, H, G, phi_t1, _, Mq, dF = self.step(tk[k], h, qa, va, ua, 0.5 * (ua + ub), ub - ua)
             pN, pT = h * blk["pN"], h * (blk["bp"] - blk["bm"])
             dyn = ca.mtimes(Wh, vb - va) - r
-            # curved contacts: the Jacobian at the step's end (the velocities that the law sees) and
-            # the mean of both ends (along which the forces act); H itself elsewhere
-            HL, HF = _end_jacobians(self, H, tk[k] + h, qb)
+            HL, HF = _end_jacobians(self, H, tk[k] + h, qb)  # curved contacts: the law's, the forces'
             if m:
                 dyn = dyn - ca.mtimes(HF.T, ca.vertcat(pN, pT))
             if nb:
                 dyn = dyn - ca.mtimes(G.T, lamb)
                 self._constrain(ca.mtimes(G, vb) + phi_t1, 0.0, 0.0)
             self._constrain(dyn, 0.0, 0.0)
-            if affine:  # the trapezoid plus its exact correction for forces affine in t over the step
-                dq = qb - qa - 0.5 * h * (va + vb) + h * h / 12 * self._rates(k, blk, H, Mq, dF, m, mu, sigma)
-            else:
-                dq = qb - qa - h * ((1 - th) * va + th * vb)
+            # the affine hold: the trapezoid plus its exact correction for forces affine in t over the step
+            dq = (qb - qa - 0.5 * h * (va + vb) + h * h / 12 * self._rates(k, blk, H, Mq, dF, m, mu, sigma) if affine
+                  else qb - qa - h * ((1 - th) * va + th * vb))
             self._constrain(_stabilised(self, dq, k, tk[k] + h, qb, vb, h, blk["pN"], sigma), 0.0, 0.0)
             if m:
                 uN, uT = ca.mtimes(H[:m, :], vb), ca.mtimes(HL[m:, :], vb)
