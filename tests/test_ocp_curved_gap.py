@@ -73,6 +73,28 @@ def test_convex_obstacle():
     assert r.replay.final_miss <= 1e-2
 
 
+def test_landing_on_a_curved_floor_meets_newton_and_coulomb():
+    """A point (mu = 0.5) dropped from 0.22 m above the bowl y = x^2 / 2 at x = 0.6, steered to rest at
+    the bottom in 1 s (N = 20): it lands at a node with an impulse, then slides along the curve
+    under a force. The node's impulse acts along the contact Jacobian at the node, and the
+    diagnosis measures it so (measuring it with the step's mean Jacobian, as the curved step's
+    forces act, read a residual 0.019 and the solve ended with status -2)."""
+    q, v, u = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1)
+    sys = System(q, v, ca.SX.eye(2), ca.vertcat(u[0], -G), contacts=[Contact(gap=q[1] - q[0] ** 2 / 2, tangent=q[0],
+                                                                          mu=0.5)],
+                 control=u, control_bounds=(np.array([-30.0]), np.array([30.0])), names=["x", "y"])
+    pb = OptimalControlProblem(sys, 20, T=1.0, q0=np.array([0.6, 0.4]), v0=np.zeros(2), stage_cost=effort,
+                               replay_tol=1e-2, terminal_constraints=lambda qq, vv: ca.vertcat(qq[0], vv))
+    r = pb.solve()
+    assert r.status == 0, r.message
+    assert r.complementarity_residual <= 1e-8
+    gaps = np.array([pb.system.gaps(qk)[0] for qk in r.q])
+    k = int(np.argmax(gaps <= 1e-9))  # the landing node
+    assert 2 <= k <= 6 and np.max(np.abs(gaps[k:])) <= 1e-9
+    assert np.all(r.p_N[k:, 0] > 0) and np.all(r.p_N[:k, 0] == pytest.approx(0.0, abs=1e-9))
+    assert r.replay.final_miss <= 1e-3  # second order on the curve (measured 2.7e-4)
+
+
 @pytest.mark.slow
 def test_box_tipped_over_its_corner_from_a_tipping_guess():
     """studies._ocp_models.box_tip at N = 20 from the event simulation of a push that tips the box
