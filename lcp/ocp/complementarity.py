@@ -394,15 +394,26 @@ def diagnose_contacts(tr, x) -> dict:
         return {"residual": res, "dynamics": float(np.max(np.abs(vfree - v[1:]), initial=0.0)), "modes": modes,
                 "conflicts": conflicts, "max_product": max_product, "lcp": lcp_res, "cross": cross, "where": ""}
     PN, PT = tr.impulses(x)
-    Ht = np.concatenate([H.transpose(0, 2, 1), np.zeros((N, nb, 2 * m))], axis=1)
+    HL = HF = H
+    if getattr(tr, "curved", np.zeros(0)).size:  # a curved gap's force acts along the mean of the
+        # normals at the step's ends and meets the velocity along the end's (lcp.ocp.transcription)
+        HL, HF, rows = H.copy(), H.copy(), np.concatenate([tr.curved, m + tr.curved])
+        H1 = blocks(tr.kin.map(N)((tk + hs)[None, :], q[1:].T)[1], 2 * m, n)
+        HL[:, rows] = H1[:, rows]
+        HF[:, rows] = 0.5 * (H[:, rows] + H1[:, rows])
+    Ht = np.concatenate([HF.transpose(0, 2, 1), np.zeros((N, nb, 2 * m))], axis=1)
     SHt = np.linalg.solve(KKT, Ht)[:, :n]
-    W = H @ SHt
+    W = HL @ SHt
     Mq = blocks(tr.kin.map(N)(tk[None, :], q[:-1].T)[0], n, n)
-    W0 = H @ np.linalg.solve(kkt(Mq, G), Ht)[:, :n]  # the impulses' Delassus operator
+    # the impulses' Delassus operator: a node's impulse acts along H(q_k) (not along the step's
+    # mean Jacobian of a curved contact)
+    H0t = np.concatenate([H.transpose(0, 2, 1), np.zeros((N, nb, 2 * m))], axis=1)
+    W0 = H @ np.linalg.solve(kkt(Mq, G), H0t)[:, :n]
     gaps = np.array([pb.system.gaps(qk) for qk in q])  # (N + 1, m)
     gtol = 1e-9 * max(1.0, float(np.max(np.abs(q))))
     uN_minus = np.einsum("kij,kj->ki", H[:, :m], vs)
     qf = np.einsum("kij,kj->ki", H, vfree)
+    qfl = np.einsum("kij,kj->ki", HL, vfree)
     gap_pred = gap + hs[:, None] * ((1 - th) * uN_minus + th * qf[:, :m])
     p = np.concatenate([pN, pT], axis=1)
     P = np.concatenate([PN, PT], axis=1)
@@ -415,7 +426,7 @@ def diagnose_contacts(tr, x) -> dict:
         act = (pN[k] > 0) | (closed0 & closed1)
         rows = np.concatenate([np.flatnonzero(act), m + np.flatnonzero(act)])
         if act.any():
-            cp = ContactProblem(W[k][np.ix_(rows, rows)], qf[k][rows], mu[act])
+            cp = ContactProblem(W[k][np.ix_(rows, rows)], qfl[k][rows], mu[act])
             res = max(res, cp.residual(p[k][rows]))
             modes[k, act] = cp.modes(p[k][rows], rtol=1e-6)
         if (~act).any():
