@@ -6,7 +6,7 @@ import pytest
 import lcp
 from lcp.contact.modes import SLIDE_POS, STICK
 from lcp.ocp import OptimalControlProblem, effort
-from lcp.ocp.shooting import NotShootable, PhaseShooting, phase_plan, solve_shooting
+from lcp.ocp.shooting import NotShootable, PhaseShooting, initial_point, phase_plan, solve_shooting
 from lcp.ocp.replay import event_pieces
 from studies._ocp_models import EXAMPLES
 
@@ -29,7 +29,7 @@ def test_plan_follows_the_event_replay(motor_transcribed):
     for k, segs in enumerate(plan):
         assert sum(d for _, d, _ in segs) == pytest.approx(res.t[k + 1] - res.t[k], rel=1e-12)
     tr = PhaseShooting(pb, plan)
-    x0 = tr.initial_point(res)
+    x0 = initial_point(tr, res)
     _, _, q, v, u, _, _ = tr.unpack(x0)
     qr, vr, _ = event_pieces(res, restart=True)
     assert np.max(np.abs(q - qr)) < 1e-9 and np.max(np.abs(v - vr)) < 1e-8

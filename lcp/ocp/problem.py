@@ -260,11 +260,10 @@ class OptimalControlProblem:
             and the Coulomb law (IPOPT stopped on a degenerate but nearly optimal point), else from
             the guess with ``options``.
         shooting : bool
-            When the solve fails (its replay misses by more than ``replay_tol``, or the homotopy
-            or IPOPT fails), solve again on the phase sequence of the event replay of its control
-            with each phase integrated exactly (:mod:`lcp.ocp.shooting`; then from the solve's own
-            states and modes); kept when its replay is within ``replay_tol``, else ``message`` says
-            what each attempt found. False returns the transcription's own result.
+            When the solve fails (its replay, the homotopy or IPOPT), solve again on the phases of
+            the event replay of its control, each integrated exactly (:mod:`lcp.ocp.shooting`);
+            kept when its replay is within ``replay_tol``, else ``message`` says what was found.
+            False returns the transcription's own result.
         **option_kw
             Fields of :class:`HomotopyOptions` (instead of ``options``).
 

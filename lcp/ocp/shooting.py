@@ -49,10 +49,12 @@ import casadi as ca
 import numpy as np
 
 from lcp.contact.modes import OPEN, SLIDE_NEG, SLIDE_POS, STICK
+from lcp.ocp.phase_dynamics import GRID, impulse_dv, mode_dynamics, rk4_segment
 from lcp.ocp.replay import event_pieces
 from lcp.ocp.transcription import Transcription
 
-__all__ = ["CHECK_TOL", "INTEGRATOR_TOL", "NotShootable", "PhaseShooting", "phase_plan", "plan_of_modes", "refuse", "solve_shooting"]
+__all__ = ["CHECK_TOL", "INTEGRATOR_TOL", "NotShootable", "PhaseShooting", "impact_law", "initial_point", "phase_plan", "plan_of_modes",
+           "refuse", "solve_shooting"]
 
 #: the event method's mode names -> codes
 MODE_CODES = {"open": OPEN, "stick": STICK, "slide+": SLIDE_POS, "slide-": SLIDE_NEG}
@@ -65,35 +67,6 @@ INTEGRATOR_TOL = {"reltol": 1e-10, "abstol": 1e-12, "linear_multistep_method": "
 CHECK_TOL = {"reltol": 1e-12, "abstol": 1e-14, "linear_multistep_method": "adams"}
 
 
-#: the integrator's output times within a segment (fractions of it): the modes are kept
-#: admissible there and at the segment's start (a slide whose velocity changed sign between its
-#: two ends kept the cart-pole's ends admissible while its replay stuck: a miss of 1.9)
-GRID = (0.25, 0.5, 0.75, 1.0)
-
-
-def _rk4(name, x, p, tau, ode, quad, substeps):
-    """(x0, p) -> (xf, qf) at the fractions GRID of [0, 1], by the classical Runge-Kutta method with
-    ``substeps`` steps per grid interval, quadratures integrated alongside (one SX function per
-    mode: evaluated by CasADi's SX virtual machine, 5-6x faster than the same steps repeated by
-    ``mapaccum`` in MX on the motor)."""
-    f = ca.Function("f", [tau, x, p], [ode, quad])
-    x0, p0 = ca.SX.sym("x0", x.shape[0]), ca.SX.sym("p", p.shape[0])
-    xs, qs = x0, ca.SX.zeros(quad.shape[0], 1)
-    outs_x, outs_q, t0 = [], [], 0.0
-    for g in GRID:
-        dt = (g - t0) / substeps
-        for i in range(substeps):
-            t = t0 + i * dt
-            k1, l1 = f(t, xs, p0)
-            k2, l2 = f(t + dt / 2, xs + dt / 2 * k1, p0)
-            k3, l3 = f(t + dt / 2, xs + dt / 2 * k2, p0)
-            k4, l4 = f(t + dt, xs + dt * k3, p0)
-            xs = xs + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-            qs = qs + dt / 6 * (l1 + 2 * l2 + 2 * l3 + l4)
-        outs_x.append(xs)
-        outs_q.append(qs)
-        t0 = g
-    return ca.Function(name, [x0, p0], [ca.horzcat(*outs_x), ca.horzcat(*outs_q)], ["x0", "p"], ["xf", "qf"])
 
 
 class NotShootable(ValueError):
@@ -128,7 +101,7 @@ def phase_plan(result):
                 tmode = STICK if abs(pT) < mu[j] * pN * (1 - 1e-6) else (SLIDE_POS if pT < 0 else SLIDE_NEG)
             hit = (float(imp.t), (j, tmode, pN, pT))
             (carried if imp.t >= h * (1 - 1e-12) else hits).append(hit if imp.t < h * (1 - 1e-12) else (0.0, hit[1]))
-        segs, t_at = [], 0.0
+        segs = []
         for ph in sim.phases:
             dur = float(ph.t1 - ph.t0)
             modes = tuple(MODE_CODES[nm] for nm in ph.modes)
@@ -139,7 +112,6 @@ def phase_plan(result):
                 segs[-1] = (modes, segs[-1][1] + dur, segs[-1][2])
             else:
                 segs.append((modes, dur, at))
-            t_at = ph.t1
         placed = sum(len(sg[2]) for sg in segs)
         if placed != len(hits):
             raise NotShootable(f"an impact in interval {k} (t = {result.t[k]:.6g}) does not start a smooth phase")
@@ -207,61 +179,10 @@ class PhaseShooting(Transcription):
 
     # ------------------------------------------------------------------ the modes' dynamics
     def mode_function(self, modes) -> ca.Function:
-        """(t, q, v, u) -> (a, lambda_N (m), lambda_T (m), normal and tangential accelerations
-        H a + dH/dt v (2 m)) in the given modes."""
-        if modes in self._modes_fns:
-            return self._modes_fns[modes]
-        sys = self.pb.system
-        n, m, nb = sys.n, sys.n_contacts, sys.n_bilateral
-        t, q, v = sys.t_sym, sys.q_sym, sys.v_sym
-        u = ca.SX.sym("u", self.pb.nu)
-        H = sys.H_expr if m else ca.SX.zeros(0, n)
-        Hdot_v = ca.mtimes(ca.jacobian(ca.mtimes(H, v), q), v) if m else ca.SX.zeros(0, 1)
-        cols, rows, rhs = [], [], []
-        closed = [j for j in range(m) if modes[j] != OPEN]
-        stick = [j for j in range(m) if modes[j] == STICK]
-        mu = np.asarray(sys.mu, dtype=float)
-        for j in closed:
-            col = H[j, :].T
-            if modes[j] in (SLIDE_POS, SLIDE_NEG):  # friction -s mu lambda_N along the tangent
-                s = 1.0 if modes[j] == SLIDE_POS else -1.0
-                col = col - s * mu[j] * H[m + j, :].T
-            cols.append(col)
-            rows.append(H[j, :])
-            rhs.append(-Hdot_v[j])
-        for j in stick:
-            cols.append(H[m + j, :].T)
-            rows.append(H[m + j, :])
-            rhs.append(-Hdot_v[m + j])
-        if nb:
-            G = ca.jacobian(sys.constraints_expr, q)
-            Gdot_v = ca.mtimes(ca.jacobian(ca.mtimes(G, v), q), v)
-            for i in range(nb):
-                cols.append(G[i, :].T)
-                rows.append(G[i, :])
-                rhs.append(-Gdot_v[i])
-        F = sys.force_expr + ca.mtimes(sys.control_matrix_expr, u)
-        r = len(cols)
-        if r:
-            K = ca.vertcat(ca.horzcat(sys.mass_expr, -ca.horzcat(*cols)), ca.horzcat(ca.vertcat(*[rw for rw in rows]),
-                                                                                      ca.SX.zeros(r, r)))
-            y = ca.solve(K, ca.vertcat(F, *rhs))
-        else:
-            y = ca.solve(sys.mass_expr, F)
-        a = y[:n]
-        lamN, lamT = [ca.SX(0)] * m, [ca.SX(0)] * m
-        for i, j in enumerate(closed):
-            lamN[j] = y[n + i]
-            if modes[j] in (SLIDE_POS, SLIDE_NEG):
-                lamT[j] = -(1.0 if modes[j] == SLIDE_POS else -1.0) * mu[j] * y[n + i]
-        for i, j in enumerate(stick):
-            lamT[j] = y[n + len(closed) + i]
-        acc = ca.mtimes(H, a) + Hdot_v if m else ca.SX.zeros(0, 1)
-        fn = ca.Function(f"mode_{''.join(map(str, modes))}", [t, q, v, u],
-                         [a, ca.vertcat(*lamN) if m else ca.SX.zeros(0, 1),
-                          ca.vertcat(*lamT) if m else ca.SX.zeros(0, 1), acc])
-        self._modes_fns[modes] = fn
-        return fn
+        """:func:`~lcp.ocp.phase_dynamics.mode_dynamics` of the given modes, built once."""
+        if modes not in self._modes_fns:
+            self._modes_fns[modes] = mode_dynamics(self.pb, modes)
+        return self._modes_fns[modes]
 
     def integrator(self, modes) -> ca.Function:
         """CVODES over one segment in the given modes: x0 = (q, v), p = (t_seg, d, t_k, h_k, u_a,
@@ -281,7 +202,7 @@ class PhaseShooting(Transcription):
         a, lamN, lamT, _ = self.mode_function(modes)(t, x[:n], x[n:], u)
         name = f"seg_{''.join(map(str, modes))}"
         if self.substeps:  # classical Runge-Kutta, fixed steps, in SX (exact derivatives of any order)
-            F = _rk4(name, x, p, tau, ca.vertcat(x[n:], a) * d, ca.vertcat(lamN, lamT) * d, self.substeps)
+            F = rk4_segment(name, x, p, tau, ca.vertcat(x[n:], a) * d, ca.vertcat(lamN, lamT) * d, self.substeps)
         else:
             dae = {"x": x, "p": p, "t": tau, "ode": d * ca.vertcat(x[n:], a), "quad": d * ca.vertcat(lamN, lamT)}
             opts = {**self.tol, "max_num_steps": 100000}
@@ -338,7 +259,7 @@ class PhaseShooting(Transcription):
             impN, impT = ca.SX.zeros(m, 1), ca.SX.zeros(m, 1)
             for j, (modes, _, impacts) in enumerate(segs):
                 if impacts:  # the impacts at the segment's start: x is the state before them
-                    x = self._impact(x, impacts, k, j)
+                    x = impact_law(self, x, impacts, k, j)
                 if j < S - 1:
                     xe = ca.vertcat(self._var(f"Qs{k}_{j}", n, -np.inf, np.inf, key="Qs"),
                                     self._var(f"Vs{k}_{j}", n, -np.inf, np.inf, key="Vs"))
@@ -426,51 +347,6 @@ class PhaseShooting(Transcription):
                 elif pm != OPEN or (first and float(self.pb.system.gaps(q_start)[j]) <= 1e-12):
                     self._constrain(acc[j], 0.0, np.inf)  # a lift-off accelerates away from the surface
 
-    def _impact(self, x, impacts, k, j):
-        """The velocity after the impacts at a segment's start, with the impact law as constraints:
-        the gap closed, an approach, Newton's restitution on the normal velocity, and Coulomb's law
-        on the tangential impulse in the replay's mode (stick: no tangential velocity after it;
-        slide: at the cone's bound against the velocity after it)."""
-        sys = self.pb.system
-        n, m = sys.n, sys.n_contacts
-        q, v = x[:n], x[n:]
-        H = ca.Function("H", [sys.q_sym], [sys.H_expr])(q)
-        Mq = ca.Function("M", [sys.t_sym, sys.q_sym], [sys.mass_expr])(0.0, q)
-        gap = ca.Function("gap", [sys.q_sym], [sys.gap_expr])(q)
-        mu, e = np.asarray(sys.mu, dtype=float), np.asarray(sys.e, dtype=float)
-        rhs = ca.SX.zeros(n, 1)
-        pairs = []
-        for c, tmode, _, _ in impacts:
-            PN = self._var(f"PN{k}_{j}_{c}", 1, 0.0, np.inf, key="PN")
-            PT = self._var(f"PT{k}_{j}_{c}", 1, -np.inf, np.inf, key="PT")
-            rhs = rhs + H[c, :].T * PN + H[m + c, :].T * PT
-            pairs.append((c, tmode, PN, PT))
-        vp = v + ca.solve(Mq, rhs)
-        for c, tmode, PN, PT in pairs:
-            uN_pre = ca.mtimes(H[c, :], v)
-            self._constrain(gap[c], 0.0, 0.0)
-            self._constrain(uN_pre, -np.inf, 0.0)
-            self._constrain(ca.mtimes(H[c, :], vp) + e[c] * uN_pre, 0.0, 0.0)
-            uT = ca.mtimes(H[m + c, :], vp)
-            if tmode == OPEN:  # frictionless
-                self._constrain(PT, 0.0, 0.0)
-            elif tmode == STICK:
-                self._constrain(uT, 0.0, 0.0)
-                self._constrain(ca.vertcat(mu[c] * PN - PT, mu[c] * PN + PT), 0.0, np.inf)
-            else:
-                s = 1.0 if tmode == SLIDE_POS else -1.0
-                self._constrain(PT + s * mu[c] * PN, 0.0, 0.0)
-                self._constrain(s * uT, 0.0, np.inf)
-        return ca.vertcat(q, vp)
-
-    def _impulse_dv(self, q, impacts):
-        """The velocity change of the given impulses (numbers: the initial point)."""
-        sys = self.pb.system
-        m = sys.n_contacts
-        H = sys.contact_jacobian(q)
-        rhs = sum(H[c] * pn + H[m + c] * pt for c, _, pn, pt in impacts)
-        return np.linalg.solve(sys.mass(q), rhs)
-
     def _defect(self, expr):
         """A continuity (or impulse) equality: the integrator's value minus the variable, plus a
         correction parameter (zero, or the accurate integrator's difference: ``solve_shooting``)."""
@@ -511,59 +387,6 @@ class PhaseShooting(Transcription):
         """(N, m) int8: each interval's mode at its start."""
         return np.array([segs[0][0] for segs in self.plan], dtype=np.int8).reshape(self.pb.N, -1)
 
-    def initial_point(self, result, states: str = "integrated") -> np.ndarray:
-        """The NLP variables of ``result``'s control and steps, the states integrated segment by
-        segment through the plan (single shooting: feasible but for the terminal conditions), or
-        with ``states="result"`` the result's own node states (multiple shooting: defects where
-        the result's steps were inexact, the terminal conditions met)."""
-        pb, ix = self.pb, self.ix
-        n, m = pb.system.n, pb.system.n_contacts
-        x = np.zeros(self.lbx.size)
-        t = np.asarray(result.t, dtype=float)
-        if pb.free_time:
-            x[ix["T"]] = result.T
-        if pb.steps == "free":
-            x[ix["h"].ravel()] = np.diff(t)
-        u = np.asarray(result.u, dtype=float)
-        for i, idx in enumerate(ix["u"]):
-            x[idx] = u[i]
-        if pb.max_cost is not None:
-            x[ix["z"]] = result.peak if np.isfinite(result.peak) else 0.0
-        xs = np.concatenate([pb.q0, pb.v0])
-        d_i, s_i, p_i = 0, 0, 0
-        for k, segs in enumerate(self.plan):
-            h = t[k + 1] - t[k]
-            ua, ub = self.control_pair(list(u), k)
-            t_seg = t[k]
-            iN, iT = np.zeros(m), np.zeros(m)
-            for j, (modes, dur, impacts) in enumerate(segs):
-                if impacts:
-                    xs = xs.copy()
-                    xs[n:] = xs[n:] + self._impulse_dv(xs[:n], impacts)
-                    for j_c, _, pn, pt in impacts:
-                        x[ix["PN"][p_i]], x[ix["PT"][p_i]] = pn, pt
-                        p_i += 1
-                if len(segs) > 1:
-                    x[ix["d"][d_i]] = dur
-                    d_i += 1
-                start = xs if states == "integrated" or j else np.concatenate([result.q[k], result.v[k]])
-                out = self.integrator(modes)(x0=start, p=np.concatenate([[t_seg, dur, t[k], h], ua, ub]))
-                xs = np.array(out["xf"])[:, -1]
-                if m:
-                    qf = np.array(out["qf"])[:, -1]
-                    iN, iT = iN + qf[:m], iT + qf[m:]
-                if j < len(segs) - 1:
-                    x[ix["Qs"][s_i]], x[ix["Vs"][s_i]] = xs[:n], xs[n:]
-                    s_i += 1
-                t_seg += dur
-            if states == "integrated":
-                x[ix["q"][k]], x[ix["v"][k]] = xs[:n], xs[n:]
-                x[ix["pN"][k]], x[ix["fT"][k]] = iN / h, iT / h
-            else:
-                x[ix["q"][k]], x[ix["v"][k]] = result.q[k + 1], result.v[k + 1]
-                x[ix["pN"][k]], x[ix["fT"][k]] = result.p_N[k] / h, result.p_T[k] / h
-        return x
-
     def diagnose(self, x) -> dict:
         """``dynamics``: the largest continuity defect between segments; ``residual``: the
         largest violation of the other constraints (the modes' admissibility and switches, the
@@ -575,6 +398,98 @@ class PhaseShooting(Transcription):
         return {"dynamics": float(np.max(viol[self.defect_rows], initial=0.0)),
                 "residual": float(np.max(viol[other], initial=0.0)), "modes": self.modes(),
                 "lcp": float("nan"), "conflicts": 0, "max_product": 0.0, "cross": 0.0}
+
+
+def impact_law(tr, x, impacts, k, j):
+    """The state after the impacts at a segment's start of ``tr``'s NLP, with the impact law as constraints:
+    the gap closed, an approach, Newton's restitution on the normal velocity, and Coulomb's law
+    on the tangential impulse in the replay's mode (stick: no tangential velocity after it;
+    slide: at the cone's bound against the velocity after it)."""
+    sys = tr.pb.system
+    n, m = sys.n, sys.n_contacts
+    q, v = x[:n], x[n:]
+    H = ca.Function("H", [sys.q_sym], [sys.H_expr])(q)
+    Mq = ca.Function("M", [sys.t_sym, sys.q_sym], [sys.mass_expr])(0.0, q)
+    gap = ca.Function("gap", [sys.q_sym], [sys.gap_expr])(q)
+    mu, e = np.asarray(sys.mu, dtype=float), np.asarray(sys.e, dtype=float)
+    rhs = ca.SX.zeros(n, 1)
+    pairs = []
+    for c, tmode, _, _ in impacts:
+        PN = tr._var(f"PN{k}_{j}_{c}", 1, 0.0, np.inf, key="PN")
+        PT = tr._var(f"PT{k}_{j}_{c}", 1, -np.inf, np.inf, key="PT")
+        rhs = rhs + H[c, :].T * PN + H[m + c, :].T * PT
+        pairs.append((c, tmode, PN, PT))
+    vp = v + ca.solve(Mq, rhs)
+    for c, tmode, PN, PT in pairs:
+        uN_pre = ca.mtimes(H[c, :], v)
+        tr._constrain(gap[c], 0.0, 0.0)
+        tr._constrain(uN_pre, -np.inf, 0.0)
+        tr._constrain(ca.mtimes(H[c, :], vp) + e[c] * uN_pre, 0.0, 0.0)
+        uT = ca.mtimes(H[m + c, :], vp)
+        if tmode == OPEN:  # frictionless
+            tr._constrain(PT, 0.0, 0.0)
+        elif tmode == STICK:
+            tr._constrain(uT, 0.0, 0.0)
+            tr._constrain(ca.vertcat(mu[c] * PN - PT, mu[c] * PN + PT), 0.0, np.inf)
+        else:
+            s = 1.0 if tmode == SLIDE_POS else -1.0
+            tr._constrain(PT + s * mu[c] * PN, 0.0, 0.0)
+            tr._constrain(s * uT, 0.0, np.inf)
+    return ca.vertcat(q, vp)
+
+
+def initial_point(tr, result, states: str = "integrated") -> np.ndarray:
+    """The variables of ``tr``'s NLP (:class:`PhaseShooting`) at ``result``'s control and steps, the states integrated segment by
+    segment through the plan (single shooting: feasible but for the terminal conditions), or
+    with ``states="result"`` the result's own node states (multiple shooting: defects where
+    the result's steps were inexact, the terminal conditions met)."""
+    pb, ix = tr.pb, tr.ix
+    n, m = pb.system.n, pb.system.n_contacts
+    x = np.zeros(tr.lbx.size)
+    t = np.asarray(result.t, dtype=float)
+    if pb.free_time:
+        x[ix["T"]] = result.T
+    if pb.steps == "free":
+        x[ix["h"].ravel()] = np.diff(t)
+    u = np.asarray(result.u, dtype=float)
+    for i, idx in enumerate(ix["u"]):
+        x[idx] = u[i]
+    if pb.max_cost is not None:
+        x[ix["z"]] = result.peak if np.isfinite(result.peak) else 0.0
+    xs = np.concatenate([pb.q0, pb.v0])
+    d_i, s_i, p_i = 0, 0, 0
+    for k, segs in enumerate(tr.plan):
+        h = t[k + 1] - t[k]
+        ua, ub = tr.control_pair(list(u), k)
+        t_seg = t[k]
+        iN, iT = np.zeros(m), np.zeros(m)
+        for j, (modes, dur, impacts) in enumerate(segs):
+            if impacts:
+                xs = xs.copy()
+                xs[n:] = xs[n:] + impulse_dv(pb.system, xs[:n], impacts)
+                for j_c, _, pn, pt in impacts:
+                    x[ix["PN"][p_i]], x[ix["PT"][p_i]] = pn, pt
+                    p_i += 1
+            if len(segs) > 1:
+                x[ix["d"][d_i]] = dur
+                d_i += 1
+            start = xs if states == "integrated" or j else np.concatenate([result.q[k], result.v[k]])
+            out = tr.integrator(modes)(x0=start, p=np.concatenate([[t_seg, dur, t[k], h], ua, ub]))
+            xs = np.array(out["xf"])[:, -1]
+            if m:
+                qf = np.array(out["qf"])[:, -1]
+                iN, iT = iN + qf[:m], iT + qf[m:]
+            if j < len(segs) - 1:
+                x[ix["Qs"][s_i]], x[ix["Vs"][s_i]] = xs[:n], xs[n:]
+                s_i += 1
+            t_seg += dur
+        if states == "integrated":
+            x[ix["q"][k]], x[ix["v"][k]] = xs[:n], xs[n:]
+            x[ix["pN"][k]], x[ix["fT"][k]] = iN / h, iT / h
+        else:
+            x[ix["q"][k]], x[ix["v"][k]] = result.q[k + 1], result.v[k + 1]
+            x[ix["pN"][k]], x[ix["fT"][k]] = result.p_N[k] / h, result.p_T[k] / h
+    return x
 
 
 #: Runge-Kutta steps per grid interval of the shooting NLP, and the most tried
@@ -601,7 +516,7 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
     plan = phase_plan(result) if start == "replay" else plan_of_modes(result)
     t0 = time.perf_counter()
     check = PhaseShooting(pb, plan, check=True)  # CVODES: the initial point, the check of every solution
-    x = check.initial_point(result, "integrated" if start == "replay" else "result")
+    x = initial_point(check, result, "integrated" if start == "replay" else "result")
     ip = {"print_level": 0, "sb": "yes", "tol": 1e-10, "constr_viol_tol": 1e-10, "max_iter": 500,
           "mu_strategy": "adaptive", "bound_relax_factor": 0.0, **(options or {})}
     warm_ip = {**ip, "warm_start_init_point": "yes", "mu_init": 1e-8, "warm_start_bound_push": 1e-9,

@@ -329,32 +329,10 @@ class Transcription:
         del self._x, self._g, self._lbx, self._ubx, self._lbg, self._ubg, self._nx
 
     def _step_terms(self, J, st, us, k, h, ua, ub, z, sigma, pair_sizes):
-        """The step's cost terms and the user's path constraints and pairs (every transcription's)."""
-        pb = self.pb
-        if pb.stage_cost is not None:
-            J = J + h * _scalar(pb.stage_cost(st), "stage_cost")
-        if pb.control_rate_weight and pb.hold == "affine":
-            J = J + pb.control_rate_weight * ca.sumsqr(ub - ua) / h
-        elif pb.control_rate_weight and k + 1 < len(us):
-            J = J + pb.control_rate_weight * ca.sumsqr(us[k + 1] - us[k]) / h
-        if pb.path_constraints is not None:
-            self._constrain(ca.vec(ca.SX(pb.path_constraints(st))), -np.inf, 0.0)
-        if pb.path_equalities is not None:
-            self._constrain(ca.vec(ca.SX(pb.path_equalities(st))), 0.0, 0.0)
-        if pb.complementarity:  # the user's pairs, relaxed with the contacts' (lcp.ocp.pairs)
-            add_pairs(pb.complementarity, k, st, sigma, self._var, self._constrain, pair_sizes)
-        if pb.max_cost is not None:
-            self._constrain(_scalar(pb.max_cost(st), "max_cost") - z, -np.inf, 0.0)
-        return J
+        return step_terms(self, J, st, us, k, h, ua, ub, z, sigma, pair_sizes)
 
     def _terminal_terms(self, J, Tv, qs, vs, z):
-        """The terminal cost and constraints, and the epigraph variable of max_cost."""
-        pb = self.pb
-        if pb.terminal_cost is not None:
-            J = J + _scalar(pb.terminal_cost(Tv, qs[-1], vs[-1]), "terminal_cost")
-        if pb.terminal_constraints is not None:
-            self._constrain(ca.vec(ca.SX(pb.terminal_constraints(qs[-1], vs[-1]))), 0.0, 0.0)
-        return J if z is None else J + z
+        return terminal_terms(self, J, Tv, qs, vs, z)
 
     def control_pair(self, us, k):
         """The control at the start and at the end of step k (lists of per-row symbols or arrays)."""
@@ -492,3 +470,34 @@ def _curved(sys):
     m = sys.n_contacts
     return np.flatnonzero([ca.depends_on(sys.H_expr[i, :], sys.q_sym) or ca.depends_on(sys.H_expr[m + i, :], sys.q_sym)
                            for i in range(m)])
+
+
+def step_terms(tr, J, st, us, k, h, ua, ub, z, sigma, pair_sizes):
+    """The step's cost terms and the user's path constraints and pairs, added to a transcription
+    ``tr`` (every transcription's: theta, Radau, shooting)."""
+    pb = tr.pb
+    if pb.stage_cost is not None:
+        J = J + h * _scalar(pb.stage_cost(st), "stage_cost")
+    if pb.control_rate_weight and pb.hold == "affine":
+        J = J + pb.control_rate_weight * ca.sumsqr(ub - ua) / h
+    elif pb.control_rate_weight and k + 1 < len(us):
+        J = J + pb.control_rate_weight * ca.sumsqr(us[k + 1] - us[k]) / h
+    if pb.path_constraints is not None:
+        tr._constrain(ca.vec(ca.SX(pb.path_constraints(st))), -np.inf, 0.0)
+    if pb.path_equalities is not None:
+        tr._constrain(ca.vec(ca.SX(pb.path_equalities(st))), 0.0, 0.0)
+    if pb.complementarity:  # the user's pairs, relaxed with the contacts' (lcp.ocp.pairs)
+        add_pairs(pb.complementarity, k, st, sigma, tr._var, tr._constrain, pair_sizes)
+    if pb.max_cost is not None:
+        tr._constrain(_scalar(pb.max_cost(st), "max_cost") - z, -np.inf, 0.0)
+    return J
+
+
+def terminal_terms(tr, J, Tv, qs, vs, z):
+    """The terminal cost and constraints, and the epigraph variable of max_cost."""
+    pb = tr.pb
+    if pb.terminal_cost is not None:
+        J = J + _scalar(pb.terminal_cost(Tv, qs[-1], vs[-1]), "terminal_cost")
+    if pb.terminal_constraints is not None:
+        tr._constrain(ca.vec(ca.SX(pb.terminal_constraints(qs[-1], vs[-1]))), 0.0, 0.0)
+    return J if z is None else J + z
