@@ -172,16 +172,20 @@ def approach_gap(model, y, n, j, t=None) -> float:
     """The gap of contact j while it closes, and a positive value while it opens: a contact that
     leaves the surface starts at gap 0, and a first step too short to change the gap in floating
     point must not read as an impact. The landing is unchanged (the gap, approached with u_N < 0).
-    For a moving contact both are taken at time t: g(t, q(t)), u_N = H v + dg/dt."""
+    A gap below -1e-9 (1 + |q|) is a penetration whatever u_N: an ODE step that carries a contact
+    through its surface and out again (two discs passing each other within one step) must end
+    negative, or the impact inside the step is missed. For a moving contact both are taken at time
+    t: g(t, q(t)), u_N = H v + dg/dt."""
     nq = getattr(model, "nq", None) or n  # n_q coordinates first (Newton-Euler kinematics: n_q != n)
     q, v = y[:nq], y[nq:nq + n]
+    deep = -1e-9 * (1.0 + float(np.max(np.abs(q), initial=0.0)))
     if t is None or not model.moving:
         gap = float(model.gaps(q)[j])
-        if gap > 0 or float(model.jac(q)[j] @ v) < 0:
+        if gap > 0 or gap < deep or float(model.jac(q)[j] @ v) < 0:
             return gap
         return 1.0 + abs(gap)
     gap = float(model.gaps(q, t)[j])
-    if gap > 0 or float(model.local_velocity(t, q, v)[j]) < 0:
+    if gap > 0 or gap < deep or float(model.local_velocity(t, q, v)[j]) < 0:
         return gap
     return 1.0 + abs(gap)
 
