@@ -3,7 +3,8 @@
 Run: ``python -m studies.ocp_examples [--out DIR] [--quick]`` (headless; PNG and CSV into
 ``figures/ocp_examples/``). The examples (:mod:`studies._ocp_models`): a point steered on a plane
 through a spatial contact (closed form; over 1 s it slides throughout, over 2 s it sticks, slides and
-sticks, on free steps), two- and seven-block chains moved 0.3 m, nosnoc_py's linear motor
+sticks, on free steps), a two-block chain moved 0.3 m, nosnoc's seven friction blocks brought
+back to their equilibrium, nosnoc_py's linear motor
 with friction and cart-pole with friction, nosnoc_py's hopper and two discs, a box tipped over
 an edge, and a ball (e = 0.5) bounced to a target height. For each, at N control intervals:
 
