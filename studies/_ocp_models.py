@@ -141,7 +141,8 @@ def block_chain7() -> Example:
     |u| <= 20 N. From rest with every block 0.2 m beyond its equilibrium x_i = 0.2 (i - 1), the
     tracking cost int (x - x_eq)' Q (x - x_eq) + 0.01 u^2 dt + (x - x_eq)' 10 Q (x - x_eq) at T = 5 s,
     Q = diag(10 on positions, 0.1 on velocities), positions within [-2, 3.2] m, speeds within 10 m/s;
-    no terminal constraint. N = 50 (nosnoc's dt = 0.1 s)."""
+    no terminal constraint. N = 50 (nosnoc's dt = 0.1 s). The contacts stay closed (Radau IIA
+    collocation, the velocity law)."""
     p = CHAIN7
     K = p["K"]
     n = 2 * K
@@ -183,8 +184,12 @@ def block_chain7() -> Example:
         return ca.vertcat(s.q1[0::2] - hi, lo - s.q1[0::2], s.v1[0::2] - p["v_max"], -p["v_max"] - s.v1[0::2])
 
     def make(N):
+        # Radau IIA (s = 2) rather than the theta step: the shooting that finishes both lands, from the
+        # theta step's control, on a phase sequence whose optimum is 0.2 % above nosnoc's (measured at
+        # N = 50: J_replay 10.957 against nosnoc's 10.934; from Radau's, 10.757)
         return OptimalControlProblem(sys, N, T=p["T"], q0=q0, v0=np.zeros(n), stage_cost=stage,
-                                     terminal_cost=terminal_cost, path_constraints=box)
+                                     terminal_cost=terminal_cost, path_constraints=box, integrator="radau",
+                                     stages=2)
 
     def integrand(t, qq, vv, uu):
         e = np.column_stack([qq[:, 0::2] - x_eq, vv[:, 0::2]])

@@ -101,3 +101,25 @@ def test_chain7_is_feasible_without_a_push():
     # every block stays or returns to rest short of the equilibrium: friction holds it (|k stretch| <= 0.4)
     assert np.all(np.abs(v[-1]) < 1e-12)
     assert np.all(x[-1] - X_EQ > 0)
+
+
+@pytest.mark.slow
+def test_chain7_is_solved_from_the_defaults_at_or_below_nosnoc():
+    """At nosnoc's N = 50: a success (the replay within 1e-6), cheaper than doing nothing, and where
+    nosnoc runs, at or below its objective and its J_replay (the cost of its control on the fine replay)."""
+    from studies import ocp_examples as study
+
+    ex = EXAMPLES["block_chain7"]()
+    N, T = CHAIN7["N"], CHAIN7["T"]
+    row, res = study._ours(ex, N)
+    assert row["ours_success"] and row["ours_method"] == "event" and row["ours_miss"] <= study.REPLAY_TOL
+    assert np.all(np.abs(res.u) <= CHAIN7["u_max"] + 1e-9)
+    idle = study.score(ex, ControlSchedule(np.linspace(0.0, T, N + 1), np.zeros((N, 1))), N)
+    assert row["ours_J_replay"] < idle
+    # the transcription's trapezoid against the fine replay's quadrature: the same cost to 0.1 %
+    assert row["ours_cost"] == pytest.approx(row["ours_J_replay"], rel=1e-3)
+    if peers.available():
+        nos, _ = study._nosnoc(ex, N)
+        assert nos["nosnoc_status"].startswith("SUCCESS")
+        assert row["ours_cost"] <= nos["nosnoc_objective"]
+        assert row["ours_J_replay"] <= nos["nosnoc_J_replay"]
