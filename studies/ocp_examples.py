@@ -38,11 +38,11 @@ The two discs also start on one line with swapped targets: the symmetric problem
 that sends one disc around the other, and the solve stops with the discs pressed together.
 
 nosnoc's seven friction blocks (N = 50, T = 5 s; no terminal constraint, so feasible: u = 0 keeps the
-state box) are solved by both (measured): nosnoc in 70 s with objective 10.949, J_replay 10.934, its
+state box) are solved by both (measured): nosnoc in 67 s with objective 10.949, J_replay 10.934, its
 control's replay 4.7e-5 from its final state; ours with Radau IIA (s = 2) and the exact-phase
-shooting in 204 s, objective 10.762, J_replay 10.757, replay miss 9.6e-10. From the theta step the
-shooting also succeeds (160 s, replay 1.0e-9) but on a phase sequence whose optimum is above
-nosnoc's (J_replay 10.957).
+shooting in 122 s (204 s on a loaded machine), objective 10.762, J_replay 10.757, replay miss
+9.6e-10. From the theta step the shooting also succeeds (160 s loaded, replay 1.0e-9) but on a phase
+sequence whose optimum is above nosnoc's (J_replay 10.957).
 """
 from __future__ import annotations
 
