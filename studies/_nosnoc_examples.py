@@ -3,10 +3,11 @@
 The models and options are nosnoc_py's own examples, written in its Filippov (Stewart) form:
 examples/cart_pole_with_friction (RADAU IIA n_s = 2, 2 finite elements per stage, T = 5 s),
 examples/motor_with_friction (n_s = 2, 2 finite elements, comp_tol 1e-6, L2_RELAXED_SCALED step
-equilibration, T = 0.08 s), and the two- and seven-block chains of
+equilibration, T = 0.08 s), the seven friction blocks of nosnoc's MATLAB examples (nosnoc_py has
+them only as a simulation; its model and options are written here in nosnoc_py's form, RADAU IIA
+n_s = 2, 3 finite elements per stage, T = 5 s), and the two-block chain of
 :func:`studies._ocp_models.block_chain` in the same form as examples/friction_block (one switching
-function per block velocity; nosnoc_py has no seven-block example: it is written here). The hopper and the
-two discs of nosnoc_py use time freezing with a speed-of-time control (a different horizon), the
+function per block velocity). The hopper and the two discs of nosnoc_py use time freezing with a speed-of-time control (a different horizon), the
 point on a plane needs the friction disk and the box is not one of nosnoc's examples: no peer is run
 for them (:data:`PEERS` says why).
 
@@ -158,7 +159,43 @@ def _chain(ns, ca, N, K=2):
 
 
 def _chain7(ns, ca, N):
-    return _chain(ns, ca, N, K=7)
+    """nosnoc's seven friction blocks (:data:`studies._ocp_models.CHAIN7`) in its own Stewart form: one
+    switching function per block velocity, the springs, dampers and push in the first subsystem (nosnoc's
+    variant without a separate f_0), RADAU IIA n_s = 2, three finite elements per stage, comp_tol 1e-7 (the
+    homotopy's length follows from it in nosnoc_py), the stage cost integrated by nosnoc's Runge-Kutta
+    quadrature."""
+    from studies._ocp_models import CHAIN7 as p
+
+    K = p["K"]
+    q, v, u = ca.SX.sym("q", K), ca.SX.sym("v", K), ca.SX.sym("u")
+    x = ca.vertcat(q, v)
+    x_eq = p["spacing"] * np.arange(K)
+    force = [-p["d"] * v[i] for i in range(K)]
+    force[0] = force[0] - p["k"] * q[0] + u
+    for i in range(1, K):
+        s_ij = p["k"] * (q[i] - q[i - 1] - p["spacing"])
+        force[i] = force[i] - s_ij
+        force[i - 1] = force[i - 1] + s_ij
+    base = ca.vertcat(v, *force)
+
+    def friction(i):
+        e = np.zeros(2 * K)
+        e[K + i] = p["mu_fric"]
+        return ca.DM(e)
+
+    F = [ca.horzcat(base - friction(0), base + friction(0))]
+    F += [ca.horzcat(-friction(i), friction(i)) for i in range(1, K)]
+    S = [np.array([[1], [-1]]) for _ in range(K)]
+    x0 = np.concatenate([x_eq + p["shift"], np.zeros(K)])
+    model = ns.NosnocModel(x=x, F=F, S=S, c=[v[i] for i in range(K)], x0=x0, u=u)
+    x_ref = np.concatenate([x_eq, np.zeros(K)])
+    Q = np.diag(np.concatenate([p["Q_q"] * np.ones(K), p["Q_v"] * np.ones(K)]))
+    e = x - x_ref
+    box = np.concatenate([(x_eq[-1] + p["q_box"]) * np.ones(K), p["v_max"] * np.ones(K)])
+    lbx = -np.concatenate([p["q_box"] * np.ones(K), p["v_max"] * np.ones(K)])
+    ocp = ns.NosnocOcp(lbu=np.array([-p["u_max"]]), ubu=np.array([p["u_max"]]), f_q=e.T @ Q @ e + p["R"] * u * u,
+                       f_terminal=p["P"] * (e.T @ Q @ e), lbx=lbx, ubx=box)
+    return model, ocp, _opts(ns, N, p["T"], fe=3, comp_tol=1e-7)
 
 
 #: example name -> (builder, nosnoc's state -> the example's common coordinates)
