@@ -16,6 +16,8 @@ from __future__ import annotations
 import itertools
 import math
 
+import numpy as np
+
 __all__ = ["approach_gap", "event_functions", "first_descent", "first_landing", "first_stop",
            "first_terminal_event", "too_many_events"]
 

@@ -6,6 +6,7 @@ dense output. SciPy's integrators are imported on the first such phase only.
 """
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 
 from lcp.contact.problem import ContactProblem
@@ -157,6 +158,13 @@ class OdePhase(SmoothPhase):
         if sol.status < 0:
             raise FloatingPointError(f"solve_ivp ({o.ode_method}) failed at t = {sol.t[-1]:.10g}: {sol.message}")
         self.y1 = sol.y[:, -1]
+        t_end = first_terminal_event(sol, meta)[0] if sol.status == 1 else t_stop
+        crossed = self._passed_through(sol, t_end)
+        if crossed is not None:  # a contact closed inside an ODE step and opened again before its end
+            self.t1, j = crossed
+            self.y1 = sol.sol(self.t1)
+            self.model.normalize(self.y1[:nq])
+            return self.t1, "impact", j
         if sol.status == 1:
             self.t1, self.y1, kind, j = first_terminal_event(sol, meta)
             self.model.normalize(self.y1[:nq])
@@ -165,6 +173,71 @@ class OdePhase(SmoothPhase):
             return self.t1, kind, j
         self.t1 = t_stop
         return None
+
+    #: dense-output samples per ODE step at which the open contacts' gaps are checked
+    GAP_SAMPLES = 8
+
+    def _passed_through(self, sol, t_end):
+        """(t, j) of the first closing of an open contact j that the event functions, evaluated at
+        the ends of the ODE steps only, cannot see: a body carried through a thin obstacle within
+        one step (two discs flying head-on passed through each other: the gap is positive at both
+        ends of the step). Each step's gaps are sampled on the dense output (:data:`GAP_SAMPLES`
+        per step); where a sample's gap is below its neighbours', the minimum between them is
+        found by Brent's method (a fast pass-through lasts a fraction of the sampling interval),
+        and a negative minimum's first crossing located. None when every contact stays open."""
+        idx = self.open_idx
+        if not idx.size or sol.t.size < 2:
+            return None
+        from scipy.optimize import brentq, minimize_scalar
+
+        nq = self.model.nq
+        moving = getattr(self.model, "moving", False)
+
+        def gap(t, j):
+            y = sol.sol(t)
+            return float(self.model.gaps(y[:nq], t if moving else None)[j])
+
+        steps = sol.t[sol.t <= t_end]
+        if steps[-1] < t_end:
+            steps = np.append(steps, t_end)
+        K = self.GAP_SAMPLES
+        for a, b in zip(steps[:-1], steps[1:]):
+            ts = a + (b - a) * np.arange(K + 1) / K
+            Y = sol.sol(ts)
+            G = self._sample_gaps(ts, Y[:nq])
+            found = None
+            for j in idx:
+                g = G[:, j]
+                i = int(np.argmin(g))
+                if 0 < i < K:  # an interior minimum: refined between its neighbours
+                    r = minimize_scalar(lambda s, j=j: gap(s, j), bounds=(ts[i - 1], ts[i + 1]), method="bounded",
+                                        options={"xatol": 1e-12 * max(1.0, abs(b))})
+                    t_min, g_min = float(r.x), float(r.fun)
+                else:
+                    t_min, g_min = float(ts[i]), float(g[i])
+                scale = 1e-9 * (1.0 + float(np.max(np.abs(Y[:nq]), initial=0.0)))
+                if g_min >= -scale or g[0] <= 0:
+                    continue  # (open throughout, or closed at the step's start: not a crossing here)
+                tc = brentq(lambda s, j=j: gap(s, j), a, t_min, xtol=1e-14, rtol=1e-14)
+                if found is None or tc < found[0]:
+                    found = (tc, int(j))
+            if found is not None:
+                return found
+        return None
+
+    def _sample_gaps(self, ts, Q) -> np.ndarray:
+        """The gaps at the columns of Q (times ts), shape (len(ts), m): in one call where the
+        gaps do not move (a mapped CasADi function, kept on the model), else per sample."""
+        model = self.model
+        if getattr(model, "constant", False):
+            return (model.gap0[:, None] + model.HN @ Q).T
+        fn = getattr(model.sys, "gap_fn", None)
+        if getattr(model, "moving", False) or not isinstance(fn, ca.Function):
+            return np.array([model.gaps(Q[:, i], ts[i]) for i in range(Q.shape[1])])
+        maps = model.__dict__.setdefault("_gap_maps", {})
+        if Q.shape[1] not in maps:
+            maps[Q.shape[1]] = fn.map(Q.shape[1])
+        return np.array(maps[Q.shape[1]](Q), dtype=float).T
 
     def margin_at(self, t, y):
         """Force margin of the phase's modes at (t, y) (:meth:`SmoothPhase.margin`), cached."""
