@@ -10,7 +10,9 @@ an edge, and a ball (e = 0.5) bounced to a target height. For each, at N control
 
 - ours: :meth:`lcp.ocp.OptimalControlProblem.solve` (the homotopy from the default starts: the
   Moreau-Jean guess, then under the gap law the event method's guess, then that guess from
-  sigma0 = 1, each only when the one before failed; ``message`` names them), its
+  sigma0 = 1, each only when the one before failed; ``message`` names them; where the result
+  fails, the exact-phase shooting on the phases of its control's event replay,
+  :mod:`lcp.ocp.shooting`), its
   objective, its replay miss (``result.replay``: the event method, or Moreau-Jean where the event
   replay does not apply, and its method), its success (which requires the replay within 1e-6)
   and time (building and solving, replay check included);
@@ -26,16 +28,16 @@ A row is a success only when the replay is within tolerance; where the replay mi
 are recorded as they are (``message`` says what the solver reported). The study runs without
 nosnoc and says so. ``--quick``: six examples at one N each (what the test suite runs).
 
-Not solved from the defaults (measured, ``message`` says where): the box, the hopper and the two
-discs. The box pivots on a corner, the hopper's foot carries the leg's rotation, the discs roll on
-each other: a contact held closed along a curved gap. The gap law asks a contact that carries a
-force over a step to start it with zero normal velocity, H_N(q_k) v_k = 0, and its gap to be zero
-at both nodes; along a curved gap the trapezoidal step meets both only with small impulses at the
-nodes, and the homotopy ends with a Coulomb residual there (a frictionless point pushed along the
-floor y = x^2 / 2 at N = 20: impulses up to 1e-3 N s, residual 1.6e-2; on a flat floor solved
-exactly). A transcription matter, not one of the guess.
-The two discs also start on one line with swapped targets: the symmetric problem has no gradient
-that sends one disc around the other, and the solve stops with the discs pressed together.
+The motor and the two-block chain end in the shooting: replays within 1e-10 (the transcription's
+alone missed by 0.5 and 1e-2). Not solved from the defaults (measured, ``message`` says where):
+the cart-pole (the default theta solve converges to a control that never swings the pole up,
+replayed exactly, so it counts as solved at cost 6472), the box, the hopper and the two discs.
+Along a curved gap the theta transcription now keeps a contact closed (a position correction
+along M^-1 H_N' eta, the end-of-step velocities); the hopper's transcription then solves from the
+defaults but its replay misses (8.3e-2), and the shooting does not model its no-slip foot (a user
+complementarity pair). The box solves only from a start that tips it (the default mid-range push
+tumbles it). The two discs start on one line with swapped targets: the symmetric problem has no
+gradient that sends one disc around the other.
 
 nosnoc's seven friction blocks (N = 50, T = 5 s; no terminal constraint, so feasible: u = 0 keeps the
 state box) are solved by both (measured): nosnoc in 67 s with objective 10.949, J_replay 10.934, its
