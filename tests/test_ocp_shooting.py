@@ -125,3 +125,26 @@ def test_impact_starts_a_segment_and_its_law_holds():
     from lcp.ocp.solve import _checked, result_of
     out = _checked(pb, result_of(pb, x, cost, diag, 0, "", [], 0.0, tr=tr), "shooting")
     assert out.status == 0 and out.replay.final_miss < 1e-8
+
+
+def test_user_pairs_keep_their_zero_members():
+    """A user pair (the mean normal force against the block's height, 0 <= N perp y >= 0) on the
+    block whose stop falls inside a uniform step: the shooting keeps the transcription's zero member
+    (y = 0 while pressed) and the pair holds on the replay."""
+    pb = _pushed_block()
+    pb.complementarity = [(lambda s: s.N, lambda s: s.q1[1])]
+    pb.transcription = None
+    res = pb.solve()
+    assert res.success and "exact-phase shooting" in res.message, res.message
+    assert res.replay.final_miss < 1e-8 and res.replay.path_violation < 1e-9
+
+
+@pytest.mark.slow
+def test_hopper_jumps_from_the_defaults():
+    """nosnoc's hopper (N = 20): the transcription from the defaults misses its replay by 8e-2; the
+    shooting (its no-slip foot a user pair with the zero members kept) jumps to 1e-10."""
+    ex = EXAMPLES["hopper"]()
+    res = ex.make(20).solve(**ex.solve_kw)
+    assert res.success and "exact-phase shooting" in res.message, res.message
+    assert res.replay.final_miss < 1e-9 and res.replay.path_violation < 1e-9
+    assert res.modes[0, 0] != 0 and np.all(res.modes[1:10, 0] == 0)  # stance, then flight

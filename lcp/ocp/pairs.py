@@ -17,7 +17,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-__all__ = ["add_pairs", "check_pairs", "fix_pairs", "pair_residual", "pair_violation"]
+__all__ = ["add_pairs", "check_pairs", "fix_pairs", "pair_residual", "pair_values", "pair_violation"]
 
 
 def check_pairs(pairs) -> list:
@@ -98,9 +98,9 @@ def fix_pairs(tr, x, ubx) -> None:
         ubx[ib[~small]] = 0.0
 
 
-def pair_violation(pairs, st) -> float:
-    """max(|min(a, b)|, -a, -b) of the user pairs on one (numeric) step: 0 when they hold."""
-    worst = 0.0
+def pair_values(pairs, st) -> list:
+    """(a, b) of every user pair on one (numeric) step, as float arrays."""
+    out = []
     for fa, fb in pairs:
         vals = []
         for f in (fa, fb):
@@ -108,7 +108,14 @@ def pair_violation(pairs, st) -> float:
             if isinstance(val, (ca.SX, ca.DM)):
                 val = ca.evalf(ca.SX(val))
             vals.append(np.array(val, dtype=float).ravel())
-        a, b = vals
+        out.append(tuple(vals))
+    return out
+
+
+def pair_violation(pairs, st) -> float:
+    """max(|min(a, b)|, -a, -b) of the user pairs on one (numeric) step: 0 when they hold."""
+    worst = 0.0
+    for a, b in pair_values(pairs, st):
         if a.size:
             worst = max(worst, float(np.max(np.abs(np.minimum(a, b)))), float(np.max(-a)), float(np.max(-b)))
     return worst

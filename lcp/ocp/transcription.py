@@ -472,7 +472,7 @@ def _curved(sys):
                            for i in range(m)])
 
 
-def step_terms(tr, J, st, us, k, h, ua, ub, z, sigma, pair_sizes):
+def step_terms(tr, J, st, us, k, h, ua, ub, z, sigma, pair_sizes, pairs: bool = True):
     """The step's cost terms and the user's path constraints and pairs, added to a transcription
     ``tr`` (every transcription's: theta, Radau, shooting)."""
     pb = tr.pb
@@ -486,7 +486,7 @@ def step_terms(tr, J, st, us, k, h, ua, ub, z, sigma, pair_sizes):
         tr._constrain(ca.vec(ca.SX(pb.path_constraints(st))), -np.inf, 0.0)
     if pb.path_equalities is not None:
         tr._constrain(ca.vec(ca.SX(pb.path_equalities(st))), 0.0, 0.0)
-    if pb.complementarity:  # the user's pairs, relaxed with the contacts' (lcp.ocp.pairs)
+    if pb.complementarity and pairs:  # the user's pairs, relaxed with the contacts' (lcp.ocp.pairs)
         add_pairs(pb.complementarity, k, st, sigma, tr._var, tr._constrain, pair_sizes)
     if pb.max_cost is not None:
         tr._constrain(_scalar(pb.max_cost(st), "max_cost") - z, -np.inf, 0.0)
