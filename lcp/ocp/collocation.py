@@ -53,7 +53,7 @@ import casadi as ca
 import numpy as np
 
 from lcp.contact.problem import ContactProblem
-from lcp.ocp.transcription import PAIRS, Transcription
+from lcp.ocp.transcription import PAIRS, Transcription, grid_variables
 
 __all__ = ["RADAU_STAGES", "RadauTranscription", "fixed_mode_bounds", "radau_tableau"]
 
@@ -117,29 +117,7 @@ class RadauTranscription(Transcription):
         m = sys.n_contacts
         mu = ca.DM(sys.mu)
         c, Ainv = self.c, np.linalg.inv(self.A)
-        sigma, q0p, v0p = ca.SX.sym("sigma"), ca.SX.sym("q0", n), ca.SX.sym("v0", n)
-        Tv = self._var("T", 1, *pb.T_bounds, key="T") if pb.free_time else ca.SX(pb.T)
-        z = self._var("z", 1, -np.inf, np.inf, key="z") if pb.max_cost is not None else None
-        if pb.steps == "free":
-            lo, hi = pb.step_bounds
-            Tlo, Thi = (pb.T_bounds if pb.free_time else (pb.T, pb.T))
-            hs = [self._var(f"h{k}", 1, lo * Tlo / N, hi * Thi / N, key="h") for k in range(N)]
-            self._constrain(ca.sum1(ca.vertcat(*hs)) - Tv, 0.0, 0.0)
-        else:
-            fr = pb.step_fractions
-            hs = [Tv / N] * N if fr is None else [Tv * float(f) for f in fr]
-        n_u = {"constant": N, "linear": N + 1, "affine": 2 * N}[pb.hold]
-        us = [self._var(f"u{k}", nu, pb.u_min, pb.u_max, key="u") for k in range(n_u)]
-        qs, vs = [q0p], [v0p]
-        for k in range(1, N + 1):
-            qs.append(self._var(f"q{k}", n, -np.inf, np.inf, key="q"))
-            vs.append(self._var(f"v{k}", n, -np.inf, np.inf, key="v"))
-        tk = [ca.SX(0)]
-        for k in range(N):
-            tk.append(tk[-1] + hs[k])
-        if pb.steps == "free" or pb.free_time:
-            for k, tval in pb.node_times.items():
-                self._constrain(tk[k] - tval, 0.0, 0.0)
+        sigma, q0p, v0p, Tv, z, hs, us, qs, vs, tk = grid_variables(self)
         t, q, v, u = sys.t_sym, sys.q_sym, sys.v_sym, ca.SX.sym("u", nu)
         stage_fn = ca.Function("radau_stage", [t, q, v, u],
                                [sys.mass_expr, sys.force_expr + ca.mtimes(sys.control_matrix_expr, u), sys.H_expr])

@@ -51,7 +51,7 @@ import numpy as np
 from lcp.contact.modes import OPEN, SLIDE_NEG, SLIDE_POS, STICK
 from lcp.ocp.phase_dynamics import GRID, impulse_dv, mode_dynamics, rk4_segment
 from lcp.ocp.replay import event_pieces
-from lcp.ocp.transcription import Transcription, step_terms
+from lcp.ocp.transcription import Transcription, grid_variables, step_terms
 
 __all__ = ["CHECK_TOL", "INTEGRATOR_TOL", "NotShootable", "PhaseShooting", "impact_law", "initial_point", "phase_plan", "plan_of_modes",
            "refuse", "solve_shooting"]
@@ -215,32 +215,10 @@ class PhaseShooting(Transcription):
     # ------------------------------------------------------------------ build
     def _build(self):
         pb = self.pb
-        sys, N, n, nu = pb.system, pb.N, pb.system.n, pb.nu
+        sys, N, n = pb.system, pb.N, pb.system.n
         m = sys.n_contacts
         mu = np.asarray(sys.mu, dtype=float)
-        sigma, q0p, v0p = ca.SX.sym("sigma"), ca.SX.sym("q0", n), ca.SX.sym("v0", n)
-        Tv = self._var("T", 1, *pb.T_bounds, key="T") if pb.free_time else ca.SX(pb.T)
-        z = self._var("z", 1, -np.inf, np.inf, key="z") if pb.max_cost is not None else None
-        if pb.steps == "free":
-            lo, hi = pb.step_bounds
-            Tlo, Thi = (pb.T_bounds if pb.free_time else (pb.T, pb.T))
-            hs = [self._var(f"h{k}", 1, lo * Tlo / N, hi * Thi / N, key="h") for k in range(N)]
-            self._constrain(ca.sum1(ca.vertcat(*hs)) - Tv, 0.0, 0.0)
-        else:
-            fr = pb.step_fractions
-            hs = [Tv / N] * N if fr is None else [Tv * float(f) for f in fr]
-        n_u = {"constant": N, "linear": N + 1, "affine": 2 * N}[pb.hold]
-        us = [self._var(f"u{k}", nu, pb.u_min, pb.u_max, key="u") for k in range(n_u)]
-        qs, vs = [q0p], [v0p]
-        for k in range(1, N + 1):
-            qs.append(self._var(f"q{k}", n, -np.inf, np.inf, key="q"))
-            vs.append(self._var(f"v{k}", n, -np.inf, np.inf, key="v"))
-        tk = [ca.SX(0)]
-        for k in range(N):
-            tk.append(tk[-1] + hs[k])
-        if pb.steps == "free" or pb.free_time:
-            for k, tval in pb.node_times.items():
-                self._constrain(tk[k] - tval, 0.0, 0.0)
+        sigma, q0p, v0p, Tv, z, hs, us, qs, vs, tk = grid_variables(self)
         gap = ca.Function("gap", [sys.q_sym], [sys.gap_expr]) if m else None
         Hfn = ca.Function("H", [sys.q_sym], [sys.H_expr]) if m else None
         J, pair_sizes = ca.SX(0), {}

@@ -37,7 +37,7 @@ import casadi as ca
 import numpy as np
 
 from lcp.contact.spatial_problem import ConeContactProblem
-from lcp.ocp.transcription import Transcription
+from lcp.ocp.transcription import Transcription, grid_variables, step_terms, terminal_terms
 
 __all__ = ["SpatialTranscription", "check_spatial"]
 
@@ -86,34 +86,12 @@ class SpatialTranscription(Transcription):
         self.build_time = time.perf_counter() - t_start
 
     def _build(self):
-        from lcp.ocp.pairs import add_pairs
-
         pb = self.pb
-        sys, N, n, nu, th = pb.system, pb.N, pb.system.n, pb.nu, pb.theta
+        sys, N, th = pb.system, pb.N, pb.theta
         m, nb, nt = sys.n_contacts, sys.n_bilateral, sys.n_tangent
         mu, e = ca.DM(sys.mu), ca.DM(sys.e)
         off = sys.tangent_offsets
-        sigma, q0p, v0p = ca.SX.sym("sigma"), ca.SX.sym("q0", n), ca.SX.sym("v0", n)
-        Tv = self._var("T", 1, *pb.T_bounds, key="T") if pb.free_time else ca.SX(pb.T)
-        z = self._var("z", 1, -np.inf, np.inf, key="z") if pb.max_cost is not None else None
-        if pb.steps == "free":  # step lengths as unknowns, as in the planar transcription
-            lo, hi = pb.step_bounds
-            hmin = lo * (pb.T_bounds[0] if pb.free_time else pb.T) / N
-            hmax = hi * (pb.T_bounds[1] if pb.free_time else pb.T) / N
-            hs = [self._var(f"h{k}", 1, hmin, hmax, key="h") for k in range(N)]
-            self._constrain(ca.sum1(ca.vertcat(*hs)) - Tv, 0.0, 0.0)
-        else:
-            hs = [Tv / N] * N
-        tk = [ca.SX(0)]
-        for k in range(N):
-            tk.append(tk[-1] + hs[k])
-        for k, tval in pb.node_times.items():
-            self._constrain(tk[k] - tval, 0.0, 0.0)
-        us = [self._var(f"u{k}", nu, pb.u_min, pb.u_max, key="u") for k in range(pb.control_rows)]
-        qs, vs = [q0p], [v0p]
-        for k in range(1, N + 1):
-            qs.append(self._var(f"q{k}", n, -np.inf, np.inf, key="q"))
-            vs.append(self._var(f"v{k}", n, -np.inf, np.inf, key="v"))
+        sigma, q0p, v0p, Tv, z, hs, us, qs, vs, tk = grid_variables(self)
         J, sizes, prev = ca.SX(0), {}, None
         for k in range(N):
             t0, h = tk[k], hs[k]
@@ -145,24 +123,8 @@ class SpatialTranscription(Transcription):
             self._constrain(a * w - sigma, -np.inf, 0.0)  # Scholtes
             prev = {**blk, "f": f}
             st = pb.make_step(k, t0, h, qa, qb, va, vb, ua, ub, pN, pT)
-            if pb.stage_cost is not None:
-                J = J + h * ca.SX(pb.stage_cost(st))
-            if pb.control_rate_weight and k + 1 < len(us):
-                J = J + pb.control_rate_weight * ca.sumsqr(us[k + 1] - us[k]) / h
-            if pb.path_constraints is not None:
-                self._constrain(ca.vec(ca.SX(pb.path_constraints(st))), -np.inf, 0.0)
-            if pb.path_equalities is not None:
-                self._constrain(ca.vec(ca.SX(pb.path_equalities(st))), 0.0, 0.0)
-            if pb.complementarity:
-                add_pairs(pb.complementarity, k, st, sigma, self._var, self._constrain, sizes)
-            if pb.max_cost is not None:
-                self._constrain(ca.SX(pb.max_cost(st)) - z, -np.inf, 0.0)
-        if pb.terminal_cost is not None:
-            J = J + ca.SX(pb.terminal_cost(Tv, qs[-1], vs[-1]))
-        if pb.terminal_constraints is not None:
-            self._constrain(ca.vec(ca.SX(pb.terminal_constraints(qs[-1], vs[-1]))), 0.0, 0.0)
-        if z is not None:
-            J = J + z
+            J = step_terms(self, J, st, us, k, h, ua, ub, z, sigma, sizes)
+        J = terminal_terms(self, J, Tv, qs, vs, z)
         self.nlp = {"x": ca.vertcat(*self._x), "f": J, "g": ca.vertcat(*self._g), "p": ca.vertcat(sigma, q0p, v0p)}
         self.ix = {key: np.array(val) for key, val in self.ix.items()}
         self.lbx, self.ubx = np.concatenate(self._lbx), np.concatenate(self._ubx)

@@ -116,7 +116,7 @@ import numpy as np
 
 from lcp.ocp.pairs import add_pairs
 
-__all__ = ["PAIRS", "Transcription"]
+__all__ = ["PAIRS", "Transcription", "grid_variables", "step_terms", "terminal_terms"]
 
 #: complementarity pairs (multiplier, slack) of one contact in one step, in the order of the module
 #: docstring; ``wN`` is the gap at the step's end (scaled to a velocity), not a velocity
@@ -216,35 +216,11 @@ class Transcription:
     # ------------------------------------------------------------------ build
     def _build(self):
         pb = self.pb
-        sys, N, n, nu, th = pb.system, pb.N, pb.system.n, pb.nu, pb.theta
+        sys, N, th = pb.system, pb.N, pb.theta
         m, nb = sys.n_contacts, sys.n_bilateral
         mu, e = ca.DM(sys.mu), ca.DM(sys.e)
-        sigma, q0p, v0p = ca.SX.sym("sigma"), ca.SX.sym("q0", n), ca.SX.sym("v0", n)
-        Tv = self._var("T", 1, *pb.T_bounds, key="T") if pb.free_time else ca.SX(pb.T)
-        z = self._var("z", 1, -np.inf, np.inf, key="z") if pb.max_cost is not None else None
-        if pb.steps == "free":
-            lo, hi = pb.step_bounds
-            hmin, hmax = lo * pb.T_bounds[0] / N if pb.free_time else lo * pb.T / N, hi * (
-                pb.T_bounds[1] if pb.free_time else pb.T) / N
-            hs = [self._var(f"h{k}", 1, hmin, hmax, key="h") for k in range(N)]
-            self._constrain(ca.sum1(ca.vertcat(*hs)) - Tv, 0.0, 0.0)
-        else:  # uniform, or the fixed piecewise-uniform grid of a phase guess (pb.step_fractions)
-            fr = pb.step_fractions
-            hs = [Tv / N] * N if fr is None else [Tv * float(f) for f in fr]
+        sigma, q0p, v0p, Tv, z, hs, us, qs, vs, tk = grid_variables(self)
         affine = pb.hold == "affine"
-        n_u = {"constant": N, "linear": N + 1, "affine": 2 * N}[pb.hold]
-        us = [self._var(f"u{k}", nu, pb.u_min, pb.u_max, key="u") for k in range(n_u)]
-        qs, vs = [q0p], [v0p]
-        for k in range(1, N + 1):
-            qs.append(self._var(f"q{k}", n, -np.inf, np.inf, key="q"))
-            vs.append(self._var(f"v{k}", n, -np.inf, np.inf, key="v"))
-        tk = [ca.SX(0)]
-        for k in range(N):
-            tk.append(tk[-1] + hs[k])
-        if pb.steps == "free" or pb.free_time:  # a fixed grid holds its pinned nodes by construction
-            # (a constant row of zeros would leave IPOPT a rank-deficient Jacobian)
-            for k, tval in pb.node_times.items():
-                self._constrain(tk[k] - tval, 0.0, 0.0)
         J = ca.SX(0)
         pair_sizes = {}
         prev = None  # the previous step's (a, w) blocks, for the cross complementarity
@@ -470,6 +446,41 @@ def _curved(sys):
     m = sys.n_contacts
     return np.flatnonzero([ca.depends_on(sys.H_expr[i, :], sys.q_sym) or ca.depends_on(sys.H_expr[m + i, :], sys.q_sym)
                            for i in range(m)])
+
+
+def grid_variables(tr):
+    """The variables and grid every transcription shares, added to ``tr``: (sigma, q0, v0, T, z,
+    steps h_k, controls, node positions, node velocities, node times). T is a variable with
+    ``free_time``, z the epigraph variable of ``max_cost``; free steps are variables summing to T
+    within ``step_bounds`` T / N, else uniform or the fixed piecewise-uniform grid of a phase guess
+    (``step_fractions``); the nodes pinned by ``node_times`` are constraints where the grid moves."""
+    pb = tr.pb
+    N, n, nu = pb.N, pb.system.n, pb.nu
+    sigma, q0p, v0p = ca.SX.sym("sigma"), ca.SX.sym("q0", n), ca.SX.sym("v0", n)
+    Tv = tr._var("T", 1, *pb.T_bounds, key="T") if pb.free_time else ca.SX(pb.T)
+    z = tr._var("z", 1, -np.inf, np.inf, key="z") if pb.max_cost is not None else None
+    if pb.steps == "free":
+        lo, hi = pb.step_bounds
+        Tlo, Thi = (pb.T_bounds if pb.free_time else (pb.T, pb.T))
+        hs = [tr._var(f"h{k}", 1, lo * Tlo / N, hi * Thi / N, key="h") for k in range(N)]
+        tr._constrain(ca.sum1(ca.vertcat(*hs)) - Tv, 0.0, 0.0)
+    else:
+        fr = pb.step_fractions
+        hs = [Tv / N] * N if fr is None else [Tv * float(f) for f in fr]
+    n_u = {"constant": N, "linear": N + 1, "affine": 2 * N}[pb.hold]
+    us = [tr._var(f"u{k}", nu, pb.u_min, pb.u_max, key="u") for k in range(n_u)]
+    qs, vs = [q0p], [v0p]
+    for k in range(1, N + 1):
+        qs.append(tr._var(f"q{k}", n, -np.inf, np.inf, key="q"))
+        vs.append(tr._var(f"v{k}", n, -np.inf, np.inf, key="v"))
+    tk = [ca.SX(0)]
+    for k in range(N):
+        tk.append(tk[-1] + hs[k])
+    if pb.steps == "free" or pb.free_time:  # a fixed grid holds its pinned nodes by construction
+        # (a constant row of zeros would leave IPOPT a rank-deficient Jacobian)
+        for k, tval in pb.node_times.items():
+            tr._constrain(tk[k] - tval, 0.0, 0.0)
+    return sigma, q0p, v0p, Tv, z, hs, us, qs, vs, tk
 
 
 def step_terms(tr, J, st, us, k, h, ua, ub, z, sigma, pair_sizes, pairs: bool = True):
