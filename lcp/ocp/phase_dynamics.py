@@ -58,14 +58,8 @@ def mode_dynamics(pb, modes) -> ca.Function:
     F = sys.force_expr + ca.mtimes(sys.control_matrix_expr, u)
     r = len(cols)
     if r:
-        Wc, Wr = ca.horzcat(*cols), ca.vertcat(*rows)
-        # redundant rows (a box resting on two stuck corners: four rows, three velocities) make the
-        # KKT matrix singular: a regularisation eps I, 1e-12 of the Delassus matrix's scale at q0,
-        # takes the least-norm forces (as the event method does) and moves the accelerations by
-        # 1e-12 relative where the rows are independent
-        D = ca.Function("D", [t, q], [ca.mtimes(Wr, ca.solve(sys.mass_expr, Wc))])(0.0, np.asarray(pb.q0, float))
-        eps = 1e-12 * max(float(np.max(np.abs(np.array(D, dtype=float)), initial=0.0)), 1e-300)
-        K = ca.vertcat(ca.horzcat(sys.mass_expr, -Wc), ca.horzcat(Wr, -eps * ca.SX.eye(r)))
+        K = ca.vertcat(ca.horzcat(sys.mass_expr, -ca.horzcat(*cols)), ca.horzcat(ca.vertcat(*[rw for rw in rows]),
+                                                                                  ca.SX.zeros(r, r)))
         y = ca.solve(K, ca.vertcat(F, *rhs))
     else:
         y = ca.solve(sys.mass_expr, F)
