@@ -87,12 +87,12 @@ def test_exact_transcription_is_left_alone():
 
 
 def test_refusals_name_what_is_not_modelled():
-    """Spatial contacts and the user's pairs are refused by name."""
+    """Spatial contacts are refused by name; the user's pairs need their zero members."""
     sc = lcp.scenes.jean_pratt(v0=0.0)
     from lcp.ocp import tangential_push
     pb = OptimalControlProblem(sc, 4, control_matrix=tangential_push(sc.system), u_min=-20, u_max=20, T=0.5,
                                complementarity=[(lambda s: s.u0[0] + 20, lambda s: 20 - s.u0[0])])
-    with pytest.raises(NotShootable, match="complementarity"):
+    with pytest.raises(ValueError, match="zeros"):
         PhaseShooting(pb, [[((STICK,), 0.125)]] * 4)
     with pytest.raises(NotShootable, match="spatial"):
         from lcp.ocp.shooting import refuse

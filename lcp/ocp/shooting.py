@@ -166,6 +166,8 @@ class PhaseShooting(Transcription):
         refuse(pb)
         #: the user pairs' zero members: zeros[i][k] is True where a_i is zero at step k
         self.zeros, self.pair_tol = zeros, pair_tol
+        if pb.complementarity and zeros is None:
+            raise ValueError("zeros (pair_zeros of a result) is needed for the user's complementarity pairs")
         #: Runge-Kutta steps per grid interval of a segment (0: CVODES)
         self.substeps = int(substeps)
         #: CVODES at the check's tolerance (CHECK_TOL) rather than the NLP's (INTEGRATOR_TOL)
