@@ -535,11 +535,7 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
     zeros = pair_zeros(pb, result) if pb.complementarity else None
     check = PhaseShooting(pb, plan, check=True, zeros=zeros)  # CVODES: the initial point, the check of every solution
     x = initial_point(check, result, "integrated" if start == "replay" else "result")
-    # (IPOPT's acceptable level: optimality 1e-7 over 10 iterations, feasibility kept at 1e-10; the
-    # motor at N = 120 sat at its optimum, cost 0.7745143875 to ten digits, for 3000 iterations
-    # without meeting the dual tolerance 1e-10)
     ip = {"print_level": 0, "sb": "yes", "tol": 1e-10, "constr_viol_tol": 1e-10, "max_iter": 500,
-          "acceptable_tol": 1e-7, "acceptable_constr_viol_tol": 1e-10, "acceptable_iter": 10,
           "mu_strategy": "adaptive", "bound_relax_factor": 0.0, **(options or {})}
     warm_ip = {**ip, "warm_start_init_point": "yes", "mu_init": 1e-8, "warm_start_bound_push": 1e-9,
                "warm_start_mult_bound_push": 1e-9}
