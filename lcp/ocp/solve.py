@@ -14,7 +14,7 @@ import numpy as np
 
 from lcp.ocp.collocation import RadauTranscription
 from lcp.ocp.complementarity import run_homotopy, run_phases
-from lcp.ocp.guess import event_guess, resample, x0_from_guess
+from lcp.ocp.guess import event_guess, resample, screened_start, x0_from_guess
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions
 from lcp.ocp.replay import replay_check
 from lcp.ocp.results import HomotopyStage, OCPGuess, OCPResult
@@ -24,7 +24,7 @@ from lcp.ocp.transcription import Transcription
 
 __all__ = ["bound_steps_note", "default_starts", "first_pass", "guess_from", "piecewise_uniform", "polished",
            "result_of",
-           "solve_problem", "unbounded_note"]
+           "solve_problem", "stuck_at_start", "unbounded_note", "unstuck"]
 
 
 def solve_problem(problem, guess, options, method, option_kw, shooting: bool = True) -> OCPResult:
@@ -56,7 +56,8 @@ def solve_problem(problem, guess, options, method, option_kw, shooting: bool = T
     if method == "phases" and guess is None:
         guess = problem.phase_guess(replace(options, tol=max(options.tol, 1e-4), factor=min(options.factor, 1e-2)))
         first_pass = list(guess.homotopy)
-    starts = default_starts(problem, own_sigma0) if guess is None else iter([(None, guess_from(problem, guess), None)])
+    defaults = guess is None
+    starts = default_starts(problem, own_sigma0) if defaults else iter([(None, guess_from(problem, guess), None)])
     run = run_phases if method == "phases" else run_homotopy
     tried, earlier = [], []  # the failed starts' messages and homotopy stages (kept in the history)
     last, message = None, ""
@@ -86,6 +87,9 @@ def solve_problem(problem, guess, options, method, option_kw, shooting: bool = T
             return alt
     if shooting and res.status < 0 and problem.replay_tol is not None and np.all(np.isfinite(res.u)):
         return polished(problem, res, t0)
+    if defaults and not own_sigma0 and method == "homotopy" and res.success and opts.sigma0 < UNSTUCK_SIGMA0 \
+            and stuck_at_start(problem, res, gs):
+        return unstuck(problem, res, gs, last, opts, shooting, t0)
     return res
 
 
@@ -192,6 +196,48 @@ def unbounded_note(problem) -> str:
             "the optimizer may use forces and steps that the replay cannot follow.")
 
 
+#: first relaxation of the second solve from a start whose control the first solve left unchanged
+#: (:func:`unstuck`): the velocity law's default, under which the friction pairs pass a gradient
+UNSTUCK_SIGMA0 = 1.0
+
+
+def stuck_at_start(problem, res, gs, rtol: float = 1e-6) -> bool:
+    """Whether a solved control is the start's own control with no control bound active: the solve
+    ended where it began, a stationary point of the start. A default start's control is arbitrary
+    (the mid-range), and at a contact that sticks an exact friction law passes no gradient to a push
+    that stays inside the friction cone: the nosnoc cart-pole (friction 2 N, |u| <= 30 N) started at
+    rest with u = 0 ends at u = 0, the pole hanging, cost 6471.76, at N = 20, 40 and 80."""
+    u, u0 = np.asarray(res.u, dtype=float), np.asarray(gs.u, dtype=float)
+    if u.shape != u0.shape or not u.size:
+        return False
+    lo, hi = np.broadcast_to(problem.u_min, u.shape), np.broadcast_to(problem.u_max, u.shape)
+    span = np.where(np.isfinite(hi - lo), hi - lo, np.maximum(1.0, np.abs(u0)))
+    inside = np.all((u - lo > rtol * span) & (hi - u > rtol * span))
+    return bool(inside and np.all(np.abs(u - u0) <= rtol * span))
+
+
+def unstuck(problem, res, gs, label, options, shooting, t0) -> OCPResult:
+    """A second solve from the start ``gs`` of a result stuck there (:func:`stuck_at_start`), from
+    sigma0 = :data:`UNSTUCK_SIGMA0`: the relaxed friction pairs let a push move a sticking contact.
+    Returned when it succeeds at a lower cost, else ``res`` with a note saying what it found.
+    Measured on the nosnoc cart-pole at N = 20 (theta transcription, gap law): from sigma0 = 1e-4
+    the pole never leaves the bottom (cost 6471.76), from sigma0 = 1 it swings up (cost 644.0)."""
+    alt = solve_problem(problem, gs, replace(options, sigma0=max(UNSTUCK_SIGMA0, options.sigma0)), "homotopy",
+                        {}, shooting)
+    head = (f"The solve from the {label} ended on that start's control (no control bound active, "
+            f"cost {res.cost:.10g}): a stationary point of the start")
+    if alt.success and alt.cost < res.cost:
+        alt.message += f" ({head}; solved again from sigma0 = {UNSTUCK_SIGMA0:g}.)"
+        alt.solve_time = time.perf_counter() - t0
+        alt.homotopy = res.homotopy + alt.homotopy
+        alt.iterations = sum(s.iterations for s in alt.homotopy)
+        return alt
+    res.message += (f" ({head}. From sigma0 = {UNSTUCK_SIGMA0:g} the solve found cost {alt.cost:.10g} but "
+                    f"{'not a lower one' if alt.success else 'failed'}: {alt.message})")
+    res.solve_time = time.perf_counter() - t0
+    return res
+
+
 #: label of the default start (:func:`default_starts`)
 MJ_START = "Moreau-Jean simulation of the mid-range control"
 #: label of the second start under the gap law
@@ -223,6 +269,11 @@ def default_starts(problem, own_sigma0: bool = False):
     yield EVENT_START, ev, None
     if not own_sigma0:
         yield EVENT_START + " from sigma0 = 1", ev, 1.0
+    screened = screened_start(problem, problem.transcription)
+    if screened is not None:
+        a, f, gs = screened
+        yield (f"event-method simulation of {a:g} of the mid-range control's distance from rest over the "
+               f"first {f:g} of the horizon (the pulse start nearest the terminal constraints)"), gs, None
 
 
 def guess_from(problem, guess) -> OCPGuess:
