@@ -284,13 +284,19 @@ def default_starts(problem, own_sigma0: bool = False):
     residual), the same control simulated by the event method and sampled at the nodes
     (:func:`~lcp.ocp.guess.event_guess`), whose nodes do not penetrate: Moreau-Jean closes a
     contact one step late, the gap law bounds every node's gap below by zero, and from such a guess
-    IPOPT can end infeasible in the first relaxation. Then, unless the caller chose sigma0, the
+    IPOPT can end infeasible in the first relaxation. Then the pulse start of
+    :func:`~lcp.ocp.guess.screened_start` (a fraction of the mid-range push over the first part of
+    the horizon, the one whose event simulation meets the terminal constraints at the lowest cost;
+    none when the mid-range control is the rest control): a mid-range push can carry the system
+    far past its target (the box tip). Then, unless the caller chose sigma0, the
     event guess again from sigma0 = 1: the default 1e-4 keeps resting contacts from hovering, but
     asks a landing to fall on a node almost at once. Measured on a ball (e = 0.5) dropped from 1 m
     to a height 0.2 m at T = 0.6 s after its bounce: N = 12 infeasible from Moreau-Jean's guess,
     solved from the event guess; N = 24 infeasible from both at sigma0 <= 0.1, solved from the
-    event guess at sigma0 = 1. Each start is simulated only when the one before it failed; a
-    problem solved from the first is solved as before."""
+    event guess at sigma0 = 1. Each start is simulated only when the one before it failed (its
+    solve, or its result's replay and exact-phase shooting); a problem solved from the first is
+    solved as before, except that a solve ending on its start's own control is repeated
+    (:func:`stuck_at_start`, :func:`unstuck`)."""
     mj = guess_from(problem, None)
     yield MJ_START, mj, None
     if problem.contact_law != "gap" or not problem.system.n_contacts or problem.system.is_spatial:
@@ -299,13 +305,16 @@ def default_starts(problem, own_sigma0: bool = False):
     if ev is None:
         return
     yield EVENT_START, ev, None
-    if not own_sigma0:
-        yield EVENT_START + " from sigma0 = 1", ev, 1.0
+    # the pulse start before the larger first relaxation: it keeps the small sigma0 (no hovering),
+    # and a problem it solves is spared that solve (on the box tip at N = 20: 1242 IPOPT
+    # iterations, ending infeasible)
     screened = screened_start(problem, problem.transcription)
     if screened is not None:
         a, f, gs = screened
         yield (f"event-method simulation of {a:g} of the mid-range control's distance from rest over the "
                f"first {f:g} of the horizon (the pulse start nearest the terminal constraints)"), gs, None
+    if not own_sigma0:
+        yield EVENT_START + " from sigma0 = 1", ev, 1.0
 
 
 def guess_from(problem, guess) -> OCPGuess:
