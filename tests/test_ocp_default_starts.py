@@ -146,3 +146,30 @@ def test_the_box_tip_lands_on_its_side_from_the_pulse_start():
     assert abs(r.q[-1, 2] + np.pi / 2) <= 1e-8 and np.max(np.abs(r.v[-1])) <= 1e-8
     # the effort is below the tipping threshold's held over the whole horizon: 2.45 N (m g w / 2 / h)
     assert r.cost < (G * 0.1 / 0.4) ** 2 * 1.0
+
+
+def test_a_start_whose_result_fails_its_replay_does_not_end_the_starts(monkeypatch):
+    # the first converged start's result is made to fail (as a replay miss would): the next default
+    # start is solved, and its success is returned with the first one named
+    q, v, u = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1)
+    sys = lcp.System(q, v, ca.DM.eye(2), ca.vertcat(u[0], -G),
+                     contacts=[lcp.Contact(gap=q[1], tangent=q[0], mu=0.5, name="floor")],
+                     control=u, control_bounds=([-20.0], [20.0]))
+    pb = OptimalControlProblem(sys, 10, T=1.0, q0=[0.0, 0.0], v0=[0.0, 0.0], contact_law="gap",
+                               stage_cost=lambda s: s.u0[0] ** 2,
+                               terminal_constraints=lambda q, v: ca.vertcat(q[0] - 1.0, v[0]))
+    real, calls = ocp_solve.finished, []
+
+    def first_fails(*args, **kw):
+        res = real(*args, **kw)
+        calls.append(res.cost)
+        if len(calls) == 1:
+            res.status = -3
+        return res
+
+    monkeypatch.setattr(ocp_solve, "finished", first_fails)
+    r = pb.solve()
+    assert len(calls) == 2 and r.success, r.message
+    assert f"from the {ocp_solve.MJ_START}: its solution (cost {calls[0]:.10g}" in r.message
+    assert f"Started from the {ocp_solve.EVENT_START}" in r.message
+    assert abs(r.q[-1, 0] - 1.0) <= 1e-8 and r.replay.ok
