@@ -6,7 +6,8 @@ import numpy as np
 from lcp.ocp.options import HomotopyOptions
 from lcp.ocp.results import OCPGuess
 
-__all__ = ["control_values", "event_guess", "multistart", "resample", "simulate_guess", "x0_from_guess"]
+__all__ = ["control_values", "event_guess", "multistart", "pulse_controls", "resample", "screened_start", "simulate_guess",
+           "x0_from_guess"]
 
 
 def _interp(a, told, tnew):
@@ -180,6 +181,66 @@ def event_guess(pb, u, T: float) -> OCPGuess | None:
     if not sim.success or len(sim.t) != pb.N + 1 or not np.all(np.isfinite(sim.q)):
         return None
     return OCPGuess(T=T, q=sim.q, v=sim.v, u=un, p_N=sim.p_N, p_T=sim.p_T, source="event simulation")
+
+
+#: levels a (of the mid-range control's distance from the rest control) and fractions f of the
+#: horizon of the pulse starts (:func:`pulse_controls`)
+PULSE_LEVELS = (1.0, 0.5, 0.25, 0.125)
+PULSE_FRACTIONS = (1.0, 0.5, 0.25)
+
+
+def pulse_controls(pb) -> list:
+    """Candidate start controls: the rest control r (zero clipped to the bounds) plus a fraction a of
+    the mid-range control's distance from it, held over the first fraction f of the horizon, r after
+    (a in :data:`PULSE_LEVELS`, f in :data:`PULSE_FRACTIONS`; the mid-range control itself, a = f = 1,
+    excluded). Returns [(a, f, rows of control values)]; empty when r is the mid-range control."""
+    lo, hi = np.asarray(pb.u_min, dtype=float), np.asarray(pb.u_max, dtype=float)
+    rest = np.array(np.clip(0.0, lo, hi), dtype=float)
+    both = np.isfinite(lo) & np.isfinite(hi)
+    mid = rest.copy()
+    mid[both] = 0.5 * (lo[both] + hi[both])
+    if np.allclose(mid, rest):
+        return []
+    t = np.linspace(0.0, pb.T, pb.N + 1)
+    ts = np.repeat(t, 2)[1:-1] if pb.hold == "affine" else (t[:-1] + 0.5 * np.diff(t) if pb.hold == "constant" else t)
+    out = []
+    for a in PULSE_LEVELS:
+        for f in PULSE_FRACTIONS:
+            if a == 1.0 and f == 1.0:
+                continue
+            on = (ts < f * pb.T)[:, None]
+            out.append((a, f, np.clip(np.where(on, rest + a * (mid - rest), rest), lo, hi)))
+    return out
+
+
+def screened_start(pb, tr=None):
+    """The pulse start (:func:`pulse_controls`) whose event-method simulation (:func:`event_guess`)
+    comes nearest to the terminal constraints, the lowest transcription cost among those that meet
+    them (to 1e-6); (a, f, guess) or None. A mid-range control can carry a system far past
+    its target (a box pushed at 15 N tumbles instead of tipping onto its side): measured on the
+    box (N = 20), every start from it fails, while from the event simulation of 3.75 N held over
+    the first quarter of the horizon (it tips the box onto its side) the transcription reaches cost 4.09."""
+    import casadi as ca
+
+    # without a transcription (not built yet) the smaller push (a f) stands in for the cost
+    cost = None if tr is None else ca.Function("start_cost", [tr.nlp["x"], tr.nlp["p"]], [tr.nlp["f"]])
+    P = np.concatenate([[0.0], pb.q0, pb.v0])
+    best, key = None, None
+    for a, f, u in pulse_controls(pb):
+        gs = event_guess(pb, u, pb.T)
+        if gs is None:
+            continue
+        viol = 0.0
+        if pb.terminal_constraints is not None:
+            viol = float(np.linalg.norm(np.array(ca.DM(pb.terminal_constraints(ca.DM(gs.q[-1]), ca.DM(gs.v[-1]))),
+                                                 dtype=float)))
+        c = a * f if cost is None else float(cost(x0_from_guess(pb, tr, gs), P))
+        if not np.isfinite(viol) or not np.isfinite(c):
+            continue
+        k = (viol > 1e-6, viol if viol > 1e-6 else 0.0, c)
+        if key is None or k < key:
+            best, key = (a, f, gs), k
+    return best
 
 
 def multistart(pb, guesses, options, rtol: float, **option_kw):

@@ -14,7 +14,7 @@ import numpy as np
 
 from lcp.ocp.collocation import RadauTranscription
 from lcp.ocp.complementarity import run_homotopy, run_phases
-from lcp.ocp.guess import event_guess, resample, x0_from_guess
+from lcp.ocp.guess import event_guess, resample, screened_start, x0_from_guess
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions
 from lcp.ocp.replay import replay_check
 from lcp.ocp.results import HomotopyStage, OCPGuess, OCPResult
@@ -24,7 +24,7 @@ from lcp.ocp.transcription import Transcription
 
 __all__ = ["bound_steps_note", "default_starts", "first_pass", "guess_from", "piecewise_uniform", "polished",
            "result_of",
-           "solve_problem", "unbounded_note"]
+           "finished", "solve_problem", "stuck_at_start", "unbounded_note", "unstuck"]
 
 
 def solve_problem(problem, guess, options, method, option_kw, shooting: bool = True) -> OCPResult:
@@ -56,10 +56,15 @@ def solve_problem(problem, guess, options, method, option_kw, shooting: bool = T
     if method == "phases" and guess is None:
         guess = problem.phase_guess(replace(options, tol=max(options.tol, 1e-4), factor=min(options.factor, 1e-2)))
         first_pass = list(guess.homotopy)
-    starts = default_starts(problem, own_sigma0) if guess is None else iter([(None, guess_from(problem, guess), None)])
+    defaults = guess is None
+    starts = default_starts(problem, own_sigma0) if defaults else iter([(None, guess_from(problem, guess), None)])
     run = run_phases if method == "phases" else run_homotopy
     tried, earlier = [], []  # the failed starts' messages and homotopy stages (kept in the history)
     last, message = None, ""
+    # default starts whose solve converged but whose result failed (its replay, then the shooting):
+    # the next start is tried too (the box tip at N = 10: from the mid-range control cost 19.54,
+    # replay miss 2.1e-2; from the pulse start cost 2.249, replay miss 1.4e-2)
+    failed, res, where = [], None, None
     for label, gs, sigma0 in starts:
         if history is not None:  # a start before this one failed
             tried.append(f"from the {last}: {message.rstrip('.')}")
@@ -69,12 +74,43 @@ def solve_problem(problem, guess, options, method, option_kw, shooting: bool = T
         opts = options if sigma0 is None else replace(options, sigma0=max(sigma0, options.sigma_min))
         x, cost, diag, status, message, history = run(problem.transcription, x0, P0, opts, problem.nlp_solvers)
         last = label
-        if status >= 0:
+        if status < 0:
+            continue
+        if tried or last not in (None, MJ_START):
+            message += (f" (Started from the {last}" + (f"; before it, {'; '.join(tried)}" if tried else "")
+                        + ".)")
+        res = finished(problem, x, cost, diag, status, message, first_pass + earlier + history, t0, method, shooting)
+        where = (gs, opts, label)
+        if res.success or not defaults:
             break
-    if tried or last not in (None, MJ_START):
-        message += (f" (Started from the {last}" + (f"; before it, {'; '.join(tried)}" if tried else "")
-                    + ".)")
-    history = first_pass + earlier + history
+        failed.append((res, len(tried)))
+        miss = f", replay miss {res.replay.final_miss:.2e}" if res.replay is not None else ""
+        message = (f"its solution (cost {cost:.10g}{miss}) failed" + (", also after the exact-phase shooting"
+                                                                      if shooting else ""))
+    if res is None:  # no start converged: the last one's failure, as before
+        if tried or last not in (None, MJ_START):
+            message += (f" (Started from the {last}" + (f"; before it, {'; '.join(tried)}" if tried else "")
+                        + ".)")
+        return finished(problem, x, cost, diag, status, message, first_pass + earlier + history, t0, method,
+                        shooting)
+    if not res.success and failed:
+        # the lowest-cost failure, with the starts tried after it
+        res, k = min(failed, key=lambda rk: rk[0].cost if np.isfinite(rk[0].cost) else np.inf)
+        later = tried[k + 1:] + ([f"from the {last}: {message.rstrip('.')}"] if k < len(tried) else [])
+        if later:
+            res.message += f" (Default starts tried after it: {'; '.join(later)}.)"
+        res.solve_time = time.perf_counter() - t0
+        return res
+    gs, opts, label = where
+    if defaults and not own_sigma0 and method == "homotopy" and res.success and opts.sigma0 < UNSTUCK_SIGMA0 \
+            and stuck_at_start(problem, res, gs):
+        return unstuck(problem, res, gs, label, opts, shooting, t0)
+    return res
+
+
+def finished(problem, x, cost, diag, status, message, history, t0, method, shooting) -> OCPResult:
+    """One start's result: replay-checked, the relaxed tail's solution where the tail's fails its
+    replay, and the exact-phase shooting (:func:`polished`) where it still fails."""
     res = _checked(problem, result_of(problem, x, cost, diag, status, message, history, time.perf_counter() - t0),
                    method)
     before = diag.get("before_tail")
@@ -192,6 +228,51 @@ def unbounded_note(problem) -> str:
             "the optimizer may use forces and steps that the replay cannot follow.")
 
 
+#: first relaxation of the second solve from a start whose control the first solve left unchanged
+#: (:func:`unstuck`): the velocity law's default, under which the friction pairs pass a gradient
+UNSTUCK_SIGMA0 = 1.0
+
+
+def stuck_at_start(problem, res, gs, rtol: float = 1e-6) -> bool:
+    """Whether a solved control is the start's own control with no control bound active: the solve
+    ended where it began, a stationary point of the start. A default start's control is arbitrary
+    (the mid-range), and at a contact that sticks an exact friction law passes no gradient to a push
+    that stays inside the friction cone: the nosnoc cart-pole (friction 2 N, |u| <= 30 N) started at
+    rest with u = 0 ends at u = 0, the pole hanging, cost 6471.76, at N = 20, 40 and 80."""
+    u, u0 = np.asarray(res.u, dtype=float), np.asarray(gs.u, dtype=float)
+    if u.shape != u0.shape or not u.size:
+        return False
+    lo, hi = np.broadcast_to(problem.u_min, u.shape), np.broadcast_to(problem.u_max, u.shape)
+    span = np.where(np.isfinite(hi - lo), hi - lo, np.maximum(1.0, np.abs(u0)))
+    inside = np.all((u - lo > rtol * span) & (hi - u > rtol * span))
+    return bool(inside and np.all(np.abs(u - u0) <= rtol * span))
+
+
+def unstuck(problem, res, gs, label, options, shooting, t0) -> OCPResult:
+    """A second solve from the start ``gs`` of a result stuck there (:func:`stuck_at_start`), from
+    sigma0 = :data:`UNSTUCK_SIGMA0`: the relaxed friction pairs let a push move a sticking contact.
+    Returned when it succeeds at a lower cost, else ``res`` with a note saying what it found.
+    Measured on the nosnoc cart-pole at N = 20 (theta transcription, gap law): from sigma0 = 1e-4
+    the pole never leaves the bottom (cost 6471.76), from sigma0 = 1 it swings up (cost 644.0).
+    The friction's relaxation is what frees it: with only the friction pairs relaxed 1e4 times
+    more than the normal ones from sigma0 = 1e-4 (an experiment, not the package's transcription)
+    the homotopy lands on the same 644.02."""
+    alt = solve_problem(problem, gs, replace(options, sigma0=max(UNSTUCK_SIGMA0, options.sigma0)), "homotopy",
+                        {}, shooting)
+    head = (f"The solve from the {label} ended on that start's control (no control bound active, "
+            f"cost {res.cost:.10g}): a stationary point of the start")
+    if alt.success and alt.cost < res.cost:
+        alt.message += f" ({head}; solved again from sigma0 = {UNSTUCK_SIGMA0:g}.)"
+        alt.solve_time = time.perf_counter() - t0
+        alt.homotopy = res.homotopy + alt.homotopy
+        alt.iterations = sum(s.iterations for s in alt.homotopy)
+        return alt
+    res.message += (f" ({head}. From sigma0 = {UNSTUCK_SIGMA0:g} the solve found cost {alt.cost:.10g} but "
+                    f"{'not a lower one' if alt.success else 'failed'}: {alt.message})")
+    res.solve_time = time.perf_counter() - t0
+    return res
+
+
 #: label of the default start (:func:`default_starts`)
 MJ_START = "Moreau-Jean simulation of the mid-range control"
 #: label of the second start under the gap law
@@ -206,13 +287,19 @@ def default_starts(problem, own_sigma0: bool = False):
     residual), the same control simulated by the event method and sampled at the nodes
     (:func:`~lcp.ocp.guess.event_guess`), whose nodes do not penetrate: Moreau-Jean closes a
     contact one step late, the gap law bounds every node's gap below by zero, and from such a guess
-    IPOPT can end infeasible in the first relaxation. Then, unless the caller chose sigma0, the
+    IPOPT can end infeasible in the first relaxation. Then the pulse start of
+    :func:`~lcp.ocp.guess.screened_start` (a fraction of the mid-range push over the first part of
+    the horizon, the one whose event simulation meets the terminal constraints at the lowest cost;
+    none when the mid-range control is the rest control): a mid-range push can carry the system
+    far past its target (the box tip). Then, unless the caller chose sigma0, the
     event guess again from sigma0 = 1: the default 1e-4 keeps resting contacts from hovering, but
     asks a landing to fall on a node almost at once. Measured on a ball (e = 0.5) dropped from 1 m
     to a height 0.2 m at T = 0.6 s after its bounce: N = 12 infeasible from Moreau-Jean's guess,
     solved from the event guess; N = 24 infeasible from both at sigma0 <= 0.1, solved from the
-    event guess at sigma0 = 1. Each start is simulated only when the one before it failed; a
-    problem solved from the first is solved as before."""
+    event guess at sigma0 = 1. Each start is simulated only when the one before it failed (its
+    solve, or its result's replay and exact-phase shooting); a problem solved from the first is
+    solved as before, except that a solve ending on its start's own control is repeated
+    (:func:`stuck_at_start`, :func:`unstuck`)."""
     mj = guess_from(problem, None)
     yield MJ_START, mj, None
     if problem.contact_law != "gap" or not problem.system.n_contacts or problem.system.is_spatial:
@@ -221,6 +308,14 @@ def default_starts(problem, own_sigma0: bool = False):
     if ev is None:
         return
     yield EVENT_START, ev, None
+    # the pulse start before the larger first relaxation: it keeps the small sigma0 (no hovering),
+    # and a problem it solves is spared that solve (on the box tip at N = 20: 1242 IPOPT
+    # iterations, ending infeasible)
+    screened = screened_start(problem, problem.transcription)
+    if screened is not None:
+        a, f, gs = screened
+        yield (f"event-method simulation of {a:g} of the mid-range control's distance from rest over the "
+               f"first {f:g} of the horizon (the pulse start nearest the terminal constraints)"), gs, None
     if not own_sigma0:
         yield EVENT_START + " from sigma0 = 1", ev, 1.0
 
