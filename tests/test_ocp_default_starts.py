@@ -21,7 +21,13 @@ from hypothesis import strategies as st
 import lcp
 from lcp.ocp import OptimalControlProblem
 from lcp.ocp import solve as ocp_solve
-from lcp.ocp.guess import PULSE_FRACTIONS, PULSE_LEVELS, event_guess, pulse_controls, screened_start
+from lcp.ocp.guess import (
+    PULSE_FRACTIONS,
+    PULSE_LEVELS,
+    event_guess,
+    pulse_controls,
+    screened_start,
+)
 
 G = 9.81
 
@@ -78,19 +84,23 @@ def test_a_users_sigma0_is_not_second_guessed():
     assert "stationary point" not in r.message and all(s.sigma <= 1e-4 for s in r.homotopy)
 
 
+def _pushed_to_one_metre():
+    """A unit block pushed to rest at 1 m in 1 s against 4.9 N of friction, least effort, N = 10."""
+    q, v, u = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1)
+    sys = lcp.System(q, v, ca.DM.eye(2), ca.vertcat(u[0], -G),
+                     contacts=[lcp.Contact(gap=q[1], tangent=q[0], mu=0.5, name="floor")],
+                     control=u, control_bounds=([-20.0], [20.0]))
+    return OptimalControlProblem(sys, 10, T=1.0, q0=[0.0, 0.0], v0=[0.0, 0.0], contact_law="gap",
+                                 stage_cost=lambda s: s.u0[0] ** 2,
+                                 terminal_constraints=lambda q, v: ca.vertcat(q[0] - 1.0, v[0]))
+
+
 def test_a_solve_that_moves_is_not_repeated(monkeypatch):
     def refuse(*args, **kw):
         raise AssertionError("a solve that left its start was repeated")
 
     monkeypatch.setattr(ocp_solve, "unstuck", refuse)
-    # pushed to rest at 1 m in 1 s against 4.9 N of friction: the control leaves u = 0
-    q, v, u = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1)
-    sys = lcp.System(q, v, ca.DM.eye(2), ca.vertcat(u[0], -G),
-                     contacts=[lcp.Contact(gap=q[1], tangent=q[0], mu=0.5, name="floor")],
-                     control=u, control_bounds=([-20.0], [20.0]))
-    pb = OptimalControlProblem(sys, 10, T=1.0, q0=[0.0, 0.0], v0=[0.0, 0.0], contact_law="gap",
-                               stage_cost=lambda s: s.u0[0] ** 2,
-                               terminal_constraints=lambda q, v: ca.vertcat(q[0] - 1.0, v[0]))
+    pb = _pushed_to_one_metre()  # the control leaves u = 0
     r = pb.solve()
     assert r.success, r.message
     assert abs(r.q[-1, 0] - 1.0) <= 1e-8 and np.max(np.abs(r.u)) > 0.5 * G  # above the friction
@@ -151,13 +161,7 @@ def test_the_box_tip_lands_on_its_side_from_the_pulse_start():
 def test_a_start_whose_result_fails_its_replay_does_not_end_the_starts(monkeypatch):
     # the first converged start's result is made to fail (as a replay miss would): the next default
     # start is solved, and its success is returned with the first one named
-    q, v, u = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1)
-    sys = lcp.System(q, v, ca.DM.eye(2), ca.vertcat(u[0], -G),
-                     contacts=[lcp.Contact(gap=q[1], tangent=q[0], mu=0.5, name="floor")],
-                     control=u, control_bounds=([-20.0], [20.0]))
-    pb = OptimalControlProblem(sys, 10, T=1.0, q0=[0.0, 0.0], v0=[0.0, 0.0], contact_law="gap",
-                               stage_cost=lambda s: s.u0[0] ** 2,
-                               terminal_constraints=lambda q, v: ca.vertcat(q[0] - 1.0, v[0]))
+    pb = _pushed_to_one_metre()
     real, calls = ocp_solve.finished, []
 
     def first_fails(*args, **kw):

@@ -6,8 +6,14 @@ import pytest
 import lcp
 from lcp.contact.modes import SLIDE_POS, STICK
 from lcp.ocp import OptimalControlProblem, effort
-from lcp.ocp.shooting import NotShootable, PhaseShooting, initial_point, phase_plan, solve_shooting
 from lcp.ocp.replay import event_pieces
+from lcp.ocp.shooting import (
+    NotShootable,
+    PhaseShooting,
+    initial_point,
+    phase_plan,
+    solve_shooting,
+)
 from studies._ocp_models import EXAMPLES
 
 
