@@ -180,14 +180,15 @@ def approach_gap(model, y, n, j, t=None) -> float:
     t: g(t, q(t)), u_N = H v + dg/dt."""
     nq = getattr(model, "nq", None) or n  # n_q coordinates first (Newton-Euler kinematics: n_q != n)
     q, v = y[:nq], y[nq:nq + n]
-    deep = -1e-9 * (1.0 + float(np.max(np.abs(q), initial=0.0)))
     if t is None or not model.moving:
         gap = float(model.gaps(q)[j])
-        if gap > 0 or gap < deep or float(model.jac(q)[j] @ v) < 0:
+        if gap > 0 or float(model.jac(q)[j] @ v) < 0:
             return gap
-        return 1.0 + abs(gap)
-    gap = float(model.gaps(q, t)[j])
-    if gap > 0 or gap < deep or float(model.local_velocity(t, q, v)[j]) < 0:
+    else:
+        gap = float(model.gaps(q, t)[j])
+        if gap > 0 or float(model.local_velocity(t, q, v)[j]) < 0:
+            return gap
+    if gap < -1e-9 * (1.0 + float(np.max(np.abs(q), initial=0.0))):
         return gap
     return 1.0 + abs(gap)
 

@@ -205,6 +205,7 @@ class OdePhase(SmoothPhase):
             ts = a + (b - a) * np.arange(K + 1) / K
             Y = sol.sol(ts)
             G = self._sample_gaps(ts, Y[:nq])
+            scale = 1e-9 * (1.0 + float(np.max(np.abs(Y[:nq]), initial=0.0)))
             found = None
             for j in idx:
                 g = G[:, j]
@@ -215,7 +216,6 @@ class OdePhase(SmoothPhase):
                     t_min, g_min = float(r.x), float(r.fun)
                 else:
                     t_min, g_min = float(ts[i]), float(g[i])
-                scale = 1e-9 * (1.0 + float(np.max(np.abs(Y[:nq]), initial=0.0)))
                 if g_min >= -scale or g[0] <= 0:
                     continue  # (open throughout, or closed at the step's start: not a crossing here)
                 tc = brentq(lambda s, j=j: gap(s, j), a, t_min, xtol=1e-14, rtol=1e-14)

@@ -231,25 +231,11 @@ class RadauTranscription(Transcription):
         fT = (x[ix["bp"]] - x[ix["bm"]]).reshape(N, s, m)
         return fN, fT
 
-    def unpack(self, x):
-        """(T, steps, q, v, u, p_N, p_T) of a vector of NLP variables (impulses h sum_j b_j f_j)."""
-        pb, ix = self.pb, self.ix
-        N, n, m = pb.N, pb.system.n, pb.system.n_contacts
-        T = float(x[ix["T"]].ravel()[0]) if pb.free_time else pb.T
-        if pb.steps == "free":
-            steps = x[ix["h"]].ravel()
-        else:
-            steps = np.full(N, T / N) if pb.step_fractions is None else T * np.asarray(pb.step_fractions)
-        q = np.vstack([pb.q0] + [x[i] for i in ix["q"]]).reshape(N + 1, n)
-        v = np.vstack([pb.v0] + [x[i] for i in ix["v"]]).reshape(N + 1, n)
-        u = np.vstack([x[i] for i in ix["u"]]).reshape(-1, pb.nu)
-        if m:
-            fN, fT = self._stage_forces(x)
-            pN = steps[:, None] * np.einsum("j,kjc->kc", self.b, fN)
-            pT = steps[:, None] * np.einsum("j,kjc->kc", self.b, fT)
-        else:
-            pN = pT = np.zeros((N, 0))
-        return T, steps, q, v, u, pN, pT
+    def step_impulses(self, x, steps):
+        """(p_N, p_T), shape (N, m): h_k sum_j b_j f_kj of the stage forces."""
+        fN, fT = self._stage_forces(x)
+        return (steps[:, None] * np.einsum("j,kjc->kc", self.b, fN),
+                steps[:, None] * np.einsum("j,kjc->kc", self.b, fT))
 
     def impulses(self, x):
         """No impulses at the nodes (the velocity law): zeros of shape (N, 0)."""

@@ -58,7 +58,7 @@ def mode_dynamics(pb, modes) -> ca.Function:
     F = sys.force_expr + ca.mtimes(sys.control_matrix_expr, u)
     r = len(cols)
     if r:
-        K = ca.vertcat(ca.horzcat(sys.mass_expr, -ca.horzcat(*cols)), ca.horzcat(ca.vertcat(*[rw for rw in rows]),
+        K = ca.vertcat(ca.horzcat(sys.mass_expr, -ca.horzcat(*cols)), ca.horzcat(ca.vertcat(*rows),
                                                                                   ca.SX.zeros(r, r)))
         y = ca.solve(K, ca.vertcat(F, *rhs))
     else:

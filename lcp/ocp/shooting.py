@@ -99,8 +99,10 @@ def phase_plan(result):
                 tmode = OPEN
             else:
                 tmode = STICK if abs(pT) < mu[j] * pN * (1 - 1e-6) else (SLIDE_POS if pT < 0 else SLIDE_NEG)
-            hit = (float(imp.t), (j, tmode, pN, pT))
-            (carried if imp.t >= h * (1 - 1e-12) else hits).append(hit if imp.t < h * (1 - 1e-12) else (0.0, hit[1]))
+            if imp.t >= h * (1 - 1e-12):  # at the interval's end: the next interval's start
+                carried.append((0.0, (j, tmode, pN, pT)))
+            else:
+                hits.append((float(imp.t), (j, tmode, pN, pT)))
         segs = []
         for ph in sim.phases:
             dur = float(ph.t1 - ph.t0)
@@ -285,7 +287,6 @@ class PhaseShooting(Transcription):
         Jm, gm = jg(Xm, Pm, ca.vertcat(*results))
         self.nlp = {"x": Xm, "f": Jm, "g": gm, "p": Pm}
         self.g_fn = ca.Function("shooting_g", [Xm, Pm], [gm])
-        self.cost_fn = ca.Function("shooting_f", [Xm, Pm], [Jm])
         self.defect_rows = np.concatenate(self._defect_rows) if self._defect_rows else np.zeros(0, dtype=int)
         self.ix = {key: np.array(val) for key, val in self.ix.items()}
         self.lbx, self.ubx = np.concatenate(self._lbx), np.concatenate(self._ubx)
@@ -300,8 +301,10 @@ class PhaseShooting(Transcription):
         n, m = self.pb.system.n, self.pb.system.n_contacts
         fn = self.mode_function(modes)
         first = prev is None
-        q_start = np.asarray(self.pb.q0, dtype=float)
-        v_start = np.asarray(self.pb.v0, dtype=float)
+        if first:  # the start state's tangential velocities and gaps (numbers)
+            sys = self.pb.system
+            q_start, v_start = np.asarray(self.pb.q0, dtype=float), np.asarray(self.pb.v0, dtype=float)
+            uT_start, gap_start = sys.contact_jacobian(q_start)[m:] @ v_start, sys.gaps(q_start)
         for i, (t, x, u) in enumerate(points):
             _, lamN, lamT, acc = fn(t, x[:n], x[n:], u)
             uT = ca.mtimes(Hfn(x[:n])[m:, :], x[n:])
@@ -318,7 +321,7 @@ class PhaseShooting(Transcription):
                     s = 1.0 if md == SLIDE_POS else -1.0
                     self._constrain(s * uT[j], 0.0, np.inf)
                     if i == 0:
-                        at_rest = pm == STICK or (first and abs(float(self._uT(q_start, v_start)[j])) <= 1e-12)
+                        at_rest = pm == STICK or (first and abs(float(uT_start[j])) <= 1e-12)
                         if pm in (SLIDE_POS, SLIDE_NEG) and pm != md:  # a reversal passes through rest
                             self._constrain(uT[j], 0.0, 0.0)
                             at_rest = True
@@ -326,7 +329,7 @@ class PhaseShooting(Transcription):
                             self._constrain(s * acc[m + j], 0.0, np.inf)
                 elif i > 0:  # open: the gap stays open
                     self._constrain(gap(x[:n])[j], 0.0, np.inf)
-                elif pm != OPEN or (first and float(self.pb.system.gaps(q_start)[j]) <= 1e-12):
+                elif pm != OPEN or (first and float(gap_start[j]) <= 1e-12):
                     self._constrain(acc[j], 0.0, np.inf)  # a lift-off accelerates away from the surface
 
     def _defect(self, expr):
@@ -336,6 +339,10 @@ class PhaseShooting(Transcription):
         self._corr.append(c)
         self._defect_rows.append(np.arange(self._ng, self._ng + expr.shape[0]))
         self._constrain(expr + c, 0.0, 0.0)
+
+    def constraints(self, x) -> np.ndarray:
+        """The constraint values at x, corrections zero (one pass of the integrators)."""
+        return np.array(self.g_fn(x, self.params())).ravel()
 
     def params(self, corrections=None) -> np.ndarray:
         """The NLP's parameter vector: (sigma = 0, q0, v0, the defect corrections or zeros)."""
@@ -353,13 +360,9 @@ class PhaseShooting(Transcription):
         self._calls.append((modes, x, xf, qf, p))
         return xf, qf
 
-    def _uT(self, q, v):
-        sys = self.pb.system
-        return sys.contact_jacobian(q)[sys.n_contacts:] @ v
-
-    # ------------------------------------------------------------------ numbers
-    def _mean_friction(self, x):
-        return x[self.ix["fT"]]
+    def step_impulses(self, x, steps):
+        N, m = self.pb.N, self.pb.system.n_contacts
+        return steps[:, None] * x[self.ix["pN"]].reshape(N, m), steps[:, None] * x[self.ix["fT"]].reshape(N, m)
 
     def impulses(self, x):
         """No impulses at the nodes: zeros of shape (N, 0)."""
@@ -369,11 +372,12 @@ class PhaseShooting(Transcription):
         """(N, m) int8: each interval's mode at its start."""
         return np.array([segs[0][0] for segs in self.plan], dtype=np.int8).reshape(self.pb.N, -1)
 
-    def diagnose(self, x) -> dict:
+    def diagnose(self, x, g=None) -> dict:
         """``dynamics``: the largest continuity defect between segments; ``residual``: the
         largest violation of the other constraints (the modes' admissibility and switches, the
-        user's constraints); ``modes``: each interval's modes at its start."""
-        g = np.array(self.g_fn(x, self.params())).ravel()
+        user's constraints); ``modes``: each interval's modes at its start. ``g``: the constraint
+        values at x, when already evaluated (:meth:`constraints`)."""
+        g = self.constraints(x) if g is None else g
         viol = np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0)
         other = np.ones(g.size, dtype=bool)
         other[self.defect_rows] = False
@@ -540,6 +544,7 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
     warm_ip = {**ip, "warm_start_init_point": "yes", "mu_init": 1e-8, "warm_start_bound_push": 1e-9,
                "warm_start_mult_bound_push": 1e-9}
     M, iters, warm, diag, ok, stats, pair_tol = RK_SUBSTEPS, 0, {}, None, False, {}, 0.0
+    cost = float("nan")
     while True:
         tr = PhaseShooting(pb, plan, substeps=M, zeros=zeros, pair_tol=pair_tol)
         solvers = {}
@@ -558,13 +563,13 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
             ok = stats["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
             if not ok:
                 break
-            x = np.array(sol["x"]).ravel()
+            x, cost = np.array(sol["x"]).ravel(), float(sol["f"])
             warm = {"lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
-            diag = check.diagnose(x)
+            g = check.constraints(x)
+            diag = check.diagnose(x, g)
             if diag["dynamics"] <= defect_tol or diag["dynamics"] > 0.5 * last:
                 break  # (met, or no longer halved by a correction)
             last = diag["dynamics"]
-            g = np.array(check.g_fn(x, check.params())).ravel()
             C = C + g[check.defect_rows]
         if not ok and stats["return_status"] == "Not_Enough_Degrees_Of_Freedom" and zeros and not pair_tol:
             pair_tol, warm = PAIR_TOL, {}  # pair members implied by the modes: held in a band
@@ -575,5 +580,4 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
         M = min(RK_SUBSTEPS_MAX, int(np.ceil(1.2 * M * (diag["dynamics"] / max(last, defect_tol)) ** 0.25 + M)))
         warm = {}
     stats = {**stats, "iter_count": iters}
-    cost = float(check.cost_fn(x, check.params())) if diag is not None else float("nan")
     return x, cost, diag if diag is not None else check.diagnose(x), stats, time.perf_counter() - t0, check

@@ -387,15 +387,16 @@ class Transcription:
         v = np.vstack([pb.v0] + [x[i] for i in ix["v"]]).reshape(N + 1, n)
         u = np.vstack([x[i] for i in ix["u"]]).reshape(-1, pb.nu)
         if m:
-            pN = steps[:, None] * x[ix["pN"]].reshape(N, m)
-            pT = steps[:, None] * self._mean_friction(x).reshape(N, m)
+            pN, pT = self.step_impulses(x, steps)
         else:
             pN = pT = np.zeros((N, 0))
         return T, steps, q, v, u, pN, pT
 
-    def _mean_friction(self, x):
-        """The mean friction force of each step and contact, flat (step-major)."""
-        return x[self.ix["bp"]] - x[self.ix["bm"]]
+    def step_impulses(self, x, steps):
+        """(p_N, p_T), shape (N, m): each step's contact impulses (its length times its mean forces)."""
+        N, m = self.pb.N, self.pb.system.n_contacts
+        return (steps[:, None] * x[self.ix["pN"]].reshape(N, m),
+                steps[:, None] * (x[self.ix["bp"]] - x[self.ix["bm"]]).reshape(N, m))
 
     def impulses(self, x):
         """The impulses (P_N, P_T) at the start node of each step, shape (N, m) each."""
