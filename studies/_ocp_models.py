@@ -51,6 +51,12 @@ class Example:
         return np.concatenate([q, v]) if self.common is None else np.asarray(self.common(q, v), dtype=float)
 
 
+#: the examples' grid: N uniform stages with the control held constant over each, as nosnoc poses its
+#: examples (and as the recorded comparisons ran); the package's own default for planar contacts
+#: would make the steps free and the hold affine, a larger control space than nosnoc's
+NOSNOC_GRID = {"hold": "constant", "steps": "uniform"}
+
+
 def _effort(t, q, v, u):
     return np.sum(u * u, axis=1)
 
@@ -121,7 +127,8 @@ def block_chain(K: int = 2, d: float = 0.3, T: float = 1.0, u_max: float = 30.0)
         return ca.vertcat(*[q[2 * i] - (sc.q0[2 * i] + d) for i in range(K)], *[v[2 * i] for i in range(K)])
 
     def make(N):
-        return OptimalControlProblem(sys, N, T=T, q0=sc.q0, v0=sc.v0, stage_cost=effort, terminal_constraints=term)
+        return OptimalControlProblem(sys, N, T=T, q0=sc.q0, v0=sc.v0, stage_cost=effort, terminal_constraints=term,
+                                     **NOSNOC_GRID)
 
     return Example(f"block_chain{K}", f"block chain (K = {K}) moved {d} m", sys, sc.q0, sc.v0, T, make, _effort,
                    _zero, 20, (20, 40, 80), common=lambda q, v: np.concatenate([q[0::2], v[0::2]]))
@@ -189,7 +196,7 @@ def block_chain7() -> Example:
         # N = 50: J_replay 10.957 against nosnoc's 10.934; from Radau's, 10.757)
         return OptimalControlProblem(sys, N, T=p["T"], q0=q0, v0=np.zeros(n), stage_cost=stage,
                                      terminal_cost=terminal_cost, path_constraints=box, integrator="radau",
-                                     stages=2)
+                                     stages=2, **NOSNOC_GRID)
 
     def integrand(t, qq, vv, uu):
         e = np.column_stack([qq[:, 0::2] - x_eq, vv[:, 0::2]])
@@ -235,7 +242,7 @@ def cart_pole(F_friction: float = 2.0, mu: float = 0.2, T: float = 5.0) -> Examp
     def make(N):
         return OptimalControlProblem(sys, N, T=T, q0=np.array([1.0, 0.0, 0.0]), v0=np.zeros(3), stage_cost=stage,
                                      terminal_cost=terminal_cost,
-                                     path_constraints=lambda s: ca.vertcat(s.q1[0] - 5.0, -5.0 - s.q1[0]))
+                                     path_constraints=lambda s: ca.vertcat(s.q1[0] - 5.0, -5.0 - s.q1[0]), **NOSNOC_GRID)
 
     def integrand(t, qq, vv, uu):
         e = np.column_stack([qq[:, 0], qq[:, 1], vv[:, 0], vv[:, 1]]) - x_ref
@@ -277,7 +284,7 @@ def motor(mu: float = 0.21) -> Example:
     def make(N):
         return OptimalControlProblem(sys, N, T=p["T"], q0=np.zeros(4), v0=np.zeros(4), stage_cost=effort,
                                      terminal_constraints=lambda q, v: ca.vertcat(q[0] - tg, q[1] - tg, v[0], v[1],
-                                                                                  v[2]))
+                                                                                  v[2]), **NOSNOC_GRID)
 
     return Example("motor", "linear motor with friction (nosnoc)", sys, np.zeros(4), np.zeros(4), p["T"], make,
                    _effort, _zero, 30, (30, 60, 120), common=lambda q, v: np.array([q[0], q[1], v[0], v[1], v[2]]))
@@ -325,7 +332,7 @@ def hopper(T: float = HOPPER["T"]) -> Example:
             sys, N, T=T, q0=q0, v0=np.zeros(4), stage_cost=stage, contact_law="gap",
             terminal_cost=lambda Tv, qq, vv: ca.mtimes([(ca.vertcat(qq, vv) - x_end).T, QT, ca.vertcat(qq, vv) - x_end]),
             path_constraints=lambda s: ca.vertcat(0.1 - s.q1[3], s.q1[3] - 0.5, -s.q1[0], s.q1[0] - p["x_goal"] - 0.1),
-            complementarity=[(lambda s: s.p_N / s.h, lambda s: vT(s.q1, s.v1) ** 2)])
+            complementarity=[(lambda s: s.p_N / s.h, lambda s: vT(s.q1, s.v1) ** 2)], **NOSNOC_GRID)
 
     def integrand(t, qq, vv, uu):
         e = np.column_stack([qq, vv]) - spline(t / T)
@@ -372,7 +379,7 @@ def two_discs() -> Example:
         return OptimalControlProblem(
             sys, N, T=p["T"], q0=q0, v0=np.zeros(4), stage_cost=stage,
             terminal_cost=lambda Tv, qq, vv: ca.mtimes([(ca.vertcat(qq, vv) - x_ref).T, QT,
-                                                        ca.vertcat(qq, vv) - x_ref]))
+                                                        ca.vertcat(qq, vv) - x_ref]), **NOSNOC_GRID)
 
     def integrand(t, qq, vv, uu):
         e = np.column_stack([qq, vv]) - x_ref
@@ -417,7 +424,7 @@ def box_tip(w: float = 0.2, hgt: float = 0.4, m: float = 1.0, mu: float = 0.8, T
 
     def make(N):
         return OptimalControlProblem(sys, N, T=T, q0=q0, v0=np.zeros(3), stage_cost=effort, contact_law="gap",
-                                     terminal_constraints=lambda qq, vv: ca.vertcat(qq[2] - q_end[2], vv))
+                                     terminal_constraints=lambda qq, vv: ca.vertcat(qq[2] - q_end[2], vv), **NOSNOC_GRID)
 
     return Example("box_tip", "box tipped over an edge", sys, q0, np.zeros(3), T, make, _effort, _zero, 20, (20, 40))
 
@@ -438,7 +445,7 @@ def ball_bounce(e: float = 0.5, u_max: float = 3.0, T: float = 0.6, target: floa
 
     def make(N):
         return OptimalControlProblem(sys, N, T=T, q0=q0, v0=np.zeros(2), stage_cost=effort,
-                                     terminal_constraints=lambda qq, vv: qq[1] - target)
+                                     terminal_constraints=lambda qq, vv: qq[1] - target, **NOSNOC_GRID)
 
     return Example("ball_bounce", f"ball bounced to {target} m (e = {e})", sys, q0, np.zeros(2), T, make, _effort,
                    _zero, 12, (12, 24))

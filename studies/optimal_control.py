@@ -192,8 +192,8 @@ def controlled_block(R=REST["R"], u_max=REST["u_max"], v0=0.0):
     return sc, add_control(sc.system, tangential_push(sc.system), -u_max, u_max)
 
 
-def rest_to_rest_problem(N: int, objective: str = "time", hold: str = "constant",
-                         steps: str = "uniform", contact_law: str | None = None) -> OptimalControlProblem:
+def rest_to_rest_problem(N: int, objective: str = "time", hold: str = "auto",
+                         steps: str = "auto", contact_law: str | None = None) -> OptimalControlProblem:
     """Problem 1 on N control intervals, ``objective`` "time" (T free) or "effort" (T = 1 s);
     ``contact_law`` None is the package's default (the study passes :data:`CONTACT_LAW`)."""
     sc, system = controlled_block()
@@ -209,11 +209,11 @@ def rest_to_rest_problem(N: int, objective: str = "time", hold: str = "constant"
     raise ValueError(f"objective must be 'time' or 'effort', got {objective!r}")
 
 
-def hold_problem(N: int, hold: str = "constant", steps: str = "uniform",
+def hold_problem(N: int, hold: str = "auto", steps: str = "auto",
                  contact_law: str | None = None) -> OptimalControlProblem:
     """Problem 2 on N intervals: with uniform steps N a multiple of 6 (the hold's ends are nodes of
-    the uniform grid); with free steps any N >= 6, nodes round(N t_a / T) and round(N t_b / T) pinned
-    at t_a and t_b."""
+    the uniform grid); with free steps (and "auto", the package's default, which the pins make free)
+    any N >= 6, nodes round(N t_a / T) and round(N t_b / T) pinned at t_a and t_b."""
     if steps == "uniform" and N % 6:
         raise ValueError(f"N must be a multiple of 6 with uniform steps (the hold's ends are nodes), got {N}")
     if not isinstance(N, int) or N < 6:
@@ -228,7 +228,7 @@ def hold_problem(N: int, hold: str = "constant", steps: str = "uniform",
         return ca.SX.zeros(0, 1)
 
     return OptimalControlProblem(system, N, q0=sc.q0, v0=sc.v0, T=T, stage_cost=effort, hold=hold, steps=steps,
-                                 node_times={k_a: t_a, k_b: t_b} if steps == "free" else None,
+                                 node_times={k_a: t_a, k_b: t_b} if steps != "uniform" else None,
                                  path_equalities=at_rest_on_hold, replay_tol=REPLAY_TOL, contact_law=contact_law,
                                  terminal_constraints=lambda q, v: ca.vertcat(q[0], v[0]))
 
@@ -238,7 +238,8 @@ def shock_problem(N: int, R: float = SHOCK["R"], contact_law: str | None = None)
     sc, system = controlled_block(R, SHOCK["u_max"], SHOCK["v0"])
     return OptimalControlProblem(system, N, q0=sc.q0, v0=sc.v0, T=SHOCK["T"], max_cost=lambda s: s.N[0],
                                  terminal_constraints=lambda q, v: v[0], replay_tol=REPLAY_TOL,
-                                 control_rate_weight=SHOCK["rate_weight"], contact_law=contact_law)
+                                 control_rate_weight=SHOCK["rate_weight"], contact_law=contact_law,
+                                 hold="constant", steps="uniform")
 
 
 def hold_violation(res, rp) -> float:
@@ -654,7 +655,8 @@ def run(out=None, quick: bool = False) -> dict:
             keep[("shock", "uniform, constant hold")] = v
     # multi-start on the hold problem, uniform steps (the default guesses: u held at u_min, 0,
     # mid-range, u_max)
-    ms = solve_and_verify(hold_problem(N_fig_hold, contact_law=CONTACT_LAW), h_fine, multistart=True)["result"]
+    ms = solve_and_verify(hold_problem(N_fig_hold, "constant", "uniform", contact_law=CONTACT_LAW), h_fine,
+                          multistart=True)["result"]
     files = []
     cols = list(rows[0].keys())
     files.append(write_csv(path / "convergence.csv", cols, [[r[c] for c in cols] for r in rows]))

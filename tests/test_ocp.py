@@ -53,8 +53,10 @@ def j_star(R=R_REST, d=D_TARGET):
 
 def rest_problem(N, objective="time", coordinates="reduced", **kw):
     sc = lcp.scenes.jean_pratt(R=R_REST, v0=0.0, coordinates=coordinates)
-    common = dict(control_matrix=tangential_push(sc.system), u_min=-U_MAX, u_max=U_MAX,
-                  terminal_constraints=lambda q, v: ca.vertcat(q[0] - D_TARGET, v[0]))
+    # the uniform theta transcription with the constant hold (the subject of these tests; the
+    # package's default for this system is free steps with the affine hold: test_ocp_gap_default)
+    common = dict(control_matrix=tangential_push(sc.system), u_min=-U_MAX, u_max=U_MAX, hold="constant",
+                  steps="uniform", terminal_constraints=lambda q, v: ca.vertcat(q[0] - D_TARGET, v[0]))
     common.update(kw)
     if objective == "time":
         return OptimalControlProblem(sc, N, T=1.0, free_time=True, T_bounds=(0.05, 5.0),
@@ -66,7 +68,7 @@ def shock_problem(N, R=1.9, T=0.2):
     sc = lcp.scenes.jean_pratt(R=R, v0=1.0)
     return OptimalControlProblem(sc, N, control_matrix=tangential_push(sc.system), u_min=-39.0, u_max=39.0,
                                  T=T, max_cost=lambda s: s.N[0], terminal_constraints=lambda q, v: v[0],
-                                 control_rate_weight=1e-6)
+                                 control_rate_weight=1e-6, hold="constant", steps="uniform")
 
 
 @pytest.fixture(scope="module")
@@ -226,7 +228,7 @@ def test_shock_avoidance_peak():
 def test_two_contacts_block_chain():
     sc = lcp.scenes.block_chain(2, v0=[0.0, 0.0], k_spring=50.0, mu=0.3, damping=2.0)
     ocp = OptimalControlProblem(sc, 20, control_matrix=tangential_push(sc.system, 0), u_min=-15, u_max=15,
-                                T=2.0, stage_cost=effort, replay_tol=0.05,
+                                T=2.0, stage_cost=effort, replay_tol=0.05, hold="constant", steps="uniform",
                                 terminal_constraints=lambda q, v: ca.vertcat(q[0] - 0.3, q[2] - 1.3, v[0], v[2]))
     res = ocp.solve()
     assert res.success and res.complementarity_residual <= 1e-8
@@ -373,7 +375,7 @@ def test_piecewise_constant_replay_integrates_the_impulse_exactly():
 def test_ocp_takes_the_system_control():
     sc, s = _controlled_jean_pratt()
     ocp = OptimalControlProblem(s, 10, q0=sc.q0, v0=sc.v0, T=1.0, free_time=True, T_bounds=(0.05, 5.0),
-                                terminal_cost=lambda T, q, v: T,
+                                terminal_cost=lambda T, q, v: T, hold="constant", steps="uniform",
                                 terminal_constraints=lambda q, v: ca.vertcat(q[0] - D_TARGET, v[0]))
     res = ocp.solve()
     assert ocp.system is s and res.success

@@ -29,7 +29,9 @@ def point_on_curve(kind, N, replay_tol=1e-2):
         gap, q0, xT = ca.sqrt(q[0] ** 2 + (q[1] + 1) ** 2) - 1.0, np.array([-0.3, np.sqrt(0.91) - 1]), 0.3
     sys = System(q, v, ca.SX.eye(2), ca.vertcat(u[0], -G), contacts=[Contact(gap=gap, tangent=q[0], mu=0.0)],
                  control=u, control_bounds=(np.array([-30.0]), np.array([30.0])), names=["x", "y"])
+    # uniform steps, constant hold: the curved-gap theta step's own order (the default grid is free)
     return OptimalControlProblem(sys, N, T=1.0, q0=q0, v0=np.zeros(2), stage_cost=effort, replay_tol=replay_tol,
+                                 hold="constant", steps="uniform",
                                  terminal_constraints=lambda qq, vv: ca.vertcat(qq[0] - xT, vv, qq[1] - q0[1] - (
                                      xT ** 2 / 2 if kind == "bowl" else 0.0)))
 
@@ -84,7 +86,7 @@ def test_landing_on_a_curved_floor_meets_newton_and_coulomb():
                                                                           mu=0.5)],
                  control=u, control_bounds=(np.array([-30.0]), np.array([30.0])), names=["x", "y"])
     pb = OptimalControlProblem(sys, 20, T=1.0, q0=np.array([0.6, 0.4]), v0=np.zeros(2), stage_cost=effort,
-                               replay_tol=1e-2, terminal_constraints=lambda qq, vv: ca.vertcat(qq[0], vv))
+                               replay_tol=1e-2, terminal_constraints=lambda qq, vv: ca.vertcat(qq[0], vv), steps="uniform", hold="constant")
     r = pb.solve()
     assert r.status == 0, r.message
     assert r.complementarity_residual <= 1e-8

@@ -39,7 +39,7 @@ def block(N=10, mu=0.5, umax=20.0, lo=None, target=1.0):
     sys = lcp.System(q, v, ca.DM.eye(2), ca.vertcat(u[0], -G),
                      contacts=[lcp.Contact(gap=q[1], tangent=q[0], mu=mu, name="floor")],
                      control=u, control_bounds=([-umax if lo is None else lo], [umax]))
-    return OptimalControlProblem(sys, N, T=1.0, q0=[0.0, 0.0], v0=[0.0, 0.0], contact_law="gap",
+    return OptimalControlProblem(sys, N, T=1.0, q0=[0.0, 0.0], v0=[0.0, 0.0], contact_law="gap", hold="constant", steps="uniform",
                                  stage_cost=lambda s: 0.01 * s.u0[0] ** 2,
                                  terminal_cost=lambda T, q, v: 10 * (q[0] - target) ** 2 + v[0] ** 2)
 
@@ -90,7 +90,7 @@ def _pushed_to_one_metre():
     sys = lcp.System(q, v, ca.DM.eye(2), ca.vertcat(u[0], -G),
                      contacts=[lcp.Contact(gap=q[1], tangent=q[0], mu=0.5, name="floor")],
                      control=u, control_bounds=([-20.0], [20.0]))
-    return OptimalControlProblem(sys, 10, T=1.0, q0=[0.0, 0.0], v0=[0.0, 0.0], contact_law="gap",
+    return OptimalControlProblem(sys, 10, T=1.0, q0=[0.0, 0.0], v0=[0.0, 0.0], contact_law="gap", hold="constant", steps="uniform",
                                  stage_cost=lambda s: s.u0[0] ** 2,
                                  terminal_constraints=lambda q, v: ca.vertcat(q[0] - 1.0, v[0]))
 
@@ -129,7 +129,7 @@ def test_the_screened_pulse_meets_the_terminal_constraints_at_the_lowest_cost():
     def term(q, v):
         return ca.vertcat(v[0])
 
-    pb = OptimalControlProblem(sys, 10, T=1.0, q0=[0.0, 0.0], v0=[0.0, 0.0], contact_law="gap",
+    pb = OptimalControlProblem(sys, 10, T=1.0, q0=[0.0, 0.0], v0=[0.0, 0.0], contact_law="gap", hold="constant", steps="uniform",
                                stage_cost=lambda s: s.u0[0] ** 2, terminal_constraints=term)
     a, f, gs = screened_start(pb)
     viol = {}

@@ -34,7 +34,8 @@ def mass_on_floor(mu):
 
 def push(mu, N, **kw):
     return OptimalControlProblem(mass_on_floor(mu), N, T=T, q0=[0.0, 0.0], v0=[0.0, 0.0], stage_cost=effort,
-                                 terminal_constraints=lambda q, v: ca.vertcat(q[0] - D, v[0]), **kw)
+                                 terminal_constraints=lambda q, v: ca.vertcat(q[0] - D, v[0]),
+                                 **{"hold": "constant", "steps": "uniform", **kw})
 
 
 def test_the_objective_converges_at_order_two_on_a_frictionless_floor():

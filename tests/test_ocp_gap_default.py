@@ -17,7 +17,7 @@ from lcp.ocp import HomotopyOptions, OptimalControlProblem, effort
 from studies import optimal_control as so
 
 
-def hold_window_problem(N, t_a, t_b, T, d=0.3, hold="affine", steps="free"):
+def hold_window_problem(N, t_a, t_b, T, d=0.3, hold="auto", steps="auto"):
     """Move d, hold still at rest on [t_a, t_b], back to rest at 0 by T (nodes round(N t / T) pinned)."""
     sc, system = so.controlled_block()
     k_a, k_b = round(N * t_a / T), round(N * t_b / T)
@@ -53,7 +53,7 @@ def test_the_default_is_the_gap_law_and_a_small_first_relaxation():
 def test_uniform_steps_do_not_hover():
     # the homotopy from the defaults on uniform steps: the block stays on its floor; T within the
     # uniform grid's error of T* (the switch falls inside a step)
-    r = so.rest_to_rest_problem(12, "time").solve()
+    r = so.rest_to_rest_problem(12, "time", "constant", "uniform").solve()
     assert r.success, r.message
     assert np.max(np.abs(r.q[:, 1])) <= 1e-9
     assert so.min_time_bound() <= r.T <= so.min_time_bound() * 1.01
@@ -81,15 +81,55 @@ def test_hold_on_any_window(N, window, T):
 
 
 @pytest.mark.slow
-def test_the_three_problems_at_N40():
-    r = so.rest_to_rest_problem(40, "time", "constant", "free").solve()
-    _check(r, r.T, so.min_time_bound(), 1e-6)
-    r = so.rest_to_rest_problem(40, "effort", "affine", "free").solve()
-    _check(r, r.cost, so.min_effort_bound(), 1e-4)
-    r = so.hold_problem(40, "affine", "free").solve()
-    _check(r, r.cost, so.hold_bound(), 1e-4)
-    r = hold_window_problem(52, 0.5, 0.7, 1.3).solve()
-    _check(r, r.cost, hold_reference(0.5, 0.7, 1.3), 1e-4)
+@pytest.mark.parametrize("N, window, T", [(40, (0.5, 0.7), 1.3), (40, (0.45, 0.7), 1.2), (40, (0.38, 0.62), 1.1)])
+def test_the_three_problems_at_N40(N, window, T):
+    # every setting the package's default: free steps and the affine hold (the pins make the hold's
+    # steps free), method "auto"
+    if window == (0.5, 0.7):
+        r = so.rest_to_rest_problem(40, "time").solve()
+        assert (r.problem.hold, r.problem.steps) == ("affine", "free")
+        _check(r, r.T, so.min_time_bound(), 1e-6)
+        r = so.rest_to_rest_problem(40, "effort").solve()
+        _check(r, r.cost, so.min_effort_bound(), 1e-4)
+        r = so.hold_problem(40).solve()
+        _check(r, r.cost, so.hold_bound(), 1e-4)
+    r = hold_window_problem(N, *window, T).solve()
+    _check(r, r.cost, hold_reference(*window, T), 1e-4)
+
+
+def _block_problem(**kw):
+    sc, system = so.controlled_block()
+    return OptimalControlProblem(system, 8, q0=sc.q0, v0=sc.v0, **{"stage_cost": effort, **kw})
+
+
+def test_the_default_grid_is_free_steps_with_the_affine_hold():
+    pb = _block_problem()
+    assert (pb.hold, pb.steps) == ("affine", "free")
+    # given one of the two, the other follows it
+    assert (_block_problem(steps="uniform").hold, _block_problem(hold="constant").steps) == ("constant", "free")
+    assert _block_problem(theta=1.0).hold == "constant"  # the affine hold's position update is theta = 1/2
+
+
+def test_a_step_indexed_callable_keeps_uniform_steps_unless_pinned():
+    # a window by step index would move in time on free steps: uniform, unless node_times pin it
+    def window(s):
+        return s.q1[0] - 0.1 if 3 <= s.k < 5 else ca.SX.zeros(0, 1)
+
+    assert (_block_problem(path_equalities=window).steps, _block_problem(path_equalities=window).hold) == \
+        ("uniform", "constant")
+    assert _block_problem(path_equalities=window, node_times={3: 0.3, 5: 0.6}).steps == "free"
+    ref = np.linspace(0.0, 0.2, 8)  # a reference sampled per step
+    assert _block_problem(stage_cost=lambda s: (s.q1[0] - ref[s.k]) ** 2).steps == "uniform"
+    # a time-dependent term is not step-indexed: t0 and h are the step's own (variables on free steps)
+    assert _block_problem(stage_cost=lambda s: (s.q1[0] - s.t1) ** 2 + 0 * s.k).steps == "free"
+    assert _block_problem(path_constraints=lambda s: s.q1[0] - 1.0).steps == "free"
+
+
+def test_systems_without_planar_contacts_keep_uniform_steps():
+    q, v, u = ca.SX.sym("q"), ca.SX.sym("v"), ca.SX.sym("u")
+    free_mass = lcp.System(q, v, ca.SX(1.0), ca.SX(0.0), control=u)
+    pb = OptimalControlProblem(free_mass, 6, q0=[0.0], v0=[0.0], stage_cost=effort)
+    assert (pb.hold, pb.steps) == ("constant", "uniform")
 
 
 def test_the_gap_law_lifts_off_when_asked():

@@ -33,7 +33,7 @@ def ball(e=0.5, umax=3.0):
 def bounce(N=12, target=None, y0=1.0, T=0.6):
     term = None if target is None else (lambda q, v: q[1] - target)
     return OptimalControlProblem(ball(), N, T=T, q0=[0.0, y0], v0=[0.0, 0.0], stage_cost=effort,
-                                 terminal_constraints=term)
+                                 terminal_constraints=term, steps="uniform", hold="constant")
 
 
 def test_the_moreau_jean_guess_penetrates_and_the_event_guess_does_not():
@@ -124,7 +124,7 @@ def test_a_failure_from_both_starts_names_both_and_where():
 
 def test_the_velocity_law_has_one_start():
     pb = OptimalControlProblem(ball(), 6, T=0.6, q0=[0.0, 0.0], v0=[0.0, 0.0], stage_cost=effort,
-                               contact_law="velocity")
+                               contact_law="velocity", steps="uniform", hold="constant")
     assert [s[0] for s in ocp_solve.default_starts(pb)] == [ocp_solve.MJ_START]
     labels = [s[0] for s in ocp_solve.default_starts(bounce())]
     assert labels == [ocp_solve.MJ_START, ocp_solve.EVENT_START, ocp_solve.EVENT_START + " from sigma0 = 1"]

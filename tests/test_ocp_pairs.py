@@ -10,7 +10,8 @@ from lcp.ocp import OptimalControlProblem, effort, tangential_push
 def _kw():
     sc = lcp.scenes.jean_pratt(v0=0.0)
     return sc, {"control_matrix": tangential_push(sc.system), "u_min": -20, "u_max": 20, "T": 1.0,
-                "stage_cost": effort, "terminal_constraints": lambda q, v: ca.vertcat(q[0] - 0.5, v[0])}
+                "stage_cost": effort, "terminal_constraints": lambda q, v: ca.vertcat(q[0] - 0.5, v[0]),
+                "hold": "constant", "steps": "uniform"}
 
 
 def test_pair_window_equals_the_equalities_it_implies():

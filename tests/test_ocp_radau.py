@@ -132,7 +132,7 @@ def test_fixed_phase_solve_succeeds_on_the_minimum_time_block():
     from studies import optimal_control as so
     sc, system = so.controlled_block()
     pb = OptimalControlProblem(system, 12, q0=sc.q0, v0=sc.v0, T=0.5, free_time=True, T_bounds=(0.05, 5.0),
-                               steps="free", integrator="radau", stages=2, replay_tol=1e-6,
+                               steps="free", hold="constant", integrator="radau", stages=2, replay_tol=1e-6,
                                terminal_cost=lambda T, q, v: T,
                                terminal_constraints=lambda q, v: ca.vertcat(q[0] - 0.5, v[0]))
     r = pb.solve()

@@ -67,7 +67,7 @@ def _pushed_block(mu=0.3, T=1.0, N=6):
                      contacts=[lcp.Contact(gap=q[1], tangent=q[0], mu=mu)], control=u,
                      control_bounds=(np.array([-20.0]), np.array([20.0])))
     return OptimalControlProblem(sys, N, T=T, q0=np.zeros(2), v0=np.zeros(2), stage_cost=effort,
-                                 terminal_constraints=lambda qq, vv: ca.vertcat(qq[0] - 0.2, vv[0]))
+                                 terminal_constraints=lambda qq, vv: ca.vertcat(qq[0] - 0.2, vv[0]), steps="uniform", hold="constant")
 
 
 def test_switch_inside_a_uniform_step():
@@ -87,7 +87,7 @@ def test_exact_transcription_is_left_alone():
     sc = lcp.scenes.jean_pratt(v0=0.0)
     pb = OptimalControlProblem(sc, 4, control_matrix=tangential_push(sc.system), u_min=-20, u_max=20, T=0.5,
                                free_time=True, T_bounds=(0.05, 2.0), steps="free", terminal_cost=lambda T, q, v: T,
-                               terminal_constraints=lambda q, v: ca.vertcat(q[0] - 0.2, v[0]))
+                               terminal_constraints=lambda q, v: ca.vertcat(q[0] - 0.2, v[0]), hold="constant")
     res = pb.solve()
     assert res.success and "shooting" not in res.message
 
@@ -97,7 +97,7 @@ def test_refusals_name_what_is_not_modelled():
     sc = lcp.scenes.jean_pratt(v0=0.0)
     from lcp.ocp import tangential_push
     pb = OptimalControlProblem(sc, 4, control_matrix=tangential_push(sc.system), u_min=-20, u_max=20, T=0.5,
-                               complementarity=[(lambda s: s.u0[0] + 20, lambda s: 20 - s.u0[0])])
+                               complementarity=[(lambda s: s.u0[0] + 20, lambda s: 20 - s.u0[0])], steps="uniform", hold="constant")
     with pytest.raises(ValueError, match="zeros"):
         PhaseShooting(pb, [[((STICK,), 0.125)]] * 4)
     with pytest.raises(NotShootable, match="spatial"):

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import casadi as ca
 import numpy as np
 
 from lcp.model.control import HOLDS, ControlSchedule
@@ -13,7 +14,7 @@ from lcp.ocp.model import add_control
 from lcp.ocp.options import HomotopyOptions, positive
 from lcp.ocp.pairs import check_pairs
 from lcp.ocp.results import OCPGuess, OCPResult, Step
-from lcp.ocp.solve import first_pass, solve_problem
+from lcp.ocp.solve import first_pass, solve_defaults
 from lcp.ocp.spatial import check_spatial
 from lcp.model.schedule import AffineSchedule
 
@@ -57,24 +58,24 @@ class OptimalControlProblem:
         Initial state (the scene's by default).
     theta : float
         Theta of the Moreau-Jean step, in [1/2, 1].
-    hold : {"constant", "linear", "affine"}
-        The control between nodes: piecewise constant (one value per step, the default), piecewise
-        linear and continuous (one value per node), or affine on each step and free to jump at the
-        nodes (a start and an end value per step, :class:`~lcp.model.schedule.AffineSchedule`). The
+    hold : {"auto", "constant", "linear", "affine"}
+        The control between nodes: piecewise constant (one value per step), piecewise linear and
+        continuous (one value per node), or affine on each step and free to jump at the nodes (a
+        start and an end value per step, :class:`~lcp.model.schedule.AffineSchedule`). The
         control's impulse is integrated exactly by every hold; the affine hold also corrects the
         trapezoidal position update for forces affine in t (theta = 1/2 only), so that with free
         steps a smooth optimal control within a contact phase is represented and integrated
-        exactly (:mod:`lcp.ocp.transcription`).
-    steps : {"uniform", "free"}
+        exactly (:mod:`lcp.ocp.transcription`). ``"auto"``: affine with free steps where modelled.
+    steps : {"auto", "uniform", "free"}
         Uniform steps T / N, or step lengths as unknowns (within ``step_bounds`` times T / N) with
-        the cross complementarity that puts every switch on a node (module
-        :mod:`lcp.ocp.transcription`).
+        the cross complementarity that puts every switch on a node (:mod:`lcp.ocp.transcription`).
+        ``"auto"``: free for planar contacts unless a step callable reads the step index ``k``
+        with no ``node_times`` pinning the grid (:func:`step_indexed`); a failed solve on them is
+        repeated on uniform steps (:func:`lcp.ocp.solve.solve_defaults`).
     step_bounds : (float, float)
-        Bounds of a free step, relative to T / N. A phase that the first pass found but the
-        optimum lacks can only shrink to the lower bound (the move-and-hold problem on
-        [0.5, 0.7] s, T = 1.3 s, ends 4.7e-4 above its optimum at N = 40, exact at N = 52). A
-        smaller lower bound (1e-3) lets such steps shrink further but lets short steps carry
-        large forces: solutions the replay refuses (misses of 0.3 m measured), so 0.05 stays.
+        Bounds of a free step, relative to T / N. A step of a phase the optimum lacks shrinks to
+        the lower bound and is then merged into a neighbour's phase; a lower bound of 1e-3 let
+        short steps carry large forces the replay refused (misses of 0.3 m), so 0.05 stays.
     node_times : dict {k: t}, optional
         Pin node k at time t (free steps; e.g. the ends of a time window of a path constraint).
     stage_cost : callable(Step) -> scalar, optional
@@ -97,12 +98,11 @@ class OptimalControlProblem:
         ``success`` requires the replay miss (:attr:`OCPResult.replay`) within it; None skips the
         replay.
     contact_law : {"auto", "gap", "velocity"}
-        ``"gap"``: complementarity on the gap, 0 <= g(q_{k+1}) perp N_k >= 0, the force only where
-        the gap is closed at both ends of the step, with impulses at the nodes (Newton's law and
-        Coulomb's, as the event method's impacts): a contact can open, fly and close; the default
-        (None) for planar contacts. ``"velocity"``: Moreau-Jean's law on every contact at every step
-        (each stays closed); the default for spatial contacts (:mod:`lcp.ocp.spatial` models no
-        other). ``"auto"``: the gap law when a contact starts open, else the velocity law.
+        ``"gap"`` (the default, None, for planar contacts): 0 <= g(q_{k+1}) perp N_k >= 0, a force
+        only where the gap is closed at both ends of the step, impulses at the nodes under the event
+        method's impact law: a contact can open, fly and close. ``"velocity"`` (the default for
+        spatial contacts): Moreau-Jean's law on every contact at every step (each stays closed).
+        ``"auto"``: the gap law when a contact starts open, else the velocity law.
     complementarity : list of (callable(Step), callable(Step)), optional
         Path pairs 0 <= a(step) perp b(step) >= 0 at every step, relaxed with the contacts (:mod:`lcp.ocp.pairs`).
     integrator : {"theta", "radau"}
@@ -115,13 +115,13 @@ class OptimalControlProblem:
     Examples
     --------
     Push the Jean-Pratt block (friction 0.5) from rest to rest 0.2 m further in minimum time with
-    |u| <= 20 N (bang-bang; the continuous optimum is 0.281085 s), switches off the grid:
+    |u| <= 20 N (bang-bang; the continuous optimum is 0.281085 s), on the default free steps:
 
     >>> import casadi as ca, lcp
     >>> from lcp.ocp import OptimalControlProblem, tangential_push
     >>> sc = lcp.scenes.jean_pratt(v0=0.0)
     >>> ocp = OptimalControlProblem(sc, 4, control_matrix=tangential_push(sc.system), u_min=-20,
-    ...                             u_max=20, T=0.5, free_time=True, T_bounds=(0.05, 2.0), steps="free",
+    ...                             u_max=20, T=0.5, free_time=True, T_bounds=(0.05, 2.0),
     ...                             terminal_cost=lambda T, q, v: T,
     ...                             terminal_constraints=lambda q, v: ca.vertcat(q[0] - 0.2, v[0]))
     >>> res = ocp.solve()
@@ -131,7 +131,7 @@ class OptimalControlProblem:
 
     def __init__(self, system, N: int, *, control_matrix=None, u_min=None, u_max=None, T: float = 1.0,
                  free_time: bool = False, T_bounds=(1e-3, 1e3), q0=None, v0=None, theta: float = 0.5,
-                 hold: str = "constant", steps: str = "uniform", step_bounds=(0.05, 4.0), node_times=None,
+                 hold: str = "auto", steps: str = "auto", step_bounds=(0.05, 4.0), node_times=None,
                  stage_cost: Callable | None = None, terminal_cost: Callable | None = None,
                  terminal_constraints: Callable | None = None, path_constraints: Callable | None = None,
                  path_equalities: Callable | None = None, max_cost: Callable | None = None, control_rate_weight: float = 0.0,
@@ -176,15 +176,20 @@ class OptimalControlProblem:
         self.T_bounds = _pair("T_bounds", T_bounds)
         if self.free_time and not self.T_bounds[0] <= self.T <= self.T_bounds[1]:
             raise ValueError(f"T (the initial guess) must lie within T_bounds {T_bounds!r}, got {T!r}")
-        self.hold, self.steps, self.step_bounds = _grid(system, self.theta, hold, steps, step_bounds)
-        check_spatial(system, self.contact_law, self.hold, self.steps)  # what lcp.ocp.spatial models
-        self.node_times = _check_node_times(self, node_times)
         for name, fn in (("stage_cost", stage_cost), ("terminal_cost", terminal_cost),
                          ("terminal_constraints", terminal_constraints),
                          ("path_constraints", path_constraints), ("path_equalities", path_equalities),
                          ("max_cost", max_cost)):
             if fn is not None and not callable(fn):
                 raise ValueError(f"{name} must be callable or None")
+        # grid_fallback: free steps chosen by steps="auto" (a failed solve is repeated on uniform ones)
+        self.hold, self.steps, self.step_bounds, self.grid_fallback = _grid(
+            system, self.theta, hold, steps, step_bounds, node_times is None and step_indexed(
+                system, self.N, self.nu, (stage_cost, path_constraints, path_equalities, max_cost,
+                                          *[f for pair in check_pairs(complementarity) for f in pair])))
+        self.hold_auto = hold == "auto"
+        check_spatial(system, self.contact_law, self.hold, self.steps)  # what lcp.ocp.spatial models
+        self.node_times = _check_node_times(self, node_times)
         self.stage_cost, self.terminal_cost = stage_cost, terminal_cost
         self.terminal_constraints, self.path_constraints = terminal_constraints, path_constraints
         self.path_equalities = path_equalities
@@ -250,15 +255,10 @@ class OptimalControlProblem:
             ``"auto"`` (default): ``"phases"`` with free steps, a contact and no guess, else
             ``"homotopy"``. ``"homotopy"``: the Scholtes relaxation homotopy and the polishing solve
             (:mod:`lcp.ocp.complementarity`). ``"phases"``: keep the guess's phase structure (the
-            mode of every step: which member of each complementarity pair is zero) and solve the
-            one smooth NLP that remains; with ``steps="free"`` the step lengths, hence the switch
-            times, stay free. From a solution with the right mode sequence (e.g. a uniform-step
-            solve resampled onto this grid) it reaches the optimum of that sequence in one solve,
-            tens of IPOPT iterations instead of hundreds. If it fails (IPOPT, or a sequence the
-            problem cannot keep), the homotopy runs instead and ``message`` says so: from the
-            fixed-phase iterate with sigma0 <= 1e-4 when that iterate already satisfies the dynamics
-            and the Coulomb law (IPOPT stopped on a degenerate but nearly optimal point), else from
-            the guess with ``options``.
+            mode of every step) and solve the one smooth NLP that remains, the step lengths free
+            with ``steps="free"``: from the right mode sequence, the optimum of that sequence in
+            tens of IPOPT iterations. If it fails, the homotopy runs instead, and ``message`` says
+            so (:func:`lcp.ocp.complementarity.run_phases`).
         shooting : bool
             When the solve fails (its replay, the homotopy or IPOPT), solve again on the phases of
             the event replay of its control, each integrated exactly (:mod:`lcp.ocp.shooting`);
@@ -269,9 +269,8 @@ class OptimalControlProblem:
 
         Examples
         --------
-        Minimum effort from rest to rest over 0.5 m in 1 s (continuous optimum 86.905749 N^2 s): a
-        uniform-step solve gives the phases (stick, slide, stick), the fixed-phase solve with free
-        steps and the affine hold the exact optimum.
+        Minimum effort from rest to rest over 0.5 m in 1 s (continuous optimum 86.905749 N^2 s): the
+        phases (stick, slide, stick) of a first pass, placed exactly by the fixed-phase solve.
 
         >>> import casadi as ca, lcp
         >>> from lcp.ocp import OptimalControlProblem, effort, tangential_push
@@ -285,11 +284,12 @@ class OptimalControlProblem:
         """
         if not isinstance(shooting, bool):
             raise ValueError(f"shooting must be True or False, got {shooting!r}")
-        return solve_problem(self, guess, options, method, option_kw, shooting)
+        return solve_defaults(self, guess, options, method, option_kw, shooting)
 
-    def phase_guess(self, options: HomotopyOptions | None = None) -> OCPResult:
+    def phase_guess(self, options: HomotopyOptions | None = None, hold: str = "constant") -> OCPResult:
         """The phase sequence of a first pass: this problem on uniform steps with the constant hold
-        (same N, costs and constraints), solved by the homotopy to a loose tolerance, not replayed.
+        (or ``hold``), same N, costs and constraints, solved by the homotopy to a loose tolerance,
+        not replayed.
 
         It is the default guess of ``solve(method="phases")``: uniform steps relax quickly, and
         their modes give the sequence of phases that the free-step solve then places exactly. The
@@ -300,8 +300,10 @@ class OptimalControlProblem:
         ----------
         options : HomotopyOptions, optional
             Default: ``tol=1e-4, factor=1e-2`` (the modes, not the optimum, are wanted).
+        hold : {"constant", "affine"}
+            The first pass's hold (``solve()`` also tries "affine" for an affine problem).
         """
-        return first_pass(self, options)
+        return first_pass(self, options, hold)
 
     def solve_multistart(self, guesses=None, options: HomotopyOptions | None = None, rtol: float = 1e-6,
                          **option_kw) -> OCPResult:
@@ -319,9 +321,8 @@ class OptimalControlProblem:
         Returns
         -------
         OCPResult
-            The successful solve of lowest cost; ``starts`` lists every start (label, cost, status)
-            and ``message`` says how many distinct optima were reached. Each is a local solution of
-            the MPCC: different optima mean the answer is the best found, not a proven global one.
+            The successful solve of lowest cost; ``starts`` lists every start (label, cost, status),
+            ``message`` how many distinct (local) optima were reached: the best found, not proven.
         """
         return multistart(self, guesses, options, rtol, **option_kw)
 
@@ -384,8 +385,18 @@ def _contact_law(system, q0, contact_law: str) -> str:
     return contact_law
 
 
-def _grid(system, theta: float, hold: str, steps: str, step_bounds) -> tuple[str, str, tuple[float, float]]:
-    """The checked control hold, step kind and step-length bounds of the transcription."""
+def _grid(system, theta: float, hold: str, steps: str, step_bounds,
+          indexed: bool = False) -> tuple[str, str, tuple[float, float], bool]:
+    """The checked control hold, step kind and step-length bounds of the transcription, "auto"
+    resolved: free steps for planar contacts unless the user's step terms are indexed by k
+    (``indexed``), and with free steps the affine hold where the transcription models it; and
+    whether "auto" chose free steps."""
+    chose_free = steps == "auto" and system.n_contacts and not system.is_spatial and not indexed
+    if steps == "auto":
+        steps = "free" if system.n_contacts and not system.is_spatial and not indexed else "uniform"
+    if hold == "auto":
+        affine = steps == "free" and theta == 0.5 and not system.n_bilateral and not system.is_spatial
+        hold = "affine" if affine else "constant"
     if hold not in OCP_HOLDS:
         raise ValueError(f"hold must be one of {OCP_HOLDS}, got {hold!r}")
     if hold == "affine" and theta != 0.5:
@@ -399,7 +410,33 @@ def _grid(system, theta: float, hold: str, steps: str, step_bounds) -> tuple[str
     bounds = _pair("step_bounds", step_bounds)
     if not bounds[0] <= 1.0 <= bounds[1]:
         raise ValueError(f"step_bounds must contain 1 (the uniform step), got {step_bounds!r}")
-    return hold, steps, bounds
+    return hold, steps, bounds, bool(chose_free)
+
+
+def step_indexed(system, N: int, nu: int, callables) -> bool:
+    """Whether a user's step callable (cost, constraint, pair member) takes another value at some
+    step index k than at k = 0, all else equal: the callable then reads the grid by its index (a
+    window ``8 <= s.k < 12``, a reference sampled per step), which free steps would move in time
+    unless ``node_times`` pins it. Evaluated at one generic point (fixed pseudo-random values)."""
+    fns = [f for f in callables if f is not None]
+    if not fns or N < 2:
+        return False
+    n, m = system.n, system.n_contacts
+    sym = [ca.SX.sym(nm, d) for nm, d in (("t0", 1), ("h", 1), ("q0", n), ("q1", n), ("v0", n), ("v1", n),
+                                          ("u0", nu), ("u1", nu), ("pN", m), ("pT", m))]
+    t0, h = sym[0], sym[1]
+    point = np.random.default_rng(7).uniform(0.1, 0.9, sum(s.shape[0] for s in sym))
+    for fn in fns:
+        first = None
+        for k in range(N):
+            out = ca.SX(fn(Step(k, t0, t0 + h, h, *sym[2:])))
+            val = (out.shape, np.array(ca.Function("probe", sym, [out])(*np.split(point, np.cumsum(
+                [s.shape[0] for s in sym])[:-1]))) if out.numel() else np.zeros(0))
+            if first is None:
+                first = val
+            elif val[0] != first[0] or not np.allclose(val[1], first[1], rtol=1e-13, atol=0.0, equal_nan=True):
+                return True
+    return False
 
 
 def _pair(name, value) -> tuple[float, float]:

@@ -182,7 +182,7 @@ def replay(result: OCPResult, refine: int = 10, method: str = "moreau-jean", sol
     --------
     >>> import lcp
     >>> from studies.optimal_control import rest_to_rest_problem
-    >>> res = rest_to_rest_problem(10, "time").solve()
+    >>> res = rest_to_rest_problem(10, "time", "constant", "uniform").solve()
     >>> replay(res, refine=1).max_error_q < 1e-10  # IPOPT's tolerance: the same steps
     True
     """

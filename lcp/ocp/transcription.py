@@ -1,7 +1,8 @@
 """Direct transcription of an optimal control problem with Moreau-Jean steps (an MPCC).
 
 The unknowns are, at the nodes k = 0..N, the state (q_k, v_k); the control, one value per step
-(piecewise-constant hold, the default) or per node (linear hold); over each step k the contact
+(piecewise-constant hold) or per node (linear hold), or a start and an end value (affine hold: the
+default with free steps, ``hold="auto"``); over each step k the contact
 impulses, lifted into the complementarity pairs of the discrete Coulomb law; and, with
 ``steps="free"``, the step lengths h_k (summing to T). Each step is one step of
 :mod:`lcp.timestepping` with the control's impulse integrated exactly over the step::
@@ -374,6 +375,9 @@ class Transcription:
         return da
 
     # ------------------------------------------------------------------ numbers out of x
+    def squeezed_phases_law(self, x):
+        return squeezed_phases(self, x)
+
     def unpack(self, x):
         """(T, steps, q, v, u, p_N, p_T) of a vector of NLP variables."""
         pb, ix = self.pb, self.ix
@@ -405,6 +409,38 @@ class Transcription:
             return np.zeros((N, 0)), np.zeros((N, 0))
         ix = self.ix
         return x[ix["PN"]].reshape(N, m), (x[ix["Pbp"]] - x[ix["Pbm"]]).reshape(N, m)
+
+
+#: a step's own contact blocks, (N, m) each: its mode, copied whole by :func:`squeezed_phases`
+STEP_BLOCKS = ("pN", "wN", "bp", "wp", "bm", "wm", "lam", "wl", "dN", "dbp", "dbm", "sN", "sT")
+
+
+def squeezed_phases(tr, x):
+    """A start for another fixed-phase solve, or None: every free step at its lower length bound
+    whose mode (which member of each contact pair is the larger) differs from a neighbour's takes
+    that neighbour's contact blocks (the following step's first). The first pass's modes come from
+    uniform steps: a switch inside one of them can leave a step of a phase the optimum lacks, which
+    the fixed-phase solve can only shrink to the lower bound. Measured on the Jean-Pratt
+    move-and-hold at N = 40 on [0.45, 0.7] s, T = 1.2 s: a stick step of minimum length after the
+    hold delayed the return, 3.6e-3 above the optimum."""
+    pb, m, N = tr.pb, tr.pb.system.n_contacts, tr.pb.N
+    if pb.steps != "free" or not m or N < 2:
+        return None
+    ih = tr.ix["h"].reshape(-1)
+    at_lo = x[ih] <= tr.lbx[ih] * (1.0 + 1e-6)
+    sig = np.stack([x[tr.ix[a]] > x[tr.ix[w]] for a, w in (("pN", "wN"), ("bp", "wp"), ("bm", "wm"), ("lam", "wl"))],
+                   axis=-1)
+    blocks = [tr.ix[key] for key in STEP_BLOCKS if key in tr.ix and tr.ix[key].shape == (N, m)]
+    x_new, changed = x.copy(), False
+    for k in np.flatnonzero(at_lo):
+        for nb in (k + 1, k - 1):
+            diff = np.any(sig[k] != sig[nb], axis=-1) if 0 <= nb < N else np.zeros(m, dtype=bool)
+            if np.any(diff):
+                for idx in blocks:
+                    x_new[idx[k][diff]] = x[idx[nb][diff]]
+                changed = True
+                break
+    return x_new if changed else None
 
 
 def _end_jacobians(tr, H, t1, q1):
