@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 import lcp
 from lcp.contact.modes import OPEN, SLIDE_NEG, SLIDE_POS, STICK
 from lcp.ocp import OptimalControlProblem
-from lcp.ocp.phase_dynamics import NotShootable, independent_rows, mode_dynamics
+from lcp.ocp.phase_dynamics import NotShootable, impact_rows, independent_rows, mode_dynamics
 from lcp.ocp.shooting import PhaseShooting, initial_point, plan_keys
 
 G, W, HGT, M = 9.81, 0.2, 0.4, 1.0
@@ -104,7 +104,7 @@ def test_shooting_finds_the_static_limit(mu, u_star):
     plan = [[((STICK, STICK), 0.1, ())]] * pb.N
     guess = SimpleNamespace(t=np.linspace(0.0, 0.4, pb.N + 1), u=np.full((pb.N, 1), 1.0), T=0.4)
     keys = plan_keys(pb, plan, guess)
-    assert keys == [[(0, 1, 2)]] * pb.N
+    assert keys == [[((0, 1, 2), None)]] * pb.N
     check = PhaseShooting(pb, plan, check=True, keys=keys)
     x0 = initial_point(check, guess)
     assert check.diagnose(x0)["dynamics"] < 1e-12 and check.diagnose(x0)["residual"] < 1e-12
@@ -122,3 +122,34 @@ def test_shooting_finds_the_static_limit(mu, u_star):
     pN, fT = x[tr.ix["pN"]].reshape(pb.N, 2), x[tr.ix["fT"]].reshape(pb.N, 2)
     assert np.sum(fT, axis=1) == pytest.approx(-u.ravel(), abs=1e-8)
     assert np.all(np.abs(fT) <= mu * pN + 1e-7)
+
+
+def test_flat_landing_impulses_split_freely():
+    """The box landing flat on both corners at 1 m/s, both impulses sticking: four velocity rows
+    on three velocities, one tangential row dropped from the impact law. The shooting's impulses
+    stop the box (total normal impulse m, total tangential zero), each within its cone, and the
+    dropped row holds in the check."""
+    pb = OptimalControlProblem(_box(0.5), 2, T=0.2, q0=REST, v0=np.array([0.0, -1.0, 0.0]),
+                               stage_cost=lambda st_: ca.sum1((st_.u0 - 1.0) ** 2), contact_law="gap")
+    impacts = ((0, STICK, 0.5, 0.0), (1, STICK, 0.5, 0.0))
+    assert impact_rows(pb.system, impacts, REST) == (0, 1, 2)
+    plan = [[((STICK, STICK), 0.1, impacts)], [((STICK, STICK), 0.1, ())]]
+    guess = SimpleNamespace(t=np.array([0.0, 0.1, 0.2]), u=np.zeros((2, 1)), T=0.2)
+    keys = plan_keys(pb, plan, guess)
+    assert keys == [[((0, 1, 2), (0, 1, 2))], [((0, 1, 2), None)]]
+    check = PhaseShooting(pb, plan, check=True, keys=keys)
+    tr = PhaseShooting(pb, plan, substeps=4, keys=keys)
+    assert check.n_constraints > tr.n_constraints  # the dropped rows, held in the check only
+    solver = ca.nlpsol("s", "ipopt", tr.nlp, {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-10}})
+    sol = solver(x0=initial_point(check, guess), lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg, p=tr.params())
+    assert solver.stats()["return_status"] == "Solve_Succeeded"
+    x = np.array(sol["x"]).ravel()
+    PN, PT = x[tr.ix["PN"]].ravel(), x[tr.ix["PT"]].ravel()
+    assert np.sum(PN) == pytest.approx(M * 1.0, abs=1e-9) and np.sum(PT) == pytest.approx(0.0, abs=1e-9)
+    assert np.all(np.abs(PT) <= 0.5 * PN + 1e-9)
+    # the normal impulses split evenly: the moment balance of a landing that leaves no rotation
+    assert PN == pytest.approx([M / 2, M / 2], abs=1e-9)
+    _, _, q, v, u, _, _ = tr.unpack(x)
+    assert np.max(np.abs(v[1:])) < 1e-12 and np.max(np.abs(u - 1.0)) < 1e-6  # (v[0]: before the landing)
+    diag = check.diagnose(x)
+    assert diag["dynamics"] < 1e-10 and diag["residual"] < 1e-9

@@ -22,7 +22,7 @@ import numpy as np
 
 from lcp.contact.modes import OPEN, SLIDE_NEG, SLIDE_POS, STICK
 
-__all__ = ["GRID", "POINT_WEIGHTS", "NotShootable", "RANK_TOL", "SINGULAR_TOL", "impulse_dv", "independent_rows", "mode_dynamics",
+__all__ = ["GRID", "POINT_WEIGHTS", "NotShootable", "RANK_TOL", "SINGULAR_TOL", "impact_rows", "impulse_dv", "independent_rows", "mode_dynamics",
            "mode_rows", "rk4_segment", "segment_integrator"]
 
 #: the integrator's output times within a segment (fractions of it): the modes are kept
@@ -118,18 +118,7 @@ def independent_rows(pb, modes, t, q):
                   ca.Function("rows", [sys.t_sym, sys.q_sym], [R, C, sys.mass_expr])(t, q))
     rank = {"N": 0, "G": 1, "T": 2}
     order = sorted(range(len(labels)), key=lambda i: (rank[labels[i][0]], i))
-    keep = []
-    for i in order:
-        norm = np.linalg.norm(Rn[i])
-        if norm == 0.0:
-            continue
-        row = Rn[i] / norm
-        if keep:
-            A = Rn[keep] / np.linalg.norm(Rn[keep], axis=1)[:, None]
-            row = row - A.T @ np.linalg.lstsq(A.T, row, rcond=None)[0]
-        if np.linalg.norm(row) > RANK_TOL:
-            keep.append(i)
-    keep.sort()
+    keep = _greedy_rows(Rn, order)
     where = f"mode {''.join(str(int(c)) for c in modes)} at t = {float(t):.6g}"
     Cs = Cn[:, keep]
     for d in (i for i in range(len(labels)) if i not in keep):
@@ -144,6 +133,44 @@ def independent_rows(pb, modes, t, q):
             raise NotShootable(f"{where}: the reduced Delassus matrix is singular (smallest singular value "
                                f"{s[-1]:.2e} of {s[0]:.2e}): the accelerations are not unique")
     return None if len(keep) == len(labels) else tuple(keep)
+
+
+def _greedy_rows(Rn, order) -> list:
+    """Sorted indices of the rows of Rn (numbers) taken in ``order``, each kept when its distance
+    from the span of those kept before it exceeds RANK_TOL (rows scaled to unit norm)."""
+    keep = []
+    for i in order:
+        norm = np.linalg.norm(Rn[i])
+        if norm == 0.0:
+            continue
+        row = Rn[i] / norm
+        if keep:
+            A = Rn[keep] / np.linalg.norm(Rn[keep], axis=1)[:, None]
+            row = row - A.T @ np.linalg.lstsq(A.T, row, rcond=None)[0]
+        if np.linalg.norm(row) > RANK_TOL:
+            keep.append(i)
+    return sorted(keep)
+
+
+def impact_rows(system, impacts, q):
+    """The velocity rows that an impact law holds after the impacts at q (numbers), in the order
+    of :func:`~lcp.ocp.shooting.impact_law`: per impact (contact c, tangential mode, ...) its normal
+    row, and its tangential row where the impulse sticks; and a maximal independent subset of
+    them (normals first), as sorted indices, or None where all are independent (two stuck corners
+    of a box landing flat: four rows on three velocities, the impulses' split not unique)."""
+    m = system.n_contacts
+    H = system.contact_jacobian(np.asarray(q, dtype=float))
+    rows, kinds = [], []
+    for c, tmode, *_ in impacts:
+        rows.append(H[c])
+        kinds.append(0)
+        if tmode == STICK:
+            rows.append(H[m + c])
+            kinds.append(1)
+    if not rows:
+        return None
+    keep = _greedy_rows(np.array(rows), sorted(range(len(rows)), key=lambda i: (kinds[i], i)))
+    return None if len(keep) == len(rows) else tuple(keep)
 
 
 def mode_dynamics(pb, modes, keep=None) -> ca.Function:

@@ -49,7 +49,7 @@ import casadi as ca
 import numpy as np
 
 from lcp.contact.modes import OPEN, SLIDE_NEG, SLIDE_POS, STICK
-from lcp.ocp.phase_dynamics import (GRID, POINT_WEIGHTS, NotShootable, impulse_dv, independent_rows, mode_dynamics,
+from lcp.ocp.phase_dynamics import (GRID, POINT_WEIGHTS, NotShootable, impact_rows, impulse_dv, independent_rows, mode_dynamics,
                                      segment_integrator)
 from lcp.ocp.replay import event_pieces
 from lcp.ocp.transcription import Transcription, grid_variables, step_terms
@@ -160,7 +160,8 @@ class PhaseShooting(Transcription):
     """The NLP of an :class:`~lcp.ocp.OptimalControlProblem` on a fixed phase sequence (module
     docstring). Same interface as :class:`~lcp.ocp.transcription.Transcription` (``nlp``, ``ix``,
     bounds, :meth:`unpack`); ``plan`` as :func:`phase_plan` returns it; ``keys`` as
-    :func:`plan_keys` returns it (None: every row a mode holds, for plans without redundant rows).
+    :func:`plan_keys` returns it (None: every row a mode or an impact law holds, for plans without
+    redundant rows).
     With ``check`` the mode conditions of the rows dropped as redundant are constraints too (the
     check of a solution, never solved: they are implied wherever the dropping was right)."""
 
@@ -179,8 +180,8 @@ class PhaseShooting(Transcription):
             raise ValueError(f"plan has {len(plan)} intervals, the problem {pb.N}")
         self.plan = [[(tuple(int(c) for c in sg[0]), float(sg[1]), tuple(sg[2]) if len(sg) > 2 else ())
                       for sg in segs] for segs in plan]
-        #: the kept rows of each segment's modes (None: all)
-        self.keys = keys if keys is not None else [[None] * len(segs) for segs in self.plan]
+        #: per segment, the kept rows of its modes and of its impacts' law (None: all)
+        self.keys = keys if keys is not None else [[(None, None)] * len(segs) for segs in self.plan]
         if [len(a) for a in self.keys] != [len(segs) for segs in self.plan]:
             raise ValueError("keys must have one entry per segment of plan")
         self.check = bool(check)
@@ -236,7 +237,7 @@ class PhaseShooting(Transcription):
                                     self._var(f"Vs{k}_{j}", n, -np.inf, np.inf, key="Vs"))
                 else:
                     xe = ca.vertcat(qs[k + 1], vs[k + 1])
-                keep = self.keys[k][j]
+                keep = self.keys[k][j][0]
                 xg, qg = self._call(modes, keep, x, ca.vertcat(t_seg, ds[j], tk[k], h, ua, ub))
                 self._defect(xg[:, -1] - xe)
                 if m:
@@ -393,8 +394,13 @@ def impact_law(tr, x, impacts, k, j):
     """The state after the impacts at a segment's start of ``tr``'s NLP, with the impact law as constraints:
     the gap closed, an approach, Newton's restitution on the normal velocity, and Coulomb's law
     on the tangential impulse in the replay's mode (stick: no tangential velocity after it;
-    slide: at the cone's bound against the velocity after it)."""
+    slide: at the cone's bound against the velocity after it). The velocity rows that
+    ``tr.keys[k][j][1]`` drops as implied by the others (with the gap of a dropped normal row) are
+    left out but in the check (``tr.check``): the impulses' split along them is free, bounded by
+    the cones."""
     sys = tr.pb.system
+    kept = tr.keys[k][j][1]
+    held = iter(range(2 * len(impacts)))  # the velocity rows' indices, in impact_rows' order
     n, m = sys.n, sys.n_contacts
     q, v = x[:n], x[n:]
     H = ca.Function("H", [sys.q_sym], [sys.H_expr])(q)
@@ -411,14 +417,18 @@ def impact_law(tr, x, impacts, k, j):
     vp = v + ca.solve(Mq, rhs)
     for c, tmode, PN, PT in pairs:
         uN_pre = ca.mtimes(H[c, :], v)
-        tr._constrain(gap[c], 0.0, 0.0)
+        normal = kept is None or next(held) in kept or tr.check
+        if normal:
+            tr._constrain(gap[c], 0.0, 0.0)
         tr._constrain(uN_pre, -np.inf, 0.0)
-        tr._constrain(ca.mtimes(H[c, :], vp) + e[c] * uN_pre, 0.0, 0.0)
+        if normal:
+            tr._constrain(ca.mtimes(H[c, :], vp) + e[c] * uN_pre, 0.0, 0.0)
         uT = ca.mtimes(H[m + c, :], vp)
         if tmode == OPEN:  # frictionless
             tr._constrain(PT, 0.0, 0.0)
         elif tmode == STICK:
-            tr._constrain(uT, 0.0, 0.0)
+            if kept is None or next(held) in kept or tr.check:
+                tr._constrain(uT, 0.0, 0.0)
             tr._constrain(ca.vertcat(mu[c] * PN - PT, mu[c] * PN + PT), 0.0, np.inf)
         else:
             s = 1.0 if tmode == SLIDE_POS else -1.0
@@ -464,8 +474,9 @@ def fixed_pairs(tr, k, st) -> None:
 
 def plan_keys(pb, plan, result, states: str = "integrated") -> list:
     """The rows each segment of ``plan`` holds, for :class:`PhaseShooting`'s ``keys``: per
-    interval and segment :func:`~lcp.ocp.phase_dynamics.independent_rows` at the segment's start
-    state (None where every row is independent), the states integrated by CVODES through the plan
+    interval and segment the pair (:func:`~lcp.ocp.phase_dynamics.independent_rows`,
+    :func:`~lcp.ocp.phase_dynamics.impact_rows` of its impacts) at the segment's start state (None
+    where every row is independent), the states integrated by CVODES through the plan
     at ``result``'s control and steps, from the problem's start or with ``states="result"`` from
     ``result``'s node state at each interval's start (the walk of :func:`initial_point`, whose
     states the rank is decided on). Raises :class:`NotShootable` where a mode's accelerations are
@@ -482,14 +493,15 @@ def plan_keys(pb, plan, result, states: str = "integrated") -> list:
         t_seg, row = t[k], []
         for modes, dur, *rest in segs:
             modes = tuple(int(c) for c in modes)
-            if rest and rest[0]:
-                xs = np.concatenate([xs[:n], xs[n:] + impulse_dv(sys, xs[:n], rest[0])])
+            impacts = tuple(rest[0]) if rest else ()
+            if impacts:
+                xs = np.concatenate([xs[:n], xs[n:] + impulse_dv(sys, xs[:n], impacts)])
             keep = independent_rows(pb, modes, t_seg, xs[:n]) if sys.n_contacts else None
+            row.append((keep, impact_rows(sys, impacts, xs[:n]) if impacts else None))
             if (modes, keep) not in fns:
                 fns[modes, keep] = segment_integrator(pb, mode_dynamics(pb, modes, keep), "seg", CHECK_TOL)
             out = fns[modes, keep](x0=xs, p=np.concatenate([[t_seg, dur, t[k], h], ua, ub]))
             xs, t_seg = np.array(out["xf"])[:, -1], t_seg + dur
-            row.append(keep)
         keys.append(row)
     return keys
 
@@ -544,7 +556,7 @@ def initial_point(tr, result, states: str = "integrated") -> np.ndarray:
                 x[ix["d"][d_i]] = dur
                 d_i += 1
             start = xs if states == "integrated" or j else np.concatenate([result.q[k], result.v[k]])
-            keep = tr.keys[k][j]
+            keep = tr.keys[k][j][0]
             out = tr.integrator(modes, keep)(x0=start, p=np.concatenate([[t_seg, dur, t[k], h], ua, ub]))
             xf = np.array(out["xf"])
             xs = xf[:, -1]
