@@ -27,6 +27,21 @@ solves the optimal control problem again with that sequence fixed:
 - the costs, constraints and control holds are the problem's own (its ``Step`` callables on the
   interval's end states and impulses).
 
+Redundant rows (a box resting on two stuck corners: four rows on three velocities): each
+segment's mode holds a maximal independent subset of its rows, chosen at the segment's start
+state on a CVODES walk through the plan (:func:`plan_keys`,
+:func:`~lcp.ocp.phase_dynamics.independent_rows`); the accelerations are unique, the forces are
+not: at each check point free variables z move the forces along the null space of the force
+columns, so the admissibility above asks that SOME distribution of the forces be admissible. The
+interval's mean forces (``pN``, ``fT``, the result's impulses) are those of one such distribution:
+the kept rows' forces integrated by the integrator plus the Newton-Cotes integral of the free part
+over the check points (admissible at the check points, as the modes are). The dropped rows'
+conditions (their velocities and accelerations, the null space's zero generalized force) are
+constraints of the check of every solution, so a dependency that does not hold along the phase
+shows as a violated mode condition, never as a silent answer; a mode whose accelerations are not
+unique is refused (:class:`NotShootable`). An impact law's redundant velocity rows likewise
+(:func:`~lcp.ocp.phase_dynamics.impact_rows`): the impulses' split is free within the cones.
+
 The solution is then exact up to the integrator's tolerance: its replay repeats it (misses of
 1e-9 and below where the transcription missed by 1e-1 to 1e-4). It is a local optimum for that
 phase sequence: a phase the optimum does not have can only shrink to zero length.
