@@ -18,7 +18,12 @@ from hypothesis import strategies as st
 import lcp
 from lcp.contact.modes import OPEN, SLIDE_NEG, SLIDE_POS, STICK
 from lcp.ocp import OptimalControlProblem
-from lcp.ocp.phase_dynamics import NotShootable, impact_rows, independent_rows, mode_dynamics
+from lcp.ocp.phase_dynamics import (
+    NotShootable,
+    impact_rows,
+    independent_rows,
+    mode_dynamics,
+)
 from lcp.ocp.shooting import PhaseShooting, initial_point, plan_keys
 
 G, W, HGT, M = 9.81, 0.2, 0.4, 1.0
@@ -149,7 +154,22 @@ def test_flat_landing_impulses_split_freely():
     assert np.all(np.abs(PT) <= 0.5 * PN + 1e-9)
     # the normal impulses split evenly: the moment balance of a landing that leaves no rotation
     assert PN == pytest.approx([M / 2, M / 2], abs=1e-9)
-    _, _, q, v, u, _, _ = tr.unpack(x)
+    _, _, _, v, u, _, _ = tr.unpack(x)
     assert np.max(np.abs(v[1:])) < 1e-12 and np.max(np.abs(u - 1.0)) < 1e-6  # (v[0]: before the landing)
     diag = check.diagnose(x)
     assert diag["dynamics"] < 1e-10 and diag["residual"] < 1e-9
+
+
+@pytest.mark.slow
+def test_box_tip_example_solves_from_the_defaults():
+    """The box tipped over an edge (studies' example, N = 20, default starts): its transcription's
+    replay misses, the shooting's last phase rests the box on two stuck corners (redundant rows)
+    and succeeds, replayed by the event method within 1e-6, on its side at rest at T."""
+    from studies._ocp_models import box_tip
+
+    res = box_tip().make(20).solve()
+    assert res.success and res.status >= 0, res.message
+    assert "exact-phase shooting" in res.message
+    assert res.replay.method == "event" and res.replay.final_miss <= 1e-6
+    assert res.q[-1, 2] == pytest.approx(-np.pi / 2, abs=1e-9) and np.max(np.abs(res.v[-1])) < 1e-9
+    assert np.all(res.p_N >= -1e-9)

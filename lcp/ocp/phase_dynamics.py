@@ -22,8 +22,20 @@ import numpy as np
 
 from lcp.contact.modes import OPEN, SLIDE_NEG, SLIDE_POS, STICK
 
-__all__ = ["GRID", "POINT_WEIGHTS", "NotShootable", "RANK_TOL", "SINGULAR_TOL", "impact_rows", "impulse_dv", "independent_rows", "mode_dynamics",
-           "mode_rows", "rk4_segment", "segment_integrator"]
+__all__ = [
+    "GRID",
+    "POINT_WEIGHTS",
+    "RANK_TOL",
+    "SINGULAR_TOL",
+    "NotShootable",
+    "impact_rows",
+    "impulse_dv",
+    "independent_rows",
+    "mode_dynamics",
+    "mode_rows",
+    "rk4_segment",
+    "segment_integrator",
+]
 
 #: the integrator's output times within a segment (fractions of it): the modes are kept
 #: admissible there and at the segment's start (a slide whose velocity changed sign between its

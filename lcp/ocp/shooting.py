@@ -64,8 +64,16 @@ import casadi as ca
 import numpy as np
 
 from lcp.contact.modes import OPEN, SLIDE_NEG, SLIDE_POS, STICK
-from lcp.ocp.phase_dynamics import (GRID, POINT_WEIGHTS, NotShootable, impact_rows, impulse_dv, independent_rows, mode_dynamics,
-                                     segment_integrator)
+from lcp.ocp.phase_dynamics import (
+    GRID,
+    POINT_WEIGHTS,
+    NotShootable,
+    impact_rows,
+    impulse_dv,
+    independent_rows,
+    mode_dynamics,
+    segment_integrator,
+)
 from lcp.ocp.replay import event_pieces
 from lcp.ocp.transcription import Transcription, grid_variables, step_terms
 
