@@ -27,6 +27,21 @@ solves the optimal control problem again with that sequence fixed:
 - the costs, constraints and control holds are the problem's own (its ``Step`` callables on the
   interval's end states and impulses).
 
+Redundant rows (a box resting on two stuck corners: four rows on three velocities): each
+segment's mode holds a maximal independent subset of its rows, chosen at the segment's start
+state on a CVODES walk through the plan (:func:`plan_keys`,
+:func:`~lcp.ocp.phase_dynamics.independent_rows`); the accelerations are unique, the forces are
+not: at each check point free variables z move the forces along the null space of the force
+columns, so the admissibility above asks that SOME distribution of the forces be admissible. The
+interval's mean forces (``pN``, ``fT``, the result's impulses) are those of one such distribution:
+the kept rows' forces integrated by the integrator plus the Newton-Cotes integral of the free part
+over the check points (admissible at the check points, as the modes are). The dropped rows'
+conditions (their velocities and accelerations, the null space's zero generalized force) are
+constraints of the check of every solution, so a dependency that does not hold along the phase
+shows as a violated mode condition, never as a silent answer; a mode whose accelerations are not
+unique is refused (:class:`NotShootable`). An impact law's redundant velocity rows likewise
+(:func:`~lcp.ocp.phase_dynamics.impact_rows`): the impulses' split is free within the cones.
+
 The solution is then exact up to the integrator's tolerance: its replay repeats it (misses of
 1e-9 and below where the transcription missed by 1e-1 to 1e-4). It is a local optimum for that
 phase sequence: a phase the optimum does not have can only shrink to zero length.
@@ -49,11 +64,20 @@ import casadi as ca
 import numpy as np
 
 from lcp.contact.modes import OPEN, SLIDE_NEG, SLIDE_POS, STICK
-from lcp.ocp.phase_dynamics import GRID, impulse_dv, mode_dynamics, rk4_segment
+from lcp.ocp.phase_dynamics import (
+    GRID,
+    POINT_WEIGHTS,
+    NotShootable,
+    impact_rows,
+    impulse_dv,
+    independent_rows,
+    mode_dynamics,
+    segment_integrator,
+)
 from lcp.ocp.replay import event_pieces
 from lcp.ocp.transcription import Transcription, grid_variables, step_terms
 
-__all__ = ["CHECK_TOL", "INTEGRATOR_TOL", "NotShootable", "PhaseShooting", "impact_law", "initial_point", "phase_plan", "plan_of_modes",
+__all__ = ["CHECK_TOL", "INTEGRATOR_TOL", "NotShootable", "PhaseShooting", "impact_law", "initial_point", "phase_plan", "plan_keys", "plan_of_modes",
            "refuse", "solve_shooting"]
 
 #: the event method's mode names -> codes
@@ -67,10 +91,6 @@ INTEGRATOR_TOL = {"reltol": 1e-10, "abstol": 1e-12, "linear_multistep_method": "
 CHECK_TOL = {"reltol": 1e-12, "abstol": 1e-14, "linear_multistep_method": "adams"}
 
 
-
-
-class NotShootable(ValueError):
-    """The problem or its phase sequence has something the shooting does not model."""
 
 
 def phase_plan(result):
@@ -162,9 +182,14 @@ def refuse(problem) -> None:
 class PhaseShooting(Transcription):
     """The NLP of an :class:`~lcp.ocp.OptimalControlProblem` on a fixed phase sequence (module
     docstring). Same interface as :class:`~lcp.ocp.transcription.Transcription` (``nlp``, ``ix``,
-    bounds, :meth:`unpack`); ``plan`` as :func:`phase_plan` returns it."""
+    bounds, :meth:`unpack`); ``plan`` as :func:`phase_plan` returns it; ``keys`` as
+    :func:`plan_keys` returns it (None: every row a mode or an impact law holds, for plans without
+    redundant rows).
+    With ``check`` the mode conditions of the rows dropped as redundant are constraints too (the
+    check of a solution, never solved: they are implied wherever the dropping was right)."""
 
-    def __init__(self, pb, plan, substeps: int = 0, check: bool = False, zeros=None, pair_tol: float = 0.0):
+    def __init__(self, pb, plan, substeps: int = 0, check: bool = False, zeros=None, pair_tol: float = 0.0,
+                 keys=None):
         refuse(pb)
         #: the user pairs' zero members: zeros[i][k] is True where a_i is zero at step k
         self.zeros, self.pair_tol = zeros, pair_tol
@@ -178,41 +203,29 @@ class PhaseShooting(Transcription):
             raise ValueError(f"plan has {len(plan)} intervals, the problem {pb.N}")
         self.plan = [[(tuple(int(c) for c in sg[0]), float(sg[1]), tuple(sg[2]) if len(sg) > 2 else ())
                       for sg in segs] for segs in plan]
+        #: per segment, the kept rows of its modes and of its impacts' law (None: all)
+        self.keys = keys if keys is not None else [[(None, None)] * len(segs) for segs in self.plan]
+        if [len(a) for a in self.keys] != [len(segs) for segs in self.plan]:
+            raise ValueError("keys must have one entry per segment of plan")
+        self.check = bool(check)
         self._modes_fns, self._integrators, self._ng = {}, {}, 0
         super().__init__(pb)
 
     # ------------------------------------------------------------------ the modes' dynamics
-    def mode_function(self, modes) -> ca.Function:
-        """:func:`~lcp.ocp.phase_dynamics.mode_dynamics` of the given modes, built once."""
-        if modes not in self._modes_fns:
-            self._modes_fns[modes] = mode_dynamics(self.pb, modes)
-        return self._modes_fns[modes]
+    def mode_function(self, modes, keep=None) -> ca.Function:
+        """:func:`~lcp.ocp.phase_dynamics.mode_dynamics` of the given modes and kept rows, built once."""
+        if (modes, keep) not in self._modes_fns:
+            self._modes_fns[modes, keep] = mode_dynamics(self.pb, modes, keep)
+        return self._modes_fns[modes, keep]
 
-    def integrator(self, modes) -> ca.Function:
-        """CVODES over one segment in the given modes: x0 = (q, v), p = (t_seg, d, t_k, h_k, u_a,
-        u_b) -> xf, qf = the integrals of lambda_N and lambda_T over the segment. The control is
-        u_a + (t - t_k) / h_k (u_b - u_a) (the hold's value on interval k)."""
-        if modes in self._integrators:
-            return self._integrators[modes]
-        sys, nu = self.pb.system, self.pb.nu
-        n = sys.n
-        x = ca.SX.sym("x", 2 * n)
-        p = ca.SX.sym("p", 4 + 2 * nu)
-        tau = ca.SX.sym("tau")
-        t_seg, d, t_k, h_k = p[0], p[1], p[2], p[3]
-        ua, ub = p[4:4 + nu], p[4 + nu:]
-        t = t_seg + tau * d
-        u = ua + (t - t_k) / h_k * (ub - ua)
-        a, lamN, lamT, _ = self.mode_function(modes)(t, x[:n], x[n:], u)
-        name = f"seg_{''.join(map(str, modes))}"
-        if self.substeps:  # classical Runge-Kutta, fixed steps, in SX (exact derivatives of any order)
-            F = rk4_segment(name, x, p, tau, ca.vertcat(x[n:], a) * d, ca.vertcat(lamN, lamT) * d, self.substeps)
-        else:
-            dae = {"x": x, "p": p, "t": tau, "ode": d * ca.vertcat(x[n:], a), "quad": d * ca.vertcat(lamN, lamT)}
-            opts = {**self.tol, "max_num_steps": 100000}
-            F = ca.integrator(name, "cvodes", dae, 0.0, list(GRID), opts)
-        self._integrators[modes] = F
-        return F
+    def integrator(self, modes, keep=None) -> ca.Function:
+        """:func:`~lcp.ocp.phase_dynamics.segment_integrator` in the given modes (CVODES at this
+        NLP's tolerance, or its Runge-Kutta steps), built once."""
+        if (modes, keep) not in self._integrators:
+            name = f"seg_{''.join(map(str, modes))}" + ("" if keep is None else "_r" + "_".join(map(str, keep)))
+            self._integrators[modes, keep] = segment_integrator(self.pb, self.mode_function(modes, keep), name,
+                                                                self.tol, self.substeps)
+        return self._integrators[modes, keep]
 
     # ------------------------------------------------------------------ build
     def _build(self):
@@ -247,7 +260,8 @@ class PhaseShooting(Transcription):
                                     self._var(f"Vs{k}_{j}", n, -np.inf, np.inf, key="Vs"))
                 else:
                     xe = ca.vertcat(qs[k + 1], vs[k + 1])
-                xg, qg = self._call(modes, x, ca.vertcat(t_seg, ds[j], tk[k], h, ua, ub))
+                keep = self.keys[k][j][0]
+                xg, qg = self._call(modes, keep, x, ca.vertcat(t_seg, ds[j], tk[k], h, ua, ub))
                 self._defect(xg[:, -1] - xe)
                 if m:
                     impN, impT = impN + qg[:m, -1], impT + qg[m:, -1]
@@ -256,7 +270,9 @@ class PhaseShooting(Transcription):
                     times = [t_seg + c * ds[j] for c in (0.0, *GRID)]
                     states = [x] + [xg[:, i] for i in range(len(GRID) - 1)] + [xe]
                     points = [(tt, xx, ua + (tt - tk[k]) / h * (ub - ua)) for tt, xx in zip(times, states)]
-                    self._admissible(modes, prev_modes, points, mu, gap, Hfn)
+                    free = self._admissible(modes, keep, prev_modes, points, mu, gap, Hfn, f"{k}_{j}")
+                    if free is not None:  # the mean forces: an admissible distribution's
+                        impN, impT = impN + ds[j] * free[:m], impT + ds[j] * free[m:]
                 prev_modes, x, t_seg = modes, xe, t_end
             pN = self._var(f"pN{k}", m, -np.inf, np.inf, key="pN")  # mean forces over the interval
             fT = self._var(f"fT{k}", m, -np.inf, np.inf, key="fT")
@@ -272,16 +288,16 @@ class PhaseShooting(Transcription):
         self.n_corrections = int(sum(c.shape[0] for c in self._corr))
         # the integrators can only be called on MX: the NLP is built in SX with their outputs as
         # symbols, then evaluated in MX with the integrator calls in place of those symbols
-        outs = ca.vertcat(*[ca.vertcat(ca.vec(c[2]), ca.vec(c[3])) for c in self._calls])
-        ins = ca.Function("shooting_inputs", [X, P], [ca.vertcat(*[ca.vertcat(c[1], c[4]) for c in self._calls])])
+        outs = ca.vertcat(*[ca.vertcat(ca.vec(c[3]), ca.vec(c[4])) for c in self._calls])
+        ins = ca.Function("shooting_inputs", [X, P], [ca.vertcat(*[ca.vertcat(c[2], c[5]) for c in self._calls])])
         jg = ca.Function("shooting_nlp", [X, P, outs], [J, g])
         Xm, Pm = ca.MX.sym("x", X.shape[0]), ca.MX.sym("p", P.shape[0])
         args = ins(Xm, Pm)
         results, row = [], 0
-        for modes, x_in, _, _, p_in in self._calls:
+        for modes, keep, x_in, _, _, p_in in self._calls:
             a, b = row, row + x_in.shape[0]
             c = b + p_in.shape[0]
-            out = self.integrator(modes)(x0=args[a:b], p=args[b:c])
+            out = self.integrator(modes, keep)(x0=args[a:b], p=args[b:c])
             results += [ca.vec(out["xf"]), ca.vec(out["qf"])]
             row = c
         Jm, gm = jg(Xm, Pm, ca.vertcat(*results))
@@ -295,18 +311,28 @@ class PhaseShooting(Transcription):
         self.n_constraints = int(self.lbg.size)
         del self._x, self._g, self._lbx, self._ubx, self._lbg, self._ubg, self._nx
 
-    def _admissible(self, modes, prev, points, mu, gap, Hfn):
+    def _admissible(self, modes, keep, prev, points, mu, gap, Hfn, tag):
         """The segment's mode kept admissible at its points (t, x, u) (start, the integrator's grid,
-        end), and its switch from the previous mode at its start."""
+        end), and its switch from the previous mode at its start. With rows dropped as redundant
+        (``keep``) the forces at each point are lambda + Z z, z free variables (``ix["zf"]``): some
+        distribution admissible. Returns the integral of Z z over the segment per unit duration
+        (Newton-Cotes on the points: exact for the polynomial through them), or None."""
         n, m = self.pb.system.n, self.pb.system.n_contacts
-        fn = self.mode_function(modes)
+        fn = self.mode_function(modes, keep)
+        free = None
         first = prev is None
         if first:  # the start state's tangential velocities and gaps (numbers)
             sys = self.pb.system
             q_start, v_start = np.asarray(self.pb.q0, dtype=float), np.asarray(self.pb.v0, dtype=float)
             uT_start, gap_start = sys.contact_jacobian(q_start)[m:] @ v_start, sys.gaps(q_start)
         for i, (t, x, u) in enumerate(points):
-            _, lamN, lamT, acc = fn(t, x[:n], x[n:], u)
+            _, lamN, lamT, acc, Z, res = fn(t, x[:n], x[n:], u)
+            if Z.shape[1]:  # redundant rows: the forces' free part
+                lam = ca.mtimes(Z, self._var(f"zf{tag}_{i}", Z.shape[1], -np.inf, np.inf, key="zf"))
+                lamN, lamT = lamN + lam[:m], lamT + lam[m:]
+                free = (0.0 if free is None else free) + POINT_WEIGHTS[i] * lam
+                if self.check:  # what the dropping assumed: the dropped rows' conditions hold
+                    self._constrain(res, 0.0, 0.0)
             uT = ca.mtimes(Hfn(x[:n])[m:, :], x[n:])
             for j in range(m):
                 md = modes[j]
@@ -331,6 +357,7 @@ class PhaseShooting(Transcription):
                     self._constrain(gap(x[:n])[j], 0.0, np.inf)
                 elif pm != OPEN or (first and float(gap_start[j]) <= 1e-12):
                     self._constrain(acc[j], 0.0, np.inf)  # a lift-off accelerates away from the surface
+        return free
 
     def _defect(self, expr):
         """A continuity (or impulse) equality: the integrator's value minus the variable, plus a
@@ -353,11 +380,11 @@ class PhaseShooting(Transcription):
         super()._constrain(expr, lo, hi)
         self._ng += self._g[-1].shape[0]
 
-    def _call(self, modes, x, p):
+    def _call(self, modes, keep, x, p):
         """Symbols standing for the segment integrator's (xf, qf) at (x, p) (see ``_build``)."""
         n, m, i = self.pb.system.n, self.pb.system.n_contacts, len(self._calls)
         xf, qf = ca.SX.sym(f"xf{i}", 2 * n, len(GRID)), ca.SX.sym(f"qf{i}", 2 * m, len(GRID))
-        self._calls.append((modes, x, xf, qf, p))
+        self._calls.append((modes, keep, x, xf, qf, p))
         return xf, qf
 
     def step_impulses(self, x, steps):
@@ -390,8 +417,13 @@ def impact_law(tr, x, impacts, k, j):
     """The state after the impacts at a segment's start of ``tr``'s NLP, with the impact law as constraints:
     the gap closed, an approach, Newton's restitution on the normal velocity, and Coulomb's law
     on the tangential impulse in the replay's mode (stick: no tangential velocity after it;
-    slide: at the cone's bound against the velocity after it)."""
+    slide: at the cone's bound against the velocity after it). The velocity rows that
+    ``tr.keys[k][j][1]`` drops as implied by the others (with the gap of a dropped normal row) are
+    left out but in the check (``tr.check``): the impulses' split along them is free, bounded by
+    the cones."""
     sys = tr.pb.system
+    kept = tr.keys[k][j][1]
+    held = iter(range(2 * len(impacts)))  # the velocity rows' indices, in impact_rows' order
     n, m = sys.n, sys.n_contacts
     q, v = x[:n], x[n:]
     H = ca.Function("H", [sys.q_sym], [sys.H_expr])(q)
@@ -408,14 +440,18 @@ def impact_law(tr, x, impacts, k, j):
     vp = v + ca.solve(Mq, rhs)
     for c, tmode, PN, PT in pairs:
         uN_pre = ca.mtimes(H[c, :], v)
-        tr._constrain(gap[c], 0.0, 0.0)
+        normal = kept is None or next(held) in kept or tr.check
+        if normal:
+            tr._constrain(gap[c], 0.0, 0.0)
         tr._constrain(uN_pre, -np.inf, 0.0)
-        tr._constrain(ca.mtimes(H[c, :], vp) + e[c] * uN_pre, 0.0, 0.0)
+        if normal:
+            tr._constrain(ca.mtimes(H[c, :], vp) + e[c] * uN_pre, 0.0, 0.0)
         uT = ca.mtimes(H[m + c, :], vp)
         if tmode == OPEN:  # frictionless
             tr._constrain(PT, 0.0, 0.0)
         elif tmode == STICK:
-            tr._constrain(uT, 0.0, 0.0)
+            if kept is None or next(held) in kept or tr.check:
+                tr._constrain(uT, 0.0, 0.0)
             tr._constrain(ca.vertcat(mu[c] * PN - PT, mu[c] * PN + PT), 0.0, np.inf)
         else:
             s = 1.0 if tmode == SLIDE_POS else -1.0
@@ -459,6 +495,54 @@ def fixed_pairs(tr, k, st) -> None:
             tr._constrain(other, 0.0, np.inf)
 
 
+def plan_keys(pb, plan, result, states: str = "integrated") -> list:
+    """The rows each segment of ``plan`` holds, for :class:`PhaseShooting`'s ``keys``: per
+    interval and segment the pair (:func:`~lcp.ocp.phase_dynamics.independent_rows`,
+    :func:`~lcp.ocp.phase_dynamics.impact_rows` of its impacts) at the segment's start state (None
+    where every row is independent), the states integrated by CVODES through the plan
+    at ``result``'s control and steps, from the problem's start or with ``states="result"`` from
+    ``result``'s node state at each interval's start (the walk of :func:`initial_point`, whose
+    states the rank is decided on). Raises :class:`NotShootable` where a mode's accelerations are
+    not unique."""
+    sys, n = pb.system, pb.system.n
+    t, u = np.asarray(result.t, dtype=float), np.asarray(result.u, dtype=float)
+    fns, keys = {}, []
+    xs = np.concatenate([pb.q0, pb.v0])
+    for k, segs in enumerate(plan):
+        h, j0 = t[k + 1] - t[k], {"constant": k, "linear": k}.get(pb.hold, 2 * k)
+        ua, ub = u[j0], u[j0] if pb.hold == "constant" else u[j0 + 1]
+        if states != "integrated":
+            xs = np.concatenate([result.q[k], result.v[k]])
+        t_seg, row = t[k], []
+        for modes, dur, *rest in segs:
+            modes = tuple(int(c) for c in modes)
+            impacts = tuple(rest[0]) if rest else ()
+            if impacts:
+                xs = np.concatenate([xs[:n], xs[n:] + impulse_dv(sys, xs[:n], impacts)])
+            keep = independent_rows(pb, modes, t_seg, xs[:n]) if sys.n_contacts else None
+            row.append((keep, impact_rows(sys, impacts, xs[:n]) if impacts else None))
+            if (modes, keep) not in fns:
+                fns[modes, keep] = segment_integrator(pb, mode_dynamics(pb, modes, keep), "seg", CHECK_TOL)
+            out = fns[modes, keep](x0=xs, p=np.concatenate([[t_seg, dur, t[k], h], ua, ub]))
+            xs, t_seg = np.array(out["xf"])[:, -1], t_seg + dur
+        keys.append(row)
+    return keys
+
+
+def _free_forces(tr, modes, keep, points):
+    """Least-norm z of the free force directions at the points (t, x, u) of a segment in ``tr``
+    (numbers), and the Newton-Cotes integral of Z z per unit duration: the initial point's."""
+    n = tr.pb.system.n
+    fn = tr.mode_function(modes, keep)
+    zs, free = [], 0.0
+    for i, (tt, x, uu) in enumerate(points):
+        _, lamN, lamT, _, Z, _ = (np.array(o, dtype=float) for o in fn(tt, x[:n], x[n:], uu))
+        z = -np.linalg.lstsq(Z, np.concatenate([lamN, lamT]).ravel(), rcond=None)[0]
+        zs.append(z)
+        free = free + POINT_WEIGHTS[i] * (Z @ z)
+    return zs, free
+
+
 def initial_point(tr, result, states: str = "integrated") -> np.ndarray:
     """The variables of ``tr``'s NLP (:class:`PhaseShooting`) at ``result``'s control and steps, the states integrated segment by
     segment through the plan (single shooting: feasible but for the terminal conditions), or
@@ -478,7 +562,7 @@ def initial_point(tr, result, states: str = "integrated") -> np.ndarray:
     if pb.max_cost is not None:
         x[ix["z"]] = result.peak if np.isfinite(result.peak) else 0.0
     xs = np.concatenate([pb.q0, pb.v0])
-    d_i, s_i, p_i = 0, 0, 0
+    d_i, s_i, p_i, z_i = 0, 0, 0, 0
     for k, segs in enumerate(tr.plan):
         h = t[k + 1] - t[k]
         ua, ub = tr.control_pair(list(u), k)
@@ -495,11 +579,22 @@ def initial_point(tr, result, states: str = "integrated") -> np.ndarray:
                 x[ix["d"][d_i]] = dur
                 d_i += 1
             start = xs if states == "integrated" or j else np.concatenate([result.q[k], result.v[k]])
-            out = tr.integrator(modes)(x0=start, p=np.concatenate([[t_seg, dur, t[k], h], ua, ub]))
-            xs = np.array(out["xf"])[:, -1]
+            keep = tr.keys[k][j][0]
+            out = tr.integrator(modes, keep)(x0=start, p=np.concatenate([[t_seg, dur, t[k], h], ua, ub]))
+            xf = np.array(out["xf"])
+            xs = xf[:, -1]
             if m:
                 qf = np.array(out["qf"])[:, -1]
                 iN, iT = iN + qf[:m], iT + qf[m:]
+            if keep is not None:  # redundant rows: the least-norm distribution at each point
+                times = [t_seg + c * dur for c in (0.0, *GRID)]
+                points = [(tt, xx, ua + (tt - t[k]) / h * (ub - ua))
+                          for tt, xx in zip(times, [start] + [xf[:, i] for i in range(len(GRID))])]
+                zs, free = _free_forces(tr, modes, keep, points)
+                for z in zs:
+                    x[ix["zf"][z_i]] = z
+                    z_i += 1
+                iN, iT = iN + dur * free[:m], iT + dur * free[m:]
             if j < len(segs) - 1:
                 x[ix["Qs"][s_i]], x[ix["Vs"][s_i]] = xs[:n], xs[n:]
                 s_i += 1
@@ -537,8 +632,11 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
     plan = phase_plan(result) if start == "replay" else plan_of_modes(result)
     t0 = time.perf_counter()
     zeros = pair_zeros(pb, result) if pb.complementarity else None
-    check = PhaseShooting(pb, plan, check=True, zeros=zeros)  # CVODES: the initial point, the check of every solution
-    x = initial_point(check, result, "integrated" if start == "replay" else "result")
+    states = "integrated" if start == "replay" else "result"
+    keys = plan_keys(pb, plan, result, states)  # redundant rows dropped (at the walk's states)
+    # CVODES: the initial point, the check of every solution
+    check = PhaseShooting(pb, plan, check=True, zeros=zeros, keys=keys)
+    x = initial_point(check, result, states)
     ip = {"print_level": 0, "sb": "yes", "tol": 1e-10, "constr_viol_tol": 1e-10, "max_iter": 500,
           "mu_strategy": "adaptive", "bound_relax_factor": 0.0, **(options or {})}
     warm_ip = {**ip, "warm_start_init_point": "yes", "mu_init": 1e-8, "warm_start_bound_push": 1e-9,
@@ -546,7 +644,7 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
     M, iters, warm, diag, ok, stats, pair_tol = RK_SUBSTEPS, 0, {}, None, False, {}, 0.0
     cost = float("nan")
     while True:
-        tr = PhaseShooting(pb, plan, substeps=M, zeros=zeros, pair_tol=pair_tol)
+        tr = PhaseShooting(pb, plan, substeps=M, zeros=zeros, pair_tol=pair_tol, keys=keys)
         solvers = {}
         C = np.zeros(tr.n_corrections)
         last = np.inf
@@ -573,7 +671,7 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
             C = C + g[check.defect_rows]
         if not ok and stats["return_status"] == "Not_Enough_Degrees_Of_Freedom" and zeros and not pair_tol:
             pair_tol, warm = PAIR_TOL, {}  # pair members implied by the modes: held in a band
-            check = PhaseShooting(pb, plan, check=True, zeros=zeros, pair_tol=pair_tol)
+            check = PhaseShooting(pb, plan, check=True, zeros=zeros, pair_tol=pair_tol, keys=keys)
             continue
         if not ok or diag["dynamics"] <= defect_tol or M >= RK_SUBSTEPS_MAX:
             break
