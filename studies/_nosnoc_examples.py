@@ -207,7 +207,9 @@ def _discs(ns, ca, N):
     (time_freezing_tolerance 0, as its ``__main__``), so the speed of time is 1 and the numerical
     and physical horizons agree: the impact takes physical time (our event method's is instant).
     Step form (pss_mode STEP), implicit Euler (RADAU IIA n_s = 1), three finite elements per stage,
-    seven homotopy steps from sigma 1 by 0.1, IPOPT max_iter 1000, velocity bounds |v| <= 5."""
+    seven homotopy steps from sigma 1 by 0.1, IPOPT max_iter 1000, velocity bounds |v| <= 5. Measured
+    (loaded machine): N = 30 objective 113.83 in 58 s, N = 60 115.49 in 170 s; the event replay of its
+    control (the package's inelastic impact) ends 3.9 and 2.3 from its final state."""
     from studies._ocp_models import DISCS as p
 
     q, v, t, u, sot = ca.SX.sym("q", 4), ca.SX.sym("v", 4), ca.SX.sym("t"), ca.SX.sym("u", 2), ca.SX.sym("sot")
