@@ -7,9 +7,11 @@ equilibration, T = 0.08 s), the seven friction blocks of nosnoc's MATLAB example
 them only as a simulation; its model and options are written here in nosnoc_py's form, RADAU IIA
 n_s = 2, 3 finite elements per stage, T = 5 s), and the two-block chain of
 :func:`studies._ocp_models.block_chain` in the same form as examples/friction_block (one switching
-function per block velocity). The hopper and the two discs of nosnoc_py use time freezing with a speed-of-time control (a different horizon), the
-point on a plane needs the friction disk and the box is not one of nosnoc's examples: no peer is run
-for them (:data:`PEERS` says why).
+function per block velocity), and examples/discs_exercise (the two discs: its time freezing with
+the clock pinned to the control grid, so that its horizon is the example's). The hopper of
+nosnoc_py uses time freezing with a free speed of time (a different horizon), the point on a plane
+needs the friction disk and the box is not one of nosnoc's examples: no peer is run for them
+(:data:`NO_PEER` says why).
 
 nosnoc is optional; :func:`available` says whether it imports. Imports the package's examples only
 through :mod:`studies._ocp_models`' constants; nothing here is imported by ``lcp``.
@@ -34,7 +36,6 @@ NO_PEER = {
     "point_on_plane": "nosnoc_py 0.2.0 has no spatial (disk) friction model",
     "point_stick_slide": "nosnoc_py 0.2.0 has no spatial (disk) friction model",
     "hopper": "nosnoc_py's hopper uses time freezing with a speed-of-time control (another horizon); not run",
-    "two_discs": "nosnoc_py's discs use time freezing with a speed-of-time control (another horizon); not run",
     "box_tip": "not one of nosnoc's examples",
     "ball_bounce": "nosnoc_py's restitution needs time freezing (another horizon); not run",
 }
@@ -198,6 +199,57 @@ def _chain7(ns, ca, N):
     return model, ocp, _opts(ns, N, p["T"], fe=3, comp_tol=1e-7)
 
 
+def _discs(ns, ca, N):
+    """nosnoc_py's examples/discs_exercise as published: the contact in its hand-crafted time-freezing
+    form (where the discs overlap and approach, the positions stop and the velocities are pushed
+    apart along the gradient of |q1 - q2|^2 - (r1 + r2)^2 at a_n = 10 until they separate), the
+    speed of time a third control in [1, 25] and the clock pinned to the uniform control grid
+    (time_freezing_tolerance 0, as its ``__main__``), so the speed of time is 1 and the numerical
+    and physical horizons agree: the impact takes physical time (our event method's is instant).
+    Step form (pss_mode STEP), implicit Euler (RADAU IIA n_s = 1), three finite elements per stage,
+    seven homotopy steps from sigma 1 by 0.1, IPOPT max_iter 1000, velocity bounds |v| <= 5. Measured
+    (loaded machine): N = 30 objective 113.83 in 58 s, N = 60 115.49 in 170 s; the event replay of its
+    control (the package's inelastic impact) ends 3.9 and 2.3 from its final state."""
+    from studies._ocp_models import DISCS as p
+
+    q, v, t, u, sot = ca.SX.sym("q", 4), ca.SX.sym("v", 4), ca.SX.sym("t"), ca.SX.sym("u", 2), ca.SX.sym("sot")
+    alpha, theta = ca.SX.sym("alpha", 2), ca.SX.sym("theta", 2)
+    x = ca.vertcat(q, v)
+    M = np.diag([p["m1"], p["m1"], p["m2"], p["m2"]])
+    ubx = np.array([10, 10, 10, 10, 5, 5, 5, 5, np.inf])
+    x0 = np.array([1.0, 0, -1.0, 0, 0, 0, 0, 0])
+    Q = np.diag([10, 10, 20, 20, 0.1, 0.1, 0.1, 0.1])
+    R = np.diag([0.1, 0.1])
+    x_ref = np.array([-1.0, 0, 1.0, 0, 0, 0, 0, 0])
+    e = x - x_ref
+    f_c = ca.norm_2(q[0:2] - q[2:4]) ** 2 - (p["r1"] + p["r2"]) ** 2
+    J_n = ca.jacobian(f_c, q).T
+    drag = p["cv"] * ca.vertcat(v[0:2] / ca.norm_2(v[0:2] + p["eps"]), v[2:4] / ca.norm_2(v[2:4] + p["eps"]))
+    f_v = ca.vertcat(u, 0, 0) - drag
+    Minv = np.linalg.inv(M)
+    f_x = sot * ca.vertcat(theta[0] * v, theta[0] * (Minv @ f_v) + theta[1] * (Minv @ J_n) * 10.0, 1)
+    g_z = theta - ca.vertcat(alpha[0] + alpha[1] - alpha[0] * alpha[1], (1 - alpha[0]) * (1 - alpha[1]))
+    model = ns.NosnocModel(x=ca.vertcat(x, t), f_x=[f_x], alpha=[alpha], c=[ca.vertcat(f_c, J_n.T @ v)],
+                           x0=np.concatenate([x0, [0.0]]), u=ca.vertcat(u, sot), t_var=t, z=theta, z0=np.ones(2),
+                           g_z=g_z)
+    ocp = ns.NosnocOcp(lbu=np.array([-20.0, -20.0, 1.0]), ubu=np.array([20.0, 20.0, 25.0]),
+                       f_q=sot * (e.T @ Q @ e + u.T @ R @ u), f_terminal=e.T @ (100 * Q) @ e, lbx=-ubx, ubx=ubx,
+                       u_guess=np.array([0.0, 0.0, 1.0]))
+    opts = _opts(ns, N, p["T"], n_s=1, fe=3, step_eq="HEURISTIC_MEAN")
+    opts.pss_mode = ns.PssMode.STEP
+    opts.use_fesd = True
+    opts.sigma_0 = 1.0
+    opts.homotopy_update_rule = ns.HomotopyUpdateRule.LINEAR
+    opts.cross_comp_mode = ns.CrossComplementarityMode.COMPLEMENT_ALL_STAGE_VALUES_WITH_EACH_OTHER
+    opts.mpcc_mode = ns.MpccMode.SCHOLTES_INEQ
+    opts.opts_casadi_nlp["ipopt"]["max_iter"] = 1000
+    opts.time_freezing = True
+    opts.time_freezing_tolerance = 0.0
+    opts.equidistant_control_grid = True
+    opts.max_iter_homotopy = 7
+    return model, ocp, opts
+
+
 #: example name -> (builder, nosnoc's state -> the example's common coordinates)
 PEERS = {
     "cart_pole": (_cart_pole, lambda x: np.asarray(x)[[0, 1, 2, 3]]),
@@ -205,7 +257,11 @@ PEERS = {
     "block_chain2": (_chain, lambda x: np.asarray(x)[[0, 1, 2, 3]]),
     # (x0..x6, v0..v6), as block_chain's common coordinates
     "block_chain7": (_chain7, lambda x: np.asarray(x, dtype=float)),
+    # (q, v) without nosnoc's clock; its control (u, speed of time) replayed without the speed of time
+    "two_discs": (_discs, lambda x: np.asarray(x, dtype=float)[:8]),
 }
+#: the columns of nosnoc's control that are the example's control (all where not listed)
+CONTROL_COLUMNS = {"two_discs": [0, 1]}
 
 
 def solve_peer(name: str, N: int) -> PeerResult:
@@ -231,6 +287,7 @@ def solve_peer(name: str, N: int) -> PeerResult:
     w = r["w_sol"]
     comp = float(solver.problem.comp_res(w, solver.p_val).full()[0, 0])
     u = np.asarray(r["u_list"], dtype=float).reshape(int(N), -1)
+    u = u[:, CONTROL_COLUMNS[name]] if name in CONTROL_COLUMNS else u
     t_u = np.asarray(r["t_grid_u"], dtype=float)
     return PeerResult(name=name, N=int(N), objective=float(r["cost_val"]) if "cost_val" in r else float("nan"),
                       control=ControlSchedule(t_u, u), x_final=common(np.asarray(r["x_out"], dtype=float).ravel()),

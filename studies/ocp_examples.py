@@ -36,8 +36,14 @@ Along a curved gap the theta transcription now keeps a contact closed (a positio
 along M^-1 H_N' eta, the end-of-step velocities); the hopper's transcription then solves from the
 defaults but its replay misses (8.3e-2), and the shooting does not model its no-slip foot (a user
 complementarity pair). The box solves only from a start that tips it (the default mid-range push
-tumbles it). The two discs start on one line with swapped targets: the symmetric problem has no
-gradient that sends one disc around the other.
+tumbles it). The two discs start on one line with swapped targets, but nosnoc's drag
+cv v / |v + eps| (eps added to both components) has no mirror symmetry: the solves leave the line.
+From rest the relaxed homotopy parks the pushed disc against the other (a local optimum, cost 8511
+at N = 30) and its polishing solve stops at IPOPT's iteration limit; from starts that send it
+around, the homotopy ends with Coulomb residuals of order one where the discs slide or strike, and
+the shooting does not recover (iteration limit, or a replay missing by 4.3e-5). nosnoc's
+discs (its time freezing; N = 30: objective 113.8 in 58 s) model the impact as a push over
+physical time: the event replay of its control ends 3.9 from its final state.
 
 nosnoc's seven friction blocks (N = 50, T = 5 s; no terminal constraint, so feasible: u = 0 keeps the
 state box) are solved by both (measured): nosnoc in 67 s with objective 10.949, J_replay 10.934, its

@@ -23,7 +23,7 @@ from lcp.ocp.spatial import SpatialTranscription
 from lcp.ocp.transcription import Transcription
 
 __all__ = ["bound_steps_note", "default_starts", "first_pass", "guess_from", "piecewise_uniform", "polished",
-           "result_of",
+           "result_of", "same_guess",
            "finished", "solve_problem", "stuck_at_start", "unbounded_note", "uniform_fallback", "unstuck",
            "affine_first_pass", "solve_defaults"]
 
@@ -290,8 +290,10 @@ def default_starts(problem, own_sigma0: bool = False):
     residual), the same control simulated by the event method and sampled at the nodes
     (:func:`~lcp.ocp.guess.event_guess`), whose nodes do not penetrate: Moreau-Jean closes a
     contact one step late, the gap law bounds every node's gap below by zero, and from such a guess
-    IPOPT can end infeasible in the first relaxation. Then the pulse start of
-    :func:`~lcp.ocp.guess.screened_start` (a fraction of the mid-range push over the first part of
+    IPOPT can end infeasible in the first relaxation (not tried when it is the first start again,
+    :func:`same_guess`: a control that touches no contact, such as two discs left at rest, has the
+    same simulation by both methods, and the solve from it would repeat the same failure). Then
+    the pulse start of :func:`~lcp.ocp.guess.screened_start` (a fraction of the mid-range push over the first part of
     the horizon, the one whose event simulation meets the terminal constraints at the lowest cost;
     none when the mid-range control is the rest control): a mid-range push can carry the system
     far past its target (the box tip). Then, unless the caller chose sigma0, the
@@ -310,7 +312,8 @@ def default_starts(problem, own_sigma0: bool = False):
     ev = event_guess(problem, mj.u, problem.T)
     if ev is None:
         return
-    yield EVENT_START, ev, None
+    if not same_guess(mj, ev):  # the same start again would repeat the same failure
+        yield EVENT_START, ev, None
     # the pulse start before the larger first relaxation: it keeps the small sigma0 (no hovering),
     # and a problem it solves is spared that solve (on the box tip at N = 20: 1242 IPOPT
     # iterations, ending infeasible)
@@ -321,6 +324,18 @@ def default_starts(problem, own_sigma0: bool = False):
                f"first {f:g} of the horizon (the pulse start nearest the terminal constraints)"), gs, None
     if not own_sigma0:
         yield EVENT_START + " from sigma0 = 1", ev, 1.0
+
+
+def same_guess(a: OCPGuess, b: OCPGuess, rtol: float = 1e-12) -> bool:
+    """Whether two guesses agree in every node value (states, controls, impulses) to ``rtol`` of
+    their largest: Moreau-Jean's and the event method's simulations of a control that touches no
+    contact (two discs at rest under the rest control) are the same start, and the solve from it
+    is deterministic."""
+    pairs = [(a.q, b.q), (a.v, b.v), (a.u, b.u), (a.p_N, b.p_N), (a.p_T, b.p_T)]
+    if any(np.shape(x) != np.shape(y) for x, y in pairs):
+        return False
+    scale = max(1.0, *(float(np.max(np.abs(x), initial=0.0)) for x, _ in pairs))
+    return all(np.allclose(x, y, rtol=0.0, atol=rtol * scale) for x, y in pairs)
 
 
 def guess_from(problem, guess) -> OCPGuess:
