@@ -47,7 +47,8 @@ def _box(mu):
 def _problem(mu, N=4, target=3.0):
     """Least squares of the push against ``target``, the box at rest from the start."""
     return OptimalControlProblem(_box(mu), N, T=0.4, q0=np.array([0.0, HGT / 2, 0.0]), v0=np.zeros(3),
-                                 stage_cost=lambda st_: ca.sum1((st_.u0 - target) ** 2), contact_law="gap")
+                                 stage_cost=lambda st_: ca.sum1((st_.u0 - target) ** 2), contact_law="gap",
+                                 hold="constant", steps="uniform")
 
 
 REST = np.array([0.0, HGT / 2, 0.0])
@@ -92,7 +93,8 @@ def test_indeterminate_mode_is_refused():
     q, v, u = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1)
     sys = lcp.System(q, v, ca.SX.eye(2), ca.vertcat(u[0], -G), control=u,
                      contacts=[lcp.Contact(gap=q[1], tangent=q[0], mu=0.5), lcp.Contact(gap=q[1], tangent=q[0], mu=0.5)])
-    pb = OptimalControlProblem(sys, 2, T=0.2, q0=np.zeros(2), v0=np.zeros(2), contact_law="gap")
+    pb = OptimalControlProblem(sys, 2, T=0.2, q0=np.zeros(2), v0=np.zeros(2), contact_law="gap",
+                               steps="uniform", hold="constant")
     assert independent_rows(pb, (SLIDE_POS, SLIDE_POS), 0.0, np.zeros(2)) == (0,)
     a = np.array(mode_dynamics(pb, (SLIDE_POS, SLIDE_POS), (0,))(0.0, np.zeros(2), [1.0, 0.0], [3.0])[0]).ravel()
     assert a == pytest.approx([3.0 - 0.5 * G, 0.0], abs=1e-12)  # the slide's exact acceleration
@@ -135,7 +137,8 @@ def test_flat_landing_impulses_split_freely():
     stop the box (total normal impulse m, total tangential zero), each within its cone, and the
     dropped row holds in the check."""
     pb = OptimalControlProblem(_box(0.5), 2, T=0.2, q0=REST, v0=np.array([0.0, -1.0, 0.0]),
-                               stage_cost=lambda st_: ca.sum1((st_.u0 - 1.0) ** 2), contact_law="gap")
+                               stage_cost=lambda st_: ca.sum1((st_.u0 - 1.0) ** 2), contact_law="gap",
+                               hold="constant", steps="uniform")
     impacts = ((0, STICK, 0.5, 0.0), (1, STICK, 0.5, 0.0))
     assert impact_rows(pb.system, impacts, REST) == (0, 1, 2)
     plan = [[((STICK, STICK), 0.1, impacts)], [((STICK, STICK), 0.1, ())]]
