@@ -41,7 +41,7 @@ __all__ = [
 #: admissible there and at the segment's start (a slide whose velocity changed sign between its
 #: two ends kept the cart-pole's ends admissible while its replay stuck: a miss of 1.9)
 GRID = (0.25, 0.5, 0.75, 1.0)
-#: Newton-Cotes weights on the segment's points (0, *GRID): the integral over [0, 1] of the
+#: Newton-Cotes weights on the segment's points (0 and GRID): the integral over [0, 1] of the
 #: polynomial through values there (Boole's rule)
 POINT_WEIGHTS = tuple(np.linalg.solve(np.vander((0.0, *GRID), increasing=True).T,
                                       1.0 / np.arange(1, len(GRID) + 2)))

@@ -411,7 +411,8 @@ class Transcription:
         return x[ix["PN"]].reshape(N, m), (x[ix["Pbp"]] - x[ix["Pbm"]]).reshape(N, m)
 
 
-#: a step's own contact blocks, (N, m) each: its mode, copied whole by :func:`squeezed_phases`
+#: a step's own contact blocks (one value per step and contact): its mode, copied whole by
+#: :func:`squeezed_phases`
 STEP_BLOCKS = ("pN", "wN", "bp", "wp", "bm", "wm", "lam", "wl", "dN", "dbp", "dbm", "sN", "sT")
 
 
