@@ -175,3 +175,19 @@ def test_a_tail_whose_replay_misses_falls_back_to_the_fixed_phase_solution(monke
     r = ocp.solve()
     assert len(calls) == 2 and calls[1] > calls[0]
     assert r.success and r.T == calls[1] and "failed its replay" in r.message
+
+
+@pytest.mark.slow
+def test_a_failure_on_the_free_steps_auto_chose_is_solved_on_uniform_steps():
+    # two springy blocks: the free-step route ends 0.30 from its target on the replay (and its
+    # shooting fails); the uniform steps' route, finished by the shooting, is exact
+    sc = lcp.scenes.block_chain(2, v0=[0.0, 0.0], k_spring=50.0, mu=0.3, damping=2.0)
+    pb = OptimalControlProblem(sc, 20, control_matrix=lcp.ocp.tangential_push(sc.system, 0), u_min=-15, u_max=15,
+                               T=2.0, stage_cost=effort,
+                               terminal_constraints=lambda q, v: ca.vertcat(q[0] - 0.3, q[2] - 1.3, v[0], v[2]))
+    assert (pb.hold, pb.steps, pb.grid_fallback) == ("affine", "free", True)
+    r = pb.solve()
+    assert r.success, r.message
+    assert (r.problem.hold, r.problem.steps) == ("constant", "uniform")
+    assert "Solved on uniform steps with the constant hold" in r.message and "free steps" in r.message
+    assert r.replay.final_miss <= 1e-9
