@@ -35,7 +35,7 @@ print(f"event-method replay: x(T) = {sim.q[-1, 0]:.9f} m, v(T) = {sim.v[-1, 0]:.
 assert sim.success and miss < 1e-8
 
 fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(6, 5), sharex=True, layout="constrained")
-ax1.plot(best.t, best.q[:, 0], "C0o-", label="optimizer's nodes")
+ax1.plot(best.t, best.q[:, 0], "C0o", label="optimizer's nodes (free steps: three at the switch)")
 ax1.plot(sim.t, sim.q[:, 0], "k:", label="event-method replay")
 ax1.set(ylabel="x [m]")
 ax1.legend(fontsize=8)

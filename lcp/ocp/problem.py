@@ -391,9 +391,9 @@ def _grid(system, theta: float, hold: str, steps: str, step_bounds,
     resolved: free steps for planar contacts unless the user's step terms are indexed by k
     (``indexed``), and with free steps the affine hold where the transcription models it; and
     whether "auto" chose free steps."""
-    chose_free = steps == "auto" and system.n_contacts and not system.is_spatial and not indexed
+    chose_free = steps == "auto" and bool(system.n_contacts) and not system.is_spatial and not indexed
     if steps == "auto":
-        steps = "free" if system.n_contacts and not system.is_spatial and not indexed else "uniform"
+        steps = "free" if chose_free else "uniform"
     if hold == "auto":
         affine = steps == "free" and theta == 0.5 and not system.n_bilateral and not system.is_spatial
         hold = "affine" if affine else "constant"
@@ -410,7 +410,7 @@ def _grid(system, theta: float, hold: str, steps: str, step_bounds,
     bounds = _pair("step_bounds", step_bounds)
     if not bounds[0] <= 1.0 <= bounds[1]:
         raise ValueError(f"step_bounds must contain 1 (the uniform step), got {step_bounds!r}")
-    return hold, steps, bounds, bool(chose_free)
+    return hold, steps, bounds, chose_free
 
 
 def step_indexed(system, N: int, nu: int, callables) -> bool:
@@ -425,13 +425,13 @@ def step_indexed(system, N: int, nu: int, callables) -> bool:
     sym = [ca.SX.sym(nm, d) for nm, d in (("t0", 1), ("h", 1), ("q0", n), ("q1", n), ("v0", n), ("v1", n),
                                           ("u0", nu), ("u1", nu), ("pN", m), ("pT", m))]
     t0, h = sym[0], sym[1]
-    point = np.random.default_rng(7).uniform(0.1, 0.9, sum(s.shape[0] for s in sym))
+    sizes = [s.shape[0] for s in sym]
+    point = np.split(np.random.default_rng(7).uniform(0.1, 0.9, sum(sizes)), np.cumsum(sizes)[:-1])
     for fn in fns:
         first = None
         for k in range(N):
             out = ca.SX(fn(Step(k, t0, t0 + h, h, *sym[2:])))
-            val = (out.shape, np.array(ca.Function("probe", sym, [out])(*np.split(point, np.cumsum(
-                [s.shape[0] for s in sym])[:-1]))) if out.numel() else np.zeros(0))
+            val = (out.shape, np.array(ca.Function("probe", sym, [out])(*point)) if out.numel() else np.zeros(0))
             if first is None:
                 first = val
             elif val[0] != first[0] or not np.allclose(val[1], first[1], rtol=1e-13, atol=0.0, equal_nan=True):

@@ -25,7 +25,7 @@ from lcp.ocp.transcription import Transcription
 __all__ = ["bound_steps_note", "default_starts", "first_pass", "guess_from", "piecewise_uniform", "polished",
            "result_of", "same_guess",
            "finished", "solve_problem", "stuck_at_start", "unbounded_note", "uniform_fallback", "unstuck",
-           "affine_first_pass", "solve_defaults"]
+           "affine_first_pass", "first_pass_route", "solve_defaults"]
 
 
 def solve_problem(problem, guess, options, method, option_kw, shooting: bool = True,
@@ -47,9 +47,7 @@ def solve_problem(problem, guess, options, method, option_kw, shooting: bool = T
     if method not in ("auto", "homotopy", "phases"):
         raise ValueError(f"method must be 'auto', 'homotopy' or 'phases', got {method!r}")
     if method == "auto":  # free steps: place the first pass's phases exactly (falls back to the homotopy)
-        free = (problem.steps == "free" and problem.system.n_contacts and guess is None
-                and not problem.system.is_spatial)
-        method = "phases" if free else "homotopy"
+        method = "phases" if first_pass_route(problem, guess, method) else "homotopy"
     if problem.transcription is None:
         kind = RadauTranscription if getattr(problem, "integrator", "theta") == "radau" else Transcription
         problem.transcription = (SpatialTranscription if problem.system.is_spatial else kind)(problem)
@@ -410,6 +408,11 @@ def piecewise_uniform(N: int, T: float, node_times: dict):
     return frac
 
 
+def first_pass_route(problem, guess, method) -> bool:
+    """Whether ``solve`` runs the fixed-phase solve from its own first pass: free steps, a planar
+    contact, no guess, and ``method`` "auto" or "phases"."""
+    return (method in ("auto", "phases") and guess is None and problem.steps == "free"
+            and bool(problem.system.n_contacts) and not problem.system.is_spatial)
 
 
 def uniform_fallback(problem, res, guess, options, method, option_kw, shooting) -> OCPResult:
@@ -429,10 +432,9 @@ def uniform_fallback(problem, res, guess, options, method, option_kw, shooting) 
                         "uniform grid.)")
         return res
     twin = copy.copy(problem)
-    twin.steps, twin.grid_fallback, twin.transcription, twin.nlp_solvers = "uniform", False, None, {}
+    twin.steps, twin.transcription, twin.nlp_solvers = "uniform", None, {}
     if twin.hold == "affine" and problem.hold_auto:
         twin.hold = "constant"
-    twin.step_fractions = None
     alt = twin.solve(guess, options, "homotopy" if method == "homotopy" else "auto", shooting, **option_kw)
     if alt.success:
         alt.message += f" (Solved on uniform steps with the {twin.hold} hold. {head})"
@@ -474,9 +476,9 @@ def solve_defaults(problem, guess, options, method, option_kw, shooting) -> OCPR
     the uniform solution replays to 9e-11, so nothing flags it) and 3.4e-4 (minimum effort: a
     piecewise-constant control on a ramp) above their optima, after the exact-phase shooting too."""
     res = solve_problem(problem, guess, options, method, option_kw, shooting)
-    if guess is None and method in ("auto", "phases") and problem.hold == "affine" and problem.steps == "free" \
-            and problem.system.n_contacts and not problem.system.is_spatial:
+    if problem.hold == "affine" and first_pass_route(problem, guess, method):
         res = affine_first_pass(problem, res, options, option_kw, shooting)
-    if problem.grid_fallback and not res.success:
+    # (steps checked too: a first pass's uniform twin copies the flag)
+    if problem.grid_fallback and problem.steps == "free" and not res.success:
         res = uniform_fallback(problem, res, guess, options, method, option_kw, shooting)
     return res
