@@ -1,8 +1,8 @@
 """Optimal control through contacts that open and close: examples, replay-checked, against nosnoc.
 
-Run: ``python -m studies.ocp_examples [--out DIR] [--quick]`` (headless; PNG and CSV into
-``figures/ocp_examples/``). The examples (:mod:`studies._ocp_models`): a point steered on a plane
-through a spatial contact (closed form; over 1 s it slides throughout, over 2 s it sticks, slides and
+Run: ``python -m studies.ocp_examples [--out DIR] [--quick] [--examples NAME[:N,...] ...]
+[--peer-blas one|default]`` (headless; PNG and CSV into ``figures/ocp_examples/``). The examples
+(:mod:`studies._ocp_models`): a point steered on a plane through a spatial contact (closed form; over 1 s it slides throughout, over 2 s it sticks, slides and
 sticks, on free steps), a two-block chain moved 0.3 m, nosnoc's seven friction blocks brought
 back to their equilibrium, nosnoc_py's linear motor
 with friction and cart-pole with friction, nosnoc_py's hopper and two discs, a box tipped over
@@ -17,8 +17,9 @@ an edge, and a ball (e = 0.5) bounced to a target height. For each, at N control
   replay does not apply, and its method), its success (which requires the replay within 1e-6)
   and time (building and solving, replay check included);
 - nosnoc (optional peer, :mod:`studies._nosnoc_examples`, nosnoc_py's own model and options where it
-  has the example): its status, its time, and the replay miss of its control through the package's
-  event method (one integration over the horizon, Moreau-Jean at T / 20000 if the event method
+  has the example, run like ours with CasADi's OpenBLAS on one thread, :mod:`lcp.ocp.blas`, unless
+  ``--peer-blas default``): its status, its time (building and solving), and the replay miss of
+  its control through the package's event method (one integration over the horizon, Moreau-Jean at T / 20000 if the event method
   fails), measured on the coordinates both models share;
 - both controls scored by one measure, ``J_replay``: the example's continuous cost integrated
   (midpoint rule, 200 subintervals per control interval, the states interpolated from a Moreau-Jean
@@ -55,12 +56,14 @@ sequence whose optimum is above nosnoc's (J_replay 10.957).
 """
 from __future__ import annotations
 
+import contextlib
 import itertools
 import time
 
 import numpy as np
 
 import lcp
+from lcp.ocp.blas import one_blas_thread
 from studies import _nosnoc_examples as peers
 from studies._common import out_dir, parse_args, save, write_csv
 from studies._ocp_models import EXAMPLES
@@ -129,14 +132,16 @@ def _ours(ex, N):
             "ours_message": res.message}, res
 
 
-def _nosnoc(ex, N):
+def _nosnoc(ex, N, blas: str = "one"):
     empty = {"nosnoc_status": "", "nosnoc_objective": float("nan"), "nosnoc_J_replay": float("nan"),
              "nosnoc_miss": float("nan"), "nosnoc_method": "", "nosnoc_time": float("nan"), "nosnoc_note": ""}
     if ex.name not in peers.PEERS:
         return {**empty, "nosnoc_note": peers.NO_PEER.get(ex.name, "no peer")}, None
     if not peers.available():
         return {**empty, "nosnoc_note": "nosnoc is not installed (optional peer)"}, None
-    pr = peers.solve_peer(ex.name, N)
+    # on the BLAS thread count ours solves with (lcp.ocp.blas), unless asked for the library's default
+    with one_blas_thread() if blas == "one" else contextlib.nullcontext():
+        pr = peers.solve_peer(ex.name, N)
     try:
         qf, vf, method = replay_control(ex, pr.control)
         miss = float(np.max(np.abs(ex.common_state(qf, vf) - pr.x_final)))
@@ -144,7 +149,7 @@ def _nosnoc(ex, N):
         miss, method = float("nan"), f"replay failed: {exc}"
     return {"nosnoc_status": f"{pr.status} ({pr.ipopt_status})", "nosnoc_objective": pr.objective,
             "nosnoc_J_replay": score(ex, pr.control, N), "nosnoc_miss": miss, "nosnoc_method": method,
-            "nosnoc_time": pr.total_time, "nosnoc_note": ""}, pr
+            "nosnoc_time": pr.total_time, "nosnoc_blas": blas, "nosnoc_note": ""}, pr
 
 
 def _figure(rows, path):
@@ -192,24 +197,34 @@ def _trajectory_figure(ex, res, path):
     return save(fig, path)
 
 
-def run(out=None, quick: bool = False, examples=None) -> dict:
+def run(out=None, quick: bool = False, examples=None, sizes: dict | None = None, peer_blas: str = "one") -> dict:
     """Solve every example (ours and nosnoc's), replay both, write the CSV and figures.
 
+    ``examples``: names (all, or the quick six, by default); ``sizes``: name -> the N to run (the
+    example's own by default); ``peer_blas``: "one" runs nosnoc with CasADi's OpenBLAS on one thread,
+    as ours solves (:mod:`lcp.ocp.blas`: the same library and setting for both), "default" leaves
+    nosnoc on the library's default thread count (``nosnoc_blas`` in the CSV says which).
     Returns ``rows`` (one dict per example and N), ``nosnoc`` (whether the peer ran) and ``files``.
     """
+    if peer_blas not in ("one", "default"):
+        raise ValueError(f"peer_blas must be 'one' or 'default', got {peer_blas!r}")
     path = out_dir(out, NAME)
     names = examples or (QUICK if quick else tuple(EXAMPLES))
+    unknown = sorted(set(names) - set(EXAMPLES)) + sorted(set(sizes or {}) - set(names))
+    if unknown:
+        raise ValueError(f"unknown or unselected examples: {unknown} (examples: {sorted(EXAMPLES)})")
     rows, files = [], []
     for name in names:
         ex = EXAMPLES[name]()
-        for N in ((ex.N_quick,) if quick else ex.N_full):
+        own = (ex.N_quick,) if quick else ex.N_full
+        for N in (sizes or {}).get(name, own):
             row = {"example": name, "title": ex.title, "N": N, "reference": ex.reference}
             ours, res = _ours(ex, N)
             row.update(ours)
-            row.update(_nosnoc(ex, N)[0])
+            row.update(_nosnoc(ex, N, peer_blas)[0])
             row["time_ratio"] = row["nosnoc_time"] / row["ours_time"]
             rows.append(row)
-            if res is not None and N == (ex.N_quick if quick else ex.N_full[0]) and np.all(np.isfinite(res.q)):
+            if res is not None and N == own[0] and np.all(np.isfinite(res.q)):
                 files.append(_trajectory_figure(ex, res, path / f"trajectory_{name}.png"))
     cols = []
     for r in rows:
@@ -219,9 +234,31 @@ def run(out=None, quick: bool = False, examples=None) -> dict:
     return {"rows": rows, "nosnoc": peers.available(), "files": files}
 
 
+def _selection(specs):
+    """``name`` or ``name:N1,N2`` items -> (names, sizes)."""
+    names, sizes = [], {}
+    for spec in specs or ():
+        name, _, ns = spec.partition(":")
+        names.append(name)
+        if ns:
+            try:
+                sizes[name] = tuple(int(n) for n in ns.split(","))
+            except ValueError:
+                raise ValueError(f"--examples: {spec!r} is not name or name:N1,N2") from None
+    return names or None, sizes or None
+
+
+def _extra(parser):
+    parser.add_argument("--examples", nargs="+", metavar="NAME[:N,...]",
+                        help="only these examples (and these N), e.g. motor:30 block_chain2:20")
+    parser.add_argument("--peer-blas", choices=("one", "default"), default="one",
+                        help="nosnoc's OpenBLAS threads: one, as ours (default), or the library's default")
+
+
 def main(argv=None):
-    args = parse_args(NAME, DESCRIPTION, argv)
-    out = run(args.out, quick=args.quick)
+    args = parse_args(NAME, DESCRIPTION, argv, extra=_extra)
+    names, sizes = _selection(args.examples)
+    out = run(args.out, quick=args.quick, examples=names, sizes=sizes, peer_blas=args.peer_blas)
     if not out["nosnoc"]:
         print("nosnoc (optional peer, pip install 'lcp-lem[ocp-peers]') is not installed: its columns are empty")
     print(f"{'example':>15} {'N':>4} | {'ok':>3} {'objective':>12} {'J_replay':>12} {'miss':>9} {'method':>18} "

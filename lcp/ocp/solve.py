@@ -12,6 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from lcp.ocp.blas import one_blas_thread
 from lcp.ocp.collocation import RadauTranscription
 from lcp.ocp.complementarity import run_homotopy, run_phases
 from lcp.ocp.guess import event_guess, resample, screened_start, x0_from_guess
@@ -474,11 +475,14 @@ def solve_defaults(problem, guess, options, method, option_kw, shooting) -> OCPR
     The default grid is free steps with the affine hold for planar contacts: on uniform steps the
     Jean-Pratt problems at N = 40 stop 2.5e-4 (minimum time: the switch falls inside a step, and
     the uniform solution replays to 9e-11, so nothing flags it) and 3.4e-4 (minimum effort: a
-    piecewise-constant control on a ramp) above their optima, after the exact-phase shooting too."""
-    res = solve_problem(problem, guess, options, method, option_kw, shooting)
-    if problem.hold == "affine" and first_pass_route(problem, guess, method):
-        res = affine_first_pass(problem, res, options, option_kw, shooting)
-    # (steps checked too: a first pass's uniform twin copies the flag)
-    if problem.grid_fallback and problem.steps == "free" and not res.success:
-        res = uniform_fallback(problem, res, guess, options, method, option_kw, shooting)
+    piecewise-constant control on a ramp) above their optima, after the exact-phase shooting too.
+
+    CasADi's OpenBLAS runs on one thread meanwhile (:func:`lcp.ocp.blas.one_blas_thread`)."""
+    with one_blas_thread():
+        res = solve_problem(problem, guess, options, method, option_kw, shooting)
+        if problem.hold == "affine" and first_pass_route(problem, guess, method):
+            res = affine_first_pass(problem, res, options, option_kw, shooting)
+        # (steps checked too: a first pass's uniform twin copies the flag)
+        if problem.grid_fallback and problem.steps == "free" and not res.success:
+            res = uniform_fallback(problem, res, guess, options, method, option_kw, shooting)
     return res
