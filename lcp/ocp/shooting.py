@@ -186,10 +186,13 @@ class PhaseShooting(Transcription):
     :func:`plan_keys` returns it (None: every row a mode or an impact law holds, for plans without
     redundant rows).
     With ``check`` the mode conditions of the rows dropped as redundant are constraints too (the
-    check of a solution, never solved: they are implied wherever the dropping was right)."""
+    check of a solution, never solved: they are implied wherever the dropping was right).
+    ``like``: another PhaseShooting of the same problem, plan, keys, pairs and band whose symbolic
+    NLP this one shares where the two NLPs differ only in their integrators (no rows dropped, so
+    ``check`` adds nothing): only the integrator calls are built again (:meth:`shares_with`)."""
 
     def __init__(self, pb, plan, substeps: int = 0, check: bool = False, zeros=None, pair_tol: float = 0.0,
-                 keys=None):
+                 keys=None, like=None):
         refuse(pb)
         #: the user pairs' zero members: zeros[i][k] is True where a_i is zero at step k
         self.zeros, self.pair_tol = zeros, pair_tol
@@ -209,7 +212,16 @@ class PhaseShooting(Transcription):
             raise ValueError("keys must have one entry per segment of plan")
         self.check = bool(check)
         self._modes_fns, self._integrators, self._ng = {}, {}, 0
+        self._like = like if like is not None and like.shares_with(pb, self.plan, self.keys, zeros, pair_tol) else None
         super().__init__(pb)
+        del self._like
+
+    def shares_with(self, pb, plan, keys, zeros, pair_tol) -> bool:
+        """Whether a PhaseShooting of these arguments has this one's symbolic NLP (constraints,
+        costs, bounds), whatever its integrators: the same problem, plan, kept rows (every row kept:
+        the check's extra constraints are those of dropped rows), pairs and band."""
+        return (pb is self.pb and plan == self.plan and keys == self.keys and zeros is self.zeros
+                and pair_tol == self.pair_tol and all(k == (None, None) for row in keys for k in row))
 
     # ------------------------------------------------------------------ the modes' dynamics
     def mode_function(self, modes, keep=None) -> ca.Function:
@@ -228,7 +240,16 @@ class PhaseShooting(Transcription):
         return self._integrators[modes, keep]
 
     # ------------------------------------------------------------------ build
+    _SHARED = ("ix", "lbx", "ubx", "lbg", "ubg", "n_constraints", "defect_rows", "n_corrections", "_sx")
+
     def _build(self):
+        like = self._like
+        if like is not None:  # the symbolic NLP of ``like`` (and its modes' functions): only the calls anew
+            for name in self._SHARED:
+                setattr(self, name, getattr(like, name))
+            self._modes_fns = like._modes_fns
+            self._wrap()
+            return
         pb = self.pb
         sys, N, n = pb.system, pb.N, pb.system.n
         m = sys.n_contacts
@@ -291,18 +312,12 @@ class PhaseShooting(Transcription):
         outs = ca.vertcat(*[ca.vertcat(ca.vec(c[3]), ca.vec(c[4])) for c in self._calls])
         ins = ca.Function("shooting_inputs", [X, P], [ca.vertcat(*[ca.vertcat(c[2], c[5]) for c in self._calls])])
         jg = ca.Function("shooting_nlp", [X, P, outs], [J, g])
-        Xm, Pm = ca.MX.sym("x", X.shape[0]), ca.MX.sym("p", P.shape[0])
-        args = ins(Xm, Pm)
-        results, row = [], 0
-        for modes, keep, x_in, _, _, p_in in self._calls:
-            a, b = row, row + x_in.shape[0]
-            c = b + p_in.shape[0]
-            out = self.integrator(modes, keep)(x0=args[a:b], p=args[b:c])
-            results += [ca.vec(out["xf"]), ca.vec(out["qf"])]
-            row = c
-        Jm, gm = jg(Xm, Pm, ca.vertcat(*results))
-        self.nlp = {"x": Xm, "f": Jm, "g": gm, "p": Pm}
-        self.g_fn = ca.Function("shooting_g", [Xm, Pm], [gm])
+        #: the symbolic NLP without its integrators: sizes of x and p, the calls' inputs, the costs and
+        #: constraints of (x, p, the calls' outputs), and per call (modes, kept rows, input sizes)
+        self._sx = (X.shape[0], P.shape[0], ins, jg,
+                    [(modes, keep, x_in.shape[0], p_in.shape[0]) for modes, keep, x_in, _, _, p_in in self._calls])
+        del self._calls
+        self._wrap()
         self.defect_rows = np.concatenate(self._defect_rows) if self._defect_rows else np.zeros(0, dtype=int)
         self.ix = {key: np.array(val) for key, val in self.ix.items()}
         self.lbx, self.ubx = np.concatenate(self._lbx), np.concatenate(self._ubx)
@@ -310,6 +325,23 @@ class PhaseShooting(Transcription):
         self.ubg = np.concatenate(self._ubg) if self._ubg else np.zeros(0)
         self.n_constraints = int(self.lbg.size)
         del self._x, self._g, self._lbx, self._ubx, self._lbg, self._ubg, self._nx
+
+    def _wrap(self):
+        """The MX NLP: the symbolic NLP (``_sx``) with this NLP's integrators in place of the calls'
+        output symbols (the integrators can only be called on MX)."""
+        nx, npar, ins, jg, calls = self._sx
+        Xm, Pm = ca.MX.sym("x", nx), ca.MX.sym("p", npar)
+        args = ins(Xm, Pm)
+        results, row = [], 0
+        for modes, keep, n_x, n_p in calls:
+            a, b = row, row + n_x
+            c = b + n_p
+            out = self.integrator(modes, keep)(x0=args[a:b], p=args[b:c])
+            results += [ca.vec(out["xf"]), ca.vec(out["qf"])]
+            row = c
+        Jm, gm = jg(Xm, Pm, ca.vertcat(*results))
+        self.nlp = {"x": Xm, "f": Jm, "g": gm, "p": Pm}
+        self.g_fn = ca.Function("shooting_g", [Xm, Pm], [gm])
 
     def _admissible(self, modes, keep, prev, points, mu, gap, Hfn, tag):
         """The segment's mode kept admissible at its points (t, x, u) (start, the integrator's grid,
@@ -644,7 +676,7 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
     M, iters, warm, diag, ok, stats, pair_tol = RK_SUBSTEPS, 0, {}, None, False, {}, 0.0
     cost = float("nan")
     while True:
-        tr = PhaseShooting(pb, plan, substeps=M, zeros=zeros, pair_tol=pair_tol, keys=keys)
+        tr = PhaseShooting(pb, plan, substeps=M, zeros=zeros, pair_tol=pair_tol, keys=keys, like=check)
         solvers = {}
         C = np.zeros(tr.n_corrections)
         last = np.inf
