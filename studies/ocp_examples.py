@@ -51,8 +51,9 @@ physical time: the event replay of its control ends 3.9 from its final state.
 nosnoc's seven friction blocks (N = 50, T = 5 s; no terminal constraint, so feasible: u = 0 keeps the
 state box) are solved by both (measured): nosnoc in 67 s with objective 10.949, J_replay 10.934, its
 control's replay 4.7e-5 from its final state; ours with Radau IIA (s = 2) and the exact-phase
-shooting in 122 s (204 s on a loaded machine), objective 10.762, J_replay 10.757, replay miss
-9.6e-10. From the theta step the shooting also succeeds (160 s loaded, replay 1.0e-9) but on a phase
+shooting in 140 s at load 5-6 (nosnoc 55 s in the same run, both with CasADi's OpenBLAS on one
+thread; on two threads ours took 184-204 s and ended on another phase sequence, objective 10.762),
+objective 10.825, J_replay 10.818, replay miss 2.2e-10. From the theta step the shooting also succeeds (160 s loaded, replay 1.0e-9) but on a phase
 sequence whose optimum is above nosnoc's (J_replay 10.957).
 """
 from __future__ import annotations
