@@ -81,7 +81,8 @@ def test_hold_on_any_window(N, window, T):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("N, window, T", [(40, (0.5, 0.7), 1.3), (40, (0.45, 0.7), 1.2), (40, (0.38, 0.62), 1.1)])
+@pytest.mark.parametrize("N, window, T", [(40, (0.5, 0.7), 1.3), (40, (0.45, 0.7), 1.2), (40, (0.38, 0.62), 1.1),
+                                         (40, (0.42, 0.6), 1.15)])
 def test_the_three_problems_at_N40(N, window, T):
     # every setting the package's default: free steps and the affine hold (the pins make the hold's
     # steps free), method "auto"

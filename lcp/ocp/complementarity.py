@@ -33,13 +33,53 @@ from lcp.ocp.results import HomotopyStage
 from lcp.ocp.transcription import IMPULSE_PAIRS, PAIRS
 
 __all__ = ["diagnose", "diagnose_contacts", "fixed_mode_bounds", "fixed_mode_bounds_contacts", "ipopt_solver",
-           "run_fixed_modes", "run_homotopy", "run_phases"]
+           "run_fixed_modes", "run_homotopy", "run_phases", "step_penalty"]
+
+#: weight of the free steps' regularization (:func:`step_penalty`), in units of T
+STEP_REGULARIZATION = 1e-6
 
 
-def ipopt_solver(tr, options: HomotopyOptions, warm: bool, cache: dict) -> ca.Function:
-    """IPOPT on the transcription's NLP (cold, or warm-started with a small barrier), cached."""
-    key = (warm, options.max_iter, options.ipopt_tol, tuple(sorted((options.ipopt_options or {}).items())))
+def step_penalty(tr, cache: dict):
+    """The term added to the objective that IPOPT sees on free steps, as a Function of the NLP
+    variables (None on fixed steps), built once per transcription (kept in ``cache``):
+    ``STEP_REGULARIZATION T mean_k (h_k / (T / N) - 1)^2`` (T the problem's T, the initial guess when
+    T is free).
+
+    Why: on free steps the optimum is not unique. Within a phase in which the theta step is exact
+    (constant forces, or affine ones under the affine hold), any split of the phase into its steps
+    gives the same cost, and IPOPT stalls on that flat valley: it stops at its acceptable level
+    short of its tolerance, or a homotopy stage ends infeasible. The term picks the most even split.
+    It is used by every homotopy stage on free steps (not the relaxed tail after a fixed-phase
+    solve, which starts from a solution) and by the repeat of a fixed-phase solve that IPOPT did not
+    converge fully (:func:`run_fixed_modes`); a fixed-phase solve that converges keeps the steps at
+    their length bounds that the merges of squeezed phases look for. Measured at N = 40 with every
+    default (gap law), the gap to the closed-form optimum without and with it: Jean-Pratt minimum
+    time at R = 0.3, 1.4e-4 and 1.7e-9; at R = 0.7, 4.8e-7 and 1.6e-9; the move-and-hold on
+    [0.42, 0.6] s, T = 1.15 s, 1.0e-5 and 2.6e-12 (replay misses 1.0e-8 and 2.3e-12, the hold kept
+    to 3.3e-8 and 1.7e-13); minimum time with the constant hold at R = 0.2, 1.2e-5 and 4.0e-9.
+    The cost reported is the problem's own (the term subtracted). The term can hold a solution
+    above the problem's optimum by at most its own value there, below 3e-6 T with steps within the
+    default ``step_bounds``.
+    """
+    if "step_penalty" not in cache:
+        pb, fn = tr.pb, None
+        if pb.steps == "free" and "h" in tr.ix:
+            x = tr.nlp["x"]
+            h = x[tr.ix["h"].ravel().tolist()]
+            fn = ca.Function("step_penalty", [x],
+                             [STEP_REGULARIZATION * pb.T * ca.sumsqr(h / (pb.T / pb.N) - 1.0) / pb.N])
+        cache["step_penalty"] = fn
+    return cache["step_penalty"]
+
+
+def ipopt_solver(tr, options: HomotopyOptions, warm: bool, cache: dict, regularized: bool = False) -> ca.Function:
+    """IPOPT on the transcription's NLP (cold, or warm-started with a small barrier; with the step
+    penalty of :func:`step_penalty` added to its objective where ``regularized``), cached."""
+    key = (warm, options.max_iter, options.ipopt_tol, tuple(sorted((options.ipopt_options or {}).items())),
+           regularized)
     if key not in cache:
+        pen = step_penalty(tr, cache) if regularized else None
+        nlp = tr.nlp if pen is None else dict(tr.nlp, f=tr.nlp["f"] + pen(tr.nlp["x"]))
         ip = {"print_level": 0, "sb": "yes", "tol": options.ipopt_tol, "constr_viol_tol": options.ipopt_tol,
               "max_iter": int(options.max_iter), "mu_strategy": "adaptive", "bound_relax_factor": 0.0}
         if warm:
@@ -53,14 +93,18 @@ def ipopt_solver(tr, options: HomotopyOptions, warm: bool, cache: dict) -> ca.Fu
         # solve that cannot recover ends with a failed status, reported in the result). CasADi
         # would print a warning for every such trial (25 in a quick optimal_control study), which
         # says nothing about the result.
-        cache[key] = ca.nlpsol("ocp_warm" if warm else "ocp", "ipopt", tr.nlp,
+        cache[key] = ca.nlpsol("ocp_warm" if warm else "ocp", "ipopt", nlp,
                                {"print_time": False, "show_eval_warnings": False, "ipopt": ip})
     return cache[key]
 
 
-def run_homotopy(tr, x0, P0, options: HomotopyOptions, cache: dict):
-    """The relaxation stages and the polishing solve. Returns (x, cost, diag, status, message, history)."""
-    cold, warm = ipopt_solver(tr, options, False, cache), ipopt_solver(tr, options, True, cache)
+def run_homotopy(tr, x0, P0, options: HomotopyOptions, cache: dict, regularized: bool = True):
+    """The relaxation stages and the polishing solve. Returns (x, cost, diag, status, message, history).
+    On free steps every stage carries the step penalty (:func:`step_penalty`; the costs reported
+    are without it) unless not ``regularized``."""
+    pen = step_penalty(tr, cache) if regularized else None
+    reg = pen is not None
+    cold, warm = ipopt_solver(tr, options, False, cache, reg), ipopt_solver(tr, options, True, cache, reg)
     x, lam_x, lam_g = x0, None, None
     history, best = [], None
     status, message = -2, OCP_STATUS_MESSAGES[-2]
@@ -76,15 +120,16 @@ def run_homotopy(tr, x0, P0, options: HomotopyOptions, cache: dict):
         xs = np.array(sol["x"]).ravel()
         diag = diagnose(tr, xs)
         ok = bool(st["success"]) or st["return_status"] == "Solved_To_Acceptable_Level"
+        f = float(sol["f"]) - (float(pen(xs)) if reg else 0.0)
         history.append(HomotopyStage(sigma, int(st["iter_count"]), diag["residual"], diag["max_product"],
-                                     float(sol["f"]), st["return_status"], ok, dt))
+                                     f, st["return_status"], ok, dt))
         if not ok:
             status = -1
             message = (f"{OCP_STATUS_MESSAGES[-1]} Stage {i} (sigma = {sigma:.3g}): IPOPT returned "
                        f"{st['return_status']}{_at(diag)}.")
             break
         x, lam_x, lam_g = xs, np.array(sol["lam_x"]).ravel(), np.array(sol["lam_g"]).ravel()
-        best = (x, float(sol["f"]), diag)
+        best = (x, f, diag)
         if diag["residual"] <= options.tol and diag["cross"] <= options.tol:
             status, message = 0, OCP_STATUS_MESSAGES[0]
             break
@@ -93,7 +138,7 @@ def run_homotopy(tr, x0, P0, options: HomotopyOptions, cache: dict):
         message = (f"{OCP_STATUS_MESSAGES[-2]} Residual {best[2]['residual']:.3g} > tol = {options.tol:.3g} "
                    f"at sigma = {history[-1].sigma:.3g}{_at(best[2])}.")
     if best is not None and options.polish and tr.pb.system.n_contacts:
-        xp, fp, diagp, st, dt = _polish(tr, best[0], lam_x, lam_g, P0, warm)
+        xp, fp, diagp, st, dt = _polish(tr, best[0], lam_x, lam_g, P0, warm, pen)
         okp = bool(st["success"])
         history.append(HomotopyStage(0.0, int(st["iter_count"]), diagp["residual"], diagp["max_product"],
                                      fp, st["return_status"], okp, dt))
@@ -215,7 +260,7 @@ def fixed_mode_bounds_contacts(tr, x):
     return lbx, ubx
 
 
-def _polish(tr, x, lam_x, lam_g, P, solver):
+def _polish(tr, x, lam_x, lam_g, P, solver, pen=None):
     """Fix the smaller member of each complementarity pair (cross pairs included) at zero and re-solve."""
     lbx, ubx = fixed_mode_bounds(tr, x)
     t0 = time.perf_counter()
@@ -223,7 +268,9 @@ def _polish(tr, x, lam_x, lam_g, P, solver):
     sol = solver(x0=np.clip(x, lbx, ubx), lbx=lbx, ubx=ubx, lbg=tr.lbg, ubg=tr.ubg, p=P, **warm)
     dt = time.perf_counter() - t0
     xs = np.array(sol["x"]).ravel()
-    return xs, float(sol["f"]), diagnose(tr, xs), solver.stats(), dt
+    # the problem's own cost: IPOPT's objective without the step penalty of a regularized solver
+    f = float(sol["f"]) - (float(pen(xs)) if pen is not None else 0.0)
+    return xs, f, diagnose(tr, xs), solver.stats(), dt
 
 
 def run_fixed_modes(tr, x0, P0, options: HomotopyOptions, cache: dict):
@@ -234,32 +281,23 @@ def run_fixed_modes(tr, x0, P0, options: HomotopyOptions, cache: dict):
     sequence of modes (the phases) is the guess's: a guess from a solution with the right phase
     sequence (e.g. a uniform-step solve) gives the exact optimum without the relaxation homotopy.
     A guess with the wrong sequence makes the NLP infeasible or leaves its complementarity violated;
-    status -1 or -2 says so.
+    status -1 or -2 says so. Where IPOPT does not converge fully (it stops at its acceptable level,
+    or fails), the solve is repeated from ``x0`` with the step penalty (:func:`step_penalty`), and
+    that result kept when it is solved and better.
     """
     P0 = P0.copy()
     P0[0] = 0.0
-    solver = ipopt_solver(tr, options, False, cache)
-    x, f, diag, st, dt, iterations = _fixed_solve(tr, np.asarray(x0, dtype=float), P0, solver)
+    x, f, diag, st, dt, iterations, merged = _fixed_merged(tr, np.asarray(x0, dtype=float), P0, options, cache, False)
+    note = ""
+    if st["return_status"] != "Solve_Succeeded" and step_penalty(tr, cache) is not None:
+        alt = _fixed_merged(tr, np.asarray(x0, dtype=float), P0, options, cache, True)
+        dt, iterations = dt + alt[4], iterations + alt[5]
+        if _solved(alt[3], alt[2], options) and (not _solved(st, diag, options)
+                                                 or alt[1] < f - TAIL_GAIN * max(1.0, abs(f))):
+            note = (f" With the step penalty: IPOPT returned {st['return_status']} without it (cost {f:.10g}, "
+                    f"Coulomb residual {diag['residual']:.3g}).")
+            x, f, diag, st, merged = alt[0], alt[1], alt[2], alt[3], alt[6]
     ok = bool(st["success"]) or st["return_status"] == "Solved_To_Acceptable_Level"
-    squeezed = getattr(tr, "squeezed_phases_law", None)  # (Radau collocation: lcp.ocp.collocation)
-    merged, f_first = 0, f
-    # a phase left on minimum-length steps: once more without it, kept if better; repeated while it
-    # helps (the move-and-hold at N = 40 on [0.42, 0.6] s, T = 1.15 s, has one such step per move)
-    for _ in range(SQUEEZE_ROUNDS if ok and squeezed is not None else 0):
-        x_alt = squeezed(x)
-        if x_alt is None:
-            break
-        x2, f2, diag2, st2, dt2, it2 = _fixed_solve(tr, x_alt, P0, solver)
-        dt, iterations = dt + dt2, iterations + it2
-        ok2 = bool(st2["success"]) or st2["return_status"] == "Solved_To_Acceptable_Level"
-        if not (ok2 and f2 < f and diag2["residual"] <= max(diag["residual"], options.tol) and
-                diag2["cross"] <= max(diag["cross"], options.tol)):
-            break
-        merged += 1
-        x, f, diag, st = x2, f2, diag2, st2
-    merged = (f" {'A phase' if merged == 1 else f'{merged} phases'} left on minimum-length steps "
-              f"{'was' if merged == 1 else 'were'} merged into {'its neighbour' if merged == 1 else 'their neighbours'} "
-              f"(cost was {f_first:.10g})." if merged else "")
     history = [HomotopyStage(0.0, iterations, diag["residual"], diag["max_product"], f,
                              st["return_status"], ok, dt)]
     if not ok:
@@ -270,23 +308,61 @@ def run_fixed_modes(tr, x0, P0, options: HomotopyOptions, cache: dict):
         msg = (f"{OCP_STATUS_MESSAGES[-2]} Residual {diag['residual']:.3g}, cross {diag['cross']:.3g} > "
                f"tol = {options.tol:.3g} after the fixed-phase solve{_at(diag)}.")
         return x, f, diag, -2, msg, history
-    return x, f, diag, 0, f"{OCP_STATUS_MESSAGES[0]} (Fixed-phase solve: the guess's mode sequence.{merged})", history
+    return x, f, diag, 0, (f"{OCP_STATUS_MESSAGES[0]} (Fixed-phase solve: the guess's mode sequence.{merged}"
+                           f"{note})"), history
+
+
+def _solved(st, diag, options) -> bool:
+    """Whether a fixed-phase solve ended solved: IPOPT converged (fully or to its acceptable level)
+    and the complementarity within tolerance."""
+    return ((bool(st["success"]) or st["return_status"] == "Solved_To_Acceptable_Level")
+            and diag["residual"] <= options.tol and diag["cross"] <= options.tol)
+
+
+def _fixed_merged(tr, x0, P0, options, cache, regularized):
+    """The fixed-phase solve from ``x0`` and the merges of the phases it leaves on minimum-length
+    steps (:data:`SQUEEZE_ROUNDS`). Returns (x, cost, diag, IPOPT stats, time, iterations, note)."""
+    solver = ipopt_solver(tr, options, False, cache, regularized)
+    pen = step_penalty(tr, cache) if regularized else None
+    x, f, diag, st, dt, iterations = _fixed_solve(tr, x0, P0, solver, pen)
+    ok = bool(st["success"]) or st["return_status"] == "Solved_To_Acceptable_Level"
+    squeezed = getattr(tr, "squeezed_phases_law", None)  # (Radau collocation: lcp.ocp.collocation)
+    merged, f_first = 0, f
+    # a phase left on minimum-length steps: once more without it, kept if better; repeated while it
+    # helps (the move-and-hold at N = 40 on [0.42, 0.6] s, T = 1.15 s, has one such step per move)
+    for _ in range(SQUEEZE_ROUNDS if ok and squeezed is not None else 0):
+        x_alt = squeezed(x)
+        if x_alt is None:
+            break
+        x2, f2, diag2, st2, dt2, it2 = _fixed_solve(tr, x_alt, P0, solver, pen)
+        dt, iterations = dt + dt2, iterations + it2
+        ok2 = bool(st2["success"]) or st2["return_status"] == "Solved_To_Acceptable_Level"
+        if not (ok2 and f2 < f and diag2["residual"] <= max(diag["residual"], options.tol) and
+                diag2["cross"] <= max(diag["cross"], options.tol)):
+            break
+        merged += 1
+        x, f, diag, st = x2, f2, diag2, st2
+    note = (f" {'A phase' if merged == 1 else f'{merged} phases'} left on minimum-length steps "
+            f"{'was' if merged == 1 else 'were'} merged into {'its neighbour' if merged == 1 else 'their neighbours'} "
+            f"(cost was {f_first:.10g})." if merged else "")
+    return x, f, diag, st, dt, iterations, note
 
 
 #: at most this many merges of phases left on minimum-length steps after a fixed-phase solve
 SQUEEZE_ROUNDS = 4
 
 
-def _fixed_solve(tr, x0, P0, solver):
-    """One fixed-phase solve from ``x0`` (the modes of ``x0``), repeated once from an acceptable point."""
-    x, f, diag, st, dt = _polish(tr, x0, None, None, P0, solver)
+def _fixed_solve(tr, x0, P0, solver, pen=None):
+    """One fixed-phase solve from ``x0`` (the modes of ``x0``), repeated once from an acceptable point
+    (``pen``: the step penalty of a regularized ``solver``, for the cost)."""
+    x, f, diag, st, dt = _polish(tr, x0, None, None, P0, solver, pen)
     iterations = int(st["iter_count"])
     if st["return_status"] == "Solved_To_Acceptable_Level":
         # IPOPT's acceptable level is looser than its tolerance (the dynamics to ~1e-8, a replay miss of
         # ~1e-7 through the phases): once more from that point, and kept if it converges fully
         # (CasADi's ``success`` also holds at the acceptable level: a second acceptable point may be
         # worse than the first, dynamics 5.5e-9 against 2.3e-13 on the minimum-time problem, N = 20)
-        x2, f2, diag2, st2, dt2 = _polish(tr, x, None, None, P0, solver)
+        x2, f2, diag2, st2, dt2 = _polish(tr, x, None, None, P0, solver, pen)
         dt += dt2
         iterations += int(st2["iter_count"])
         if st2["return_status"] == "Solve_Succeeded":
@@ -333,7 +409,8 @@ def _relaxed_tail(tr, x, cost, diag, status, message, history, P0, options, cach
     phases and 1.3e-10 above after the tail."""
     tail = replace(options, sigma0=max(min(options.sigma0, TAIL_SIGMA0), options.sigma_min),
                    factor=min(options.factor, 1e-2))
-    xt, ct, dt, st, mt, more = run_homotopy(tr, x, P0.copy(), tail, cache)
+    # (without the step penalty: the tail starts from a solution, and only a lower cost is kept)
+    xt, ct, dt, st, mt, more = run_homotopy(tr, x, P0.copy(), tail, cache, regularized=False)
     history = history + more
     # a decrease of more than 1e-8: within the tolerances, the relaxed pairs can buy a few 1e-9 (the
     # minimum effort at N = 6, affine hold: 2e-9 below the exact optimum, complementarity 2.8e-9)
