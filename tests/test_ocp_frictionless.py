@@ -149,3 +149,32 @@ def test_a_frictionless_landing_keeps_the_tangential_velocity():
     np.testing.assert_allclose(res.v[:, 0], vx, atol=1e-7)
     assert res.p_T.shape == (N, 1) and np.all(res.p_T == 0.0)
     assert res.replay is not None and res.replay.final_miss <= 1e-6
+
+
+@pytest.mark.slow
+def test_the_discs_going_around_meet_their_contact_law_at_every_node():
+    # two_discs at N = 30 from its start around disc 2 (studies._ocp_models.discs_start): without the
+    # row u_N(v_k+) >= -g_k / (theta T / N) of curved contacts a node touched disc 2 approaching it
+    # with no impulse (the chord through disc 2), and the homotopy ended with the Coulomb residual
+    # 0.51; with it the transcription meets its own law
+    from lcp.ocp.complementarity import run_homotopy
+    from lcp.ocp.guess import x0_from_guess
+    from lcp.ocp.options import HomotopyOptions
+    from studies._ocp_models import two_discs
+
+    ex = two_discs()
+    pb = ex.make(30)
+    gs = ex.start(pb)
+    assert gs is not None
+    tr = Transcription(pb)
+    P0 = np.concatenate([[0.0], pb.q0, pb.v0])
+    x, cost, diag, status, message, _ = run_homotopy(tr, x0_from_guess(pb, tr, gs), P0, HomotopyOptions(), {})
+    assert status == 0, message
+    assert diag["residual"] <= 1e-8
+    _, _, q, v, _, _, _ = tr.unpack(x)
+    vplus = np.array(tr.aux(x, P0), dtype=float).T
+    for k in range(pb.N):
+        if pb.system.gaps(q[k])[0] <= 1e-9:
+            assert pb.system.contact_jacobian(q[k])[0] @ vplus[k] >= -1e-9, k
+    # the strike: disc 2 leaves its start towards its target
+    assert q[-1, 2] > 0.5
