@@ -356,7 +356,12 @@ def two_discs() -> Example:
     """nosnoc_py's discs that switch places (examples/discs_exercise): disc 1 (m = 2, r = 0.3, actuated,
     |u| <= 20) at (1, 0) and disc 2 (m = 1, r = 0.2, not actuated) at (-1, 0), both with nosnoc's
     drag cv v / |v + eps|; targets swapped; nosnoc's tracking cost Q = diag(10, 10, 20, 20, 0.1 x 4),
-    R = 0.1 I, Q_T = 100 Q; the frictionless contact between the discs, inelastic. T = 3 s."""
+    R = 0.1 I, Q_T = 100 Q; the frictionless contact between the discs, inelastic. T = 3 s. Solved from
+    its own start (:func:`discs_start`, disc 1 sent around disc 2): measured at N = 30, the
+    transcription reaches cost 222.05 (its theta step on the drag replays to 0.29), and the
+    exact-phase shooting cost 204.27 with replay miss 5.8e-11 when its IPOPT may take 3000 iterations
+    (at its 500 the second round stops at defect 3.3e-8); at N = 60 the transcription 215.46, replay
+    0.044, the shooting's first round stops at 500 iterations (defect 1.2e-12)."""
     p = DISCS
     q, v, u = ca.SX.sym("q", 4), ca.SX.sym("v", 4), ca.SX.sym("u", 2)
     d = q[0:2] - q[2:4]

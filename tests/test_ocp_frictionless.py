@@ -178,3 +178,18 @@ def test_the_discs_going_around_meet_their_contact_law_at_every_node():
             assert pb.system.contact_jacobian(q[k])[0] @ vplus[k] >= -1e-9, k
     # the strike: disc 2 leaves its start towards its target
     assert q[-1, 2] > 0.5
+
+
+def test_the_discs_start_goes_around_and_strikes():
+    # studies._ocp_models.discs_start: disc 1 passes over disc 2, never overlaps it at a node, strikes it to the right, and the same control at N = 30 and 60
+    from studies._ocp_models import two_discs
+
+    ex = two_discs()
+    g30, g60 = ex.start(ex.make(30)), ex.start(ex.make(60))
+    assert g30 is not None and g60 is not None
+    np.testing.assert_array_equal(np.repeat(g30.u, 2, axis=0), g60.u)
+    gaps = np.array([ex.system.gaps(q)[0] for q in g30.q])
+    assert np.min(gaps) >= -1e-12
+    over = (np.abs(g30.q[:, 0] - g30.q[:, 2]) < 0.3) & (g30.q[:, 1] - g30.q[:, 3] > 0.5)
+    assert np.any(over)
+    assert g30.q[-1, 2] > 0.5 and g30.q[-1, 0] < -0.5  # swapped sides
