@@ -41,15 +41,15 @@ on a force: the gap closed at the step's start too (N_k perp g(q_k)) and the nor
 there (|N_k u_N(v_k+)| <= sigma, a signed pair). A contact that closes with approach velocity gets
 an impulse at the node: v_k+ = v_k + M^-1 H' P_k, with P_N perp g(q_k), Newton's law
 P_N (u_N(v_k+) + e min(u_N(v_k), 0)) = 0 and Coulomb's law on P_T (the event method's impact
-law), and step k starts from v_k+. A curved contact (see below) closed at a node does not approach
-after it, u_N(v_k+) >= -g(q_k) / (theta T / N): without this row a node could touch a curved gap
-with an approaching velocity and no impulse, the chord to the next node passing through the other
-body (the two discs, N = 30, from a start that sends disc 1 around disc 2: the homotopy ended with
-a Coulomb residual 0.51, with the row at 2e-15). An open contact then approaches at most so fast
-that it would close within theta T / N, a bound that a landing on a node meets (its speed at the
-node before is below g / h when it accelerates). Flat gaps have no such row: there it made the
-fixed-phase solves degenerate (a resting contact's u_N+ and gap both fixed at zero; eight OCP
-tests failed, the Jean-Pratt block's among them). Friction vanishes with N (mu N - beta+ - beta- >= 0). Between
+law), and step k starts from v_k+. A curved frictionless contact (see below) closed at a node does
+not approach after it, u_N(v_k+) >= -g(q_k) / (theta T / N): without this row a node could touch a
+curved gap with an approaching velocity and no impulse, the chord to the next node passing through
+the other body (the two discs, N = 30, from a start that sends disc 1 around disc 2: the homotopy
+ended with a Coulomb residual 0.51, with the row at 2e-15). An open contact then approaches at most
+so fast that it would close within theta T / N. Not yet on other contacts: on flat gaps the row
+made the fixed-phase solves degenerate (a resting contact's u_N+ and gap both fixed at zero; eight
+OCP tests failed, the Jean-Pratt block's among them), and on the tipped box's corners (curved,
+mu = 0.8) it changed how the default starts fail at N = 10 (not measured further). Friction vanishes with N (mu N - beta+ - beta- >= 0). Between
 nodes a contact is then either closed with a force or open, so the theta = 1/2 step is exact for
 constant forces in flight as in contact, and the event replay repeats it, provided the touchdowns,
 lift-offs and stick-slip switches fall on nodes (free steps, or a control that puts them there).
@@ -382,11 +382,11 @@ class Transcription:
         self._constrain(fr(imp["Pwl"] - (ca.DM(sys.mu) * imp["PN"] - imp["Pbp"] - imp["Pbm"])), 0.0, 0.0)
         a = [imp["PN"]] + [fr(imp[nm]) for nm in ("Pbp", "Pbm", "Plam")]
         w = [gS] + [fr(imp[nm]) for nm in ("Pwp", "Pwm", "Pwl")]
-        if self.curved.size:
-            # a curved contact closed at the node does not approach after it (gS = 0: u_N+ >= 0,
-            # Moreau's condition, which the pairs above leave out where P_N = 0); an open one not so
-            # fast that it would close within theta T / N (gS is the gap over that time)
-            rows = [int(i) for i in self.curved]
+        rows = [int(i) for i in self.curved if sys.mu[i] == 0.0]
+        if rows:
+            # a curved frictionless contact closed at the node does not approach after it (gS = 0:
+            # u_N+ >= 0, Moreau's condition, which the pairs above leave out where P_N = 0); an open
+            # one not so fast that it would close within theta T / N (gS is the gap over that time)
             self._constrain(ca.vertcat(*[sU[i] + gS[i] for i in rows]), 0.0, np.inf)
         return vp, (a, w), (sU, imp["PN"] * sI)
 
