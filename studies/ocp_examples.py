@@ -128,7 +128,7 @@ def _ours(ex, N):
     t0 = time.perf_counter()
     try:
         ocp = ex.make(N)
-        res = ocp.solve(**ex.solve_kw)
+        res = ocp.solve(ex.start(ocp) if ex.start is not None else None, **ex.solve_kw)  # (the example's own start)
     except (ValueError, RuntimeError) as exc:
         return {"ours_success": False, "ours_cost": float("nan"), "ours_J_replay": float("nan"),
                 "ours_miss": float("nan"), "ours_method": "", "ours_time": time.perf_counter() - t0,

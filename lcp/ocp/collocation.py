@@ -53,7 +53,7 @@ import casadi as ca
 import numpy as np
 
 from lcp.contact.problem import ContactProblem
-from lcp.ocp.transcription import PAIRS, Transcription, grid_variables
+from lcp.ocp.transcription import PAIRS, Transcription, contact_blocks, friction_rows, grid_variables
 
 __all__ = ["RADAU_STAGES", "RadauTranscription", "fixed_mode_bounds", "radau_tableau"]
 
@@ -142,13 +142,14 @@ class RadauTranscription(Transcription):
                 dv = sum(Ainv[j, l_] * (V[l_] - va) for l_ in range(s))
                 force = Fj
                 if m:
-                    blk = {nm: self._var(f"{nm}{k}_{j}", m, 0.0, np.inf, key=nm) for a_w in PAIRS for nm in a_w}
+                    blk = contact_blocks(self, [nm for a_w in PAIRS for nm in a_w], f"{k}_{j}")
                     force = force + ca.mtimes(Hj.T, ca.vertcat(blk["pN"], blk["bp"] - blk["bm"]))
                     uN, uT = ca.mtimes(Hj[:m, :], V[j]), ca.mtimes(Hj[m:, :], V[j])
                     self._constrain(blk["wN"] - uN, 0.0, 0.0)
-                    self._constrain(blk["wp"] - (blk["lam"] + uT), 0.0, 0.0)
-                    self._constrain(blk["wm"] - (blk["lam"] - uT), 0.0, 0.0)
-                    self._constrain(blk["wl"] - (mu * blk["pN"] - blk["bp"] - blk["bm"]), 0.0, 0.0)
+                    # (a frictionless contact's friction blocks are fixed at zero, in no constraint)
+                    self._constrain(friction_rows(self, blk["wp"] - (blk["lam"] + uT)), 0.0, 0.0)
+                    self._constrain(friction_rows(self, blk["wm"] - (blk["lam"] - uT)), 0.0, 0.0)
+                    self._constrain(friction_rows(self, blk["wl"] - (mu * blk["pN"] - blk["bp"] - blk["bm"])), 0.0, 0.0)
                     blks.append(blk)
                 res = ca.vertcat(dq - h * V[j], ca.mtimes(Mj, dv) - h * force)
                 self._constrain(res, 0.0, 0.0)
@@ -162,11 +163,11 @@ class RadauTranscription(Transcription):
                 for j in range(s):  # each stage's own pairs; with free steps every other stage's slacks
                     # too (one mode per step: uniform steps keep a switch inside a step possible)
                     for l_ in (range(s) if self.cross else (j,)):
-                        a += [blks[j][x] for x, _ in PAIRS]
-                        w += [blks[l_][y] for _, y in PAIRS]
+                        a += [_rows(self, x, blks[j][x]) for x, _ in PAIRS]
+                        w += [_rows(self, x, blks[l_][y]) for x, y in PAIRS]
                     if self.cross:
-                        a += [blks[j][x] for x, _ in STEP_CROSS]
-                        w += [prev[y] for _, y in STEP_CROSS]
+                        a += [_rows(self, x, blks[j][x]) for x, _ in STEP_CROSS]
+                        w += [_rows(self, x, prev[y]) for x, y in STEP_CROSS]
                 if self.cross:
                     prev = blks[-1]
                 self._constrain(ca.vertcat(*a) * ca.vertcat(*w) - sigma, -np.inf, 0.0)  # Scholtes
@@ -255,6 +256,12 @@ class RadauTranscription(Transcription):
 
     def diagnose_law(self, x) -> dict:
         return diagnose(self, x)
+
+
+def _rows(tr, a_name, expr):
+    """A pair's rows in the Scholtes constraint: every contact's for the normal pair (multiplier
+    ``pN``), the frictional contacts' for a friction pair."""
+    return expr if a_name == "pN" else friction_rows(tr, expr)
 
 
 def fill_x0(tr, x0, gs, steps) -> None:

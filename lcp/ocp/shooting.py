@@ -679,7 +679,7 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
         tr = PhaseShooting(pb, plan, substeps=M, zeros=zeros, pair_tol=pair_tol, keys=keys, like=check)
         solvers = {}
         C = np.zeros(tr.n_corrections)
-        last = np.inf
+        last, good = np.inf, None
         for _ in range(CORRECTIONS + 1):
             key = bool(warm)
             if key not in solvers:
@@ -691,8 +691,15 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
             stats = solver.stats()
             iters += int(stats["iter_count"])
             ok = stats["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+            if not ok and good is not None:
+                # a correction's solve failed: keep the last solution (then finer steps), as when a
+                # correction no longer halves the defect (the two discs, N = 30: the first solve's
+                # defect 3.7e-8, the correction's warm solve ended in IPOPT's Error_In_Step_Computation)
+                stats, ok = good, True
+                break
             if not ok:
                 break
+            good = stats
             x, cost = np.array(sol["x"]).ravel(), float(sol["f"])
             warm = {"lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
             g = check.constraints(x)

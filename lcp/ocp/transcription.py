@@ -26,7 +26,12 @@ The discrete Coulomb law of each contact is the LCP of
     0 <= beta-  perp  wm = lambda - u_T            >= 0,
     0 <= lambda perp  wl = mu N - beta+ - beta-    >= 0,      u = H(q_k) v_{k+1}, u_N- = H_N(q_k) v_k,
 
-with forces (N = p_N / h) as unknowns, so that a product a w is a power whatever the step.
+with forces (N = p_N / h) as unknowns, so that a product a w is a power whatever the step. A
+frictionless contact (mu = 0) has no friction pairs: with them, mu N - beta+ - beta- >= 0 forced
+beta+- = 0, a feasible set without interior that degraded IPOPT's conditioning (measured on a ball
+bounced to a target height, N = 12: the first start failed, the event start ended at cost 4.061; without
+them the first start reaches 0.2935). Its friction blocks stay in x at a fixed zero
+(:func:`contact_blocks`), so that every block keeps its shape and its friction impulses read zero.
 
 The gap law: contacts that open and close (``contact_law="gap"``)
 ------------------------------------------------------------------
@@ -36,7 +41,15 @@ on a force: the gap closed at the step's start too (N_k perp g(q_k)) and the nor
 there (|N_k u_N(v_k+)| <= sigma, a signed pair). A contact that closes with approach velocity gets
 an impulse at the node: v_k+ = v_k + M^-1 H' P_k, with P_N perp g(q_k), Newton's law
 P_N (u_N(v_k+) + e min(u_N(v_k), 0)) = 0 and Coulomb's law on P_T (the event method's impact
-law), and step k starts from v_k+. Friction vanishes with N (mu N - beta+ - beta- >= 0). Between
+law), and step k starts from v_k+. A curved frictionless contact (see below) closed at a node does
+not approach after it, u_N(v_k+) >= -g(q_k) / (theta T / N): without this row a node could touch a
+curved gap with an approaching velocity and no impulse, the chord to the next node passing through
+the other body (the two discs, N = 30, from a start that sends disc 1 around disc 2: the homotopy
+ended with a Coulomb residual 0.51, with the row at 2e-15). An open contact then approaches at most
+so fast that it would close within theta T / N. Not yet on other contacts: on flat gaps the row
+made the fixed-phase solves degenerate (a resting contact's u_N+ and gap both fixed at zero; eight
+OCP tests failed, the Jean-Pratt block's among them), and on the tipped box's corners (curved,
+mu = 0.8) it changed how the default starts fail at N = 10 (not measured further). Friction vanishes with N (mu N - beta+ - beta- >= 0). Between
 nodes a contact is then either closed with a force or open, so the theta = 1/2 step is exact for
 constant forces in flight as in contact, and the event replay repeats it, provided the touchdowns,
 lift-offs and stick-slip switches fall on nodes (free steps, or a control that puts them there).
@@ -117,7 +130,8 @@ import numpy as np
 
 from lcp.ocp.pairs import add_pairs
 
-__all__ = ["PAIRS", "Transcription", "grid_variables", "step_terms", "terminal_terms"]
+__all__ = ["FRICTION_BLOCKS", "PAIRS", "Transcription", "contact_blocks", "friction_rows", "grid_variables",
+           "step_terms", "terminal_terms"]
 
 #: complementarity pairs (multiplier, slack) of one contact in one step, in the order of the module
 #: docstring; ``wN`` is the gap at the step's end (scaled to a velocity), not a velocity
@@ -128,6 +142,10 @@ IMPULSE_PAIRS = (("PN", "gS"), ("Pbp", "Pwp"), ("Pbm", "Pwm"), ("Plam", "Pwl"))
 #: pairs of a multiplier >= 0 and a signed velocity (relaxed as |a s| <= sigma): a contact carrying a
 #: force over a step starts it at rest in the normal direction; an impulse gives Newton's restitution
 SIGNED_PAIRS = (("pN", "sU"), ("PN", "sI"))
+#: the friction blocks of a contact (the step's Coulomb pairs, the impulse's, the affine hold's force
+#: rates): those of a frictionless contact (mu = 0) are fixed at zero and enter no constraint
+FRICTION_BLOCKS = frozenset(("bp", "wp", "bm", "wm", "lam", "wl", "Pbp", "Pwp", "Pbm", "Pwm", "Plam", "Pwl",
+                             "dbp", "dbm"))
 
 
 def _scalar(expr, name):
@@ -170,6 +188,8 @@ class Transcription:
         self.restitution = self.gap_law and bool(np.any(sys.e > 0))
         self.cross = pb.steps == "free" and pb.system.n_contacts > 0
         self.curved = _curved(sys) if self.gap_law else np.zeros(0, dtype=int)  # stabilised steps (Curved gaps)
+        #: the contacts with friction (mu > 0); see :func:`contact_blocks`
+        self.frictional = np.flatnonzero(np.asarray(sys.mu, dtype=float) > 0)
         self._x, self._lbx, self._ubx, self._nx = [], [], [], 0
         self._g, self._lbg, self._ubg = [], [], []
         self.ix = {}
@@ -241,7 +261,7 @@ class Transcription:
             if self.gap_law:  # the impulse at the step's start node, then the step from the velocity after it
                 va, imp_pairs, signed = self._impulse(k, tk[k], qa, va, gS, sigma)
             self.vplus.append(va)
-            blk = {nm: self._var(f"{nm}{k}", m, 0.0, np.inf, key=nm) for a_w in PAIRS for nm in a_w}
+            blk = contact_blocks(self, [nm for a_w in PAIRS for nm in a_w], str(k))
             lamb = self._var(f"lb{k}", nb, -np.inf, np.inf, key="lb")
             Wh, r, H, G, phi_t1, _, Mq, dF = self.step(tk[k], h, qa, va, ua, 0.5 * (ua + ub), ub - ua)
             pN, pT = h * blk["pN"], h * (blk["bp"] - blk["bm"])
@@ -267,11 +287,12 @@ class Transcription:
                     self._constrain(blk["wN"] - sys.gap_fn(qb) / self.gap_scale, 0.0, 0.0)
                 else:
                     self._constrain(blk["wN"] - (uN + e * ca.fmin(ca.mtimes(H[:m, :], va), 0)), 0.0, 0.0)
-                self._constrain(blk["wp"] - (lam + uT), 0.0, 0.0)
-                self._constrain(blk["wm"] - (lam - uT), 0.0, 0.0)
-                self._constrain(blk["wl"] - (mu * blk["pN"] - blk["bp"] - blk["bm"]), 0.0, 0.0)
-                a = [blk[x] for x, _ in PAIRS]
-                w = [blk[y] for _, y in PAIRS]
+                fr = self.friction_rows
+                self._constrain(fr(blk["wp"] - (lam + uT)), 0.0, 0.0)
+                self._constrain(fr(blk["wm"] - (lam - uT)), 0.0, 0.0)
+                self._constrain(fr(blk["wl"] - (mu * blk["pN"] - blk["bp"] - blk["bm"])), 0.0, 0.0)
+                a = [blk["pN"]] + [fr(blk[x]) for x, _ in PAIRS[1:]]
+                w = [blk["wN"]] + [fr(blk[y]) for _, y in PAIRS[1:]]
                 if self.gap_law:
                     a += [blk["pN"]] + imp_pairs[0]
                     w += [gS] + imp_pairs[1]
@@ -280,8 +301,8 @@ class Transcription:
                     names = (("bp", "wp"), ("bm", "wm"), ("wl", "lam"))
                     if not self.gap_law:
                         names = (("pN", "wN"),) + names
-                    a += [blk[x] for x, _ in names]
-                    w += [prev[y] for _, y in names]
+                    a += [blk[x] if x == "pN" else fr(blk[x]) for x, _ in names]
+                    w += [prev[y] if y == "wN" else fr(prev[y]) for _, y in names]
                     prev = blk
                 self._constrain(ca.vertcat(*a) * ca.vertcat(*w) - sigma, -np.inf, 0.0)  # Scholtes
                 if self.gap_law:
@@ -320,6 +341,11 @@ class Transcription:
             return us[k], us[k + 1]
         return us[2 * k], us[2 * k + 1]
 
+    def friction_rows(self, expr):
+        """The rows of an m-vector (one per contact) that belong to the frictional contacts: the
+        friction pairs and equalities of the others are left out (see :func:`contact_blocks`)."""
+        return friction_rows(self, expr)
+
     def _impulse(self, k, t, q, v, gS, sigma):
         """The impulse at node k (at the start of step k) and the velocity after it.
 
@@ -331,7 +357,7 @@ class Transcription:
         """
         sys = self.pb.system
         m, nb = sys.n_contacts, sys.n_bilateral
-        imp = {nm: self._var(f"{nm}{k}", m, 0.0, np.inf, key=nm) for a_w in IMPULSE_PAIRS[1:] for nm in a_w}
+        imp = contact_blocks(self, [nm for a_w in IMPULSE_PAIRS[1:] for nm in a_w], str(k))
         imp["PN"] = self._var(f"PN{k}", m, 0.0, np.inf, key="PN")
         sU = self._var(f"sU{k}", m, -np.inf, np.inf, key="sU")
         Mq, H, G = self.kin(t, q)
@@ -350,11 +376,18 @@ class Transcription:
             self._constrain(sI - (uN + ca.DM(sys.e) * ca.fmin(ca.mtimes(HN, v), 0)), 0.0, 0.0)
         else:
             sI = sU
-        self._constrain(imp["Pwp"] - (imp["Plam"] + uT), 0.0, 0.0)
-        self._constrain(imp["Pwm"] - (imp["Plam"] - uT), 0.0, 0.0)
-        self._constrain(imp["Pwl"] - (ca.DM(sys.mu) * imp["PN"] - imp["Pbp"] - imp["Pbm"]), 0.0, 0.0)
-        a = [imp["PN"], imp["Pbp"], imp["Pbm"], imp["Plam"]]
-        w = [gS, imp["Pwp"], imp["Pwm"], imp["Pwl"]]
+        fr = self.friction_rows
+        self._constrain(fr(imp["Pwp"] - (imp["Plam"] + uT)), 0.0, 0.0)
+        self._constrain(fr(imp["Pwm"] - (imp["Plam"] - uT)), 0.0, 0.0)
+        self._constrain(fr(imp["Pwl"] - (ca.DM(sys.mu) * imp["PN"] - imp["Pbp"] - imp["Pbm"])), 0.0, 0.0)
+        a = [imp["PN"]] + [fr(imp[nm]) for nm in ("Pbp", "Pbm", "Plam")]
+        w = [gS] + [fr(imp[nm]) for nm in ("Pwp", "Pwm", "Pwl")]
+        rows = [int(i) for i in self.curved if sys.mu[i] == 0.0]
+        if rows:
+            # a curved frictionless contact closed at the node does not approach after it (gS = 0:
+            # u_N+ >= 0, Moreau's condition, which the pairs above leave out where P_N = 0); an open
+            # one not so fast that it would close within theta T / N (gS is the gap over that time)
+            self._constrain(ca.vertcat(*[sU[i] + gS[i] for i in rows]), 0.0, np.inf)
         return vp, (a, w), (sU, imp["PN"] * sI)
 
     def _rates(self, k, blk, H, Mq, dF, m, mu, sigma):
@@ -362,14 +395,16 @@ class Transcription:
         contact-force changes as unknowns, their endpoint bounds and rate complementarity."""
         if not m:
             return ca.solve(Mq, dF)
-        d = {nm: self._var(f"{nm}{k}", m, -np.inf, np.inf, key=nm) for nm in ("dN", "dbp", "dbm")}
+        d = contact_blocks(self, ("dN", "dbp", "dbm"), str(k), -np.inf)
         s = {nm: self._var(f"{nm}{k}", m, -np.inf, np.inf, key=nm) for nm in ("sN", "sT")}
         da = ca.solve(Mq, dF + ca.mtimes(H.T, ca.vertcat(d["dN"], d["dbp"] - d["dbm"])))
         self._constrain(ca.vertcat(s["sN"], s["sT"]) - ca.mtimes(H, da), 0.0, 0.0)
         dwl = mu * d["dN"] - d["dbp"] - d["dbm"]
-        for mean, rate in ((blk["pN"], d["dN"]), (blk["bp"], d["dbp"]), (blk["bm"], d["dbm"]), (blk["wl"], dwl)):
+        fr = self.friction_rows
+        for mean, rate in ((blk["pN"], d["dN"]), (fr(blk["bp"]), fr(d["dbp"])), (fr(blk["bm"]), fr(d["dbm"])),
+                           (fr(blk["wl"]), fr(dwl))):
             self._constrain(ca.vertcat(mean - 0.5 * rate, mean + 0.5 * rate), 0.0, np.inf)  # >= 0 at both ends
-        prod = ca.vertcat(blk["pN"] * s["sN"], blk["wl"] * s["sT"])
+        prod = ca.vertcat(blk["pN"] * s["sN"], fr(blk["wl"] * s["sT"]))
         self._constrain(prod - sigma, -np.inf, 0.0)
         self._constrain(prod + sigma, 0.0, np.inf)
         return da
@@ -442,6 +477,40 @@ def squeezed_phases(tr, x):
                 changed = True
                 break
     return x_new if changed else None
+
+
+def contact_blocks(tr, names, tag: str, lb: float = 0.0, ub: float = np.inf) -> dict:
+    """One step's (or stage's) contact blocks ``names`` (m each, keys of ``tr.ix``), within [lb, ub];
+    the :data:`FRICTION_BLOCKS` of a frictionless contact fixed at zero (lb = ub = 0).
+
+    A contact with mu = 0 still had its friction pairs, whose feasible set has no interior
+    (mu N - beta+ - beta- >= 0 forces beta+- = 0) and which degraded IPOPT's conditioning. Its
+    friction blocks stay in x, so that every block keeps its (N, m) shape and the reported friction
+    impulses are zeros, but fixed at zero and in no constraint (:func:`friction_rows`): IPOPT
+    treats fixed variables as parameters (its default ``fixed_variable_treatment``), so the
+    problem it solves has no friction variables for such a contact.
+    """
+    m = tr.pb.system.n_contacts
+    fric = np.zeros(m, dtype=bool)
+    fric[tr.frictional] = True
+    out = {}
+    for nm in names:
+        if nm in FRICTION_BLOCKS and not fric.all():
+            sym = tr._var(f"{nm}{tag}", m, np.where(fric, lb, 0.0), np.where(fric, ub, 0.0), key=nm)
+            # the expressions see zeros: the fixed variables appear in no constraint and no cost
+            out[nm] = ca.vertcat(*[sym[i] if fric[i] else ca.SX(0.0) for i in range(m)])
+        else:
+            out[nm] = tr._var(f"{nm}{tag}", m, lb, ub, key=nm)
+    return out
+
+
+def friction_rows(tr, expr):
+    """The rows of the frictional contacts (``tr.frictional``) of an m-vector: ``expr`` itself when
+    every contact has friction."""
+    if tr.frictional.size == tr.pb.system.n_contacts:
+        return expr
+    # (row by row: CasADi reads an index list on a 1 x 1 expression as the whole expression)
+    return ca.vertcat(ca.SX.zeros(0, 1), *[expr[int(i)] for i in tr.frictional])
 
 
 def _end_jacobians(tr, H, t1, q1):
