@@ -9,9 +9,11 @@ polishing solve fixes, pair by pair, the smaller member at zero (the active set 
 identified), which makes the complementarity exact; it is kept only if IPOPT converges and the
 residual does not grow.
 
-Limitation: every contact is treated as active at every step (the velocity-level law). Moreau-Jean
-also skips a contact whose predicted gap is positive; ``inactive_conflicts`` counts the steps where
-that would change the step (a positive predicted gap with a nonzero normal impulse).
+Under the velocity law every contact is treated as active at every step. Moreau-Jean also skips a
+contact whose predicted gap is positive; ``inactive_conflicts`` counts the steps where that would
+change the step (a positive predicted gap with a nonzero normal impulse). The gap law
+(:mod:`lcp.ocp.transcription`) lets contacts open and close. On free steps IPOPT sees a small
+penalty on uneven steps (:func:`step_penalty`), never in the cost reported.
 
 References
 ----------
