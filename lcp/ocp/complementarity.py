@@ -44,8 +44,8 @@ STEP_REGULARIZATION = 1e-6
 def step_penalty(tr, cache: dict):
     """The term added to the objective that IPOPT sees on free steps, as a Function of the NLP
     variables (None on fixed steps), built once per transcription (kept in ``cache``):
-    ``STEP_REGULARIZATION T mean_k (h_k / (T / N) - 1)^2`` (T the problem's T, the initial guess when
-    T is free).
+    ``STEP_REGULARIZATION T mean_k (h_k / (T / N) - 1)^2`` (T the problem's T, or the variable T
+    when it is free).
 
     Why: on free steps the optimum is not unique. Within a phase in which the theta step is exact
     (constant forces, or affine ones under the affine hold), any split of the phase into its steps
@@ -56,9 +56,10 @@ def step_penalty(tr, cache: dict):
     converge fully (:func:`run_fixed_modes`); a fixed-phase solve that converges keeps the steps at
     their length bounds that the merges of squeezed phases look for. Measured at N = 40 with every
     default (gap law), the gap to the closed-form optimum without and with it: Jean-Pratt minimum
-    time at R = 0.3, 1.4e-4 and 1.7e-9; at R = 0.7, 4.8e-7 and 1.6e-9; the move-and-hold on
+    time at R = 0.3, 1.4e-4 and 5.8e-9; at R = 0.7, 4.8e-7 and 4.2e-8; the move-and-hold on
     [0.42, 0.6] s, T = 1.15 s, 1.0e-5 and 2.6e-12 (replay misses 1.0e-8 and 2.3e-12, the hold kept
-    to 3.3e-8 and 1.7e-13); minimum time with the constant hold at R = 0.2, 1.2e-5 and 4.0e-9.
+    to 3.3e-8 and 1.7e-13); minimum time with the constant hold at R = 0.2, 1.2e-5 and 7.7e-10 (the penalty
+    against T / N of the initial guess, not of the variable T, left R = 0.3 at 6.3e-5).
     The cost reported is the problem's own (the term subtracted). The term can hold a solution
     above the problem's optimum by at most its own value there, below 3e-6 T with steps within the
     default ``step_bounds``.
@@ -68,8 +69,11 @@ def step_penalty(tr, cache: dict):
         if pb.steps == "free" and "h" in tr.ix:
             x = tr.nlp["x"]
             h = x[tr.ix["h"].ravel().tolist()]
+            # a free T is the variable's (against the initial guess's T / N, the minimum time at
+            # R = 1, T* = 1.63 from T = 0.5, would push every step shorter)
+            T = x[int(np.ravel(tr.ix["T"])[0])] if pb.free_time else pb.T
             fn = ca.Function("step_penalty", [x],
-                             [STEP_REGULARIZATION * pb.T * ca.sumsqr(h / (pb.T / pb.N) - 1.0) / pb.N])
+                             [STEP_REGULARIZATION * T * ca.sumsqr(h / (T / pb.N) - 1.0) / pb.N])
         cache["step_penalty"] = fn
     return cache["step_penalty"]
 
