@@ -104,6 +104,15 @@ def _frictionless_block(m):
                       control_bounds=([-50.0], [50.0]))
 
 
+def _assert_least_effort(res, N, T, m, d):
+    """Solved, with the closed form's least effort and control (:func:`_least_effort`); returns that control."""
+    u_star, J_star = _least_effort(N, T, m, d)
+    assert res.success, res.message
+    assert res.cost == pytest.approx(J_star, rel=1e-7)
+    np.testing.assert_allclose(res.u[:, 0], u_star, rtol=1e-5, atol=1e-6 * np.max(np.abs(u_star)))
+    return u_star
+
+
 @pytest.mark.parametrize("N, d, m", [(6, 0.5, 2.0), (9, -0.3, 0.5)])
 def test_a_frictionless_block_pushed_to_a_target_meets_the_closed_form(N, d, m):
     T = 1.0
@@ -111,10 +120,7 @@ def test_a_frictionless_block_pushed_to_a_target_meets_the_closed_form(N, d, m):
                                stage_cost=lcp.ocp.effort, hold="constant", steps="uniform",
                                terminal_constraints=lambda q, v: ca.vertcat(q[0] - d, v[0]))
     res = pb.solve()
-    u_star, J_star = _least_effort(N, T, m, d)
-    assert res.success, res.message
-    assert res.cost == pytest.approx(J_star, rel=1e-7)
-    np.testing.assert_allclose(res.u[:, 0], u_star, rtol=1e-5, atol=1e-6 * np.max(np.abs(u_star)))
+    _assert_least_effort(res, N, T, m, d)
     # the floor carries the weight and no friction: p_T zeros of shape (N, m)
     assert res.p_T.shape == (N, 1) and np.all(res.p_T == 0.0)
     np.testing.assert_allclose(res.p_N[:, 0], m * G * res.steps, rtol=1e-8)
@@ -136,10 +142,7 @@ def test_a_frictionless_landing_keeps_the_tangential_velocity():
                                hold="constant", steps="uniform", contact_law="gap",
                                terminal_constraints=lambda qq, vv: ca.vertcat(qq[0] - d, vv[0]))
     res = pb.solve()
-    u_star, J_star = _least_effort(N, T, m, d)
-    assert res.success, res.message
-    assert res.cost == pytest.approx(J_star, rel=1e-7)
-    np.testing.assert_allclose(res.u[:, 0], u_star, rtol=1e-5, atol=1e-6 * np.max(np.abs(u_star)))
+    u_star = _assert_least_effort(res, N, T, m, d)
     k = N // 2  # the landing node: the velocity before the impulse is the free fall's
     assert res.v[k, 1] == pytest.approx(-G * t_land, rel=1e-9)
     np.testing.assert_allclose(res.v[k + 1:, 1], 0.0, atol=1e-8)
