@@ -53,7 +53,7 @@ import casadi as ca
 import numpy as np
 
 from lcp.contact.problem import ContactProblem
-from lcp.ocp.transcription import PAIRS, Transcription, contact_blocks, friction_rows, grid_variables
+from lcp.ocp.transcription import PAIRS, Transcription, contact_blocks, friction_rows, grid_variables, pair_rows
 
 __all__ = ["RADAU_STAGES", "RadauTranscription", "fixed_mode_bounds", "radau_tableau"]
 
@@ -163,11 +163,11 @@ class RadauTranscription(Transcription):
                 for j in range(s):  # each stage's own pairs; with free steps every other stage's slacks
                     # too (one mode per step: uniform steps keep a switch inside a step possible)
                     for l_ in (range(s) if self.cross else (j,)):
-                        a += [_rows(self, x, blks[j][x]) for x, _ in PAIRS]
-                        w += [_rows(self, x, blks[l_][y]) for x, y in PAIRS]
+                        a += [pair_rows(self, x, blks[j][x]) for x, _ in PAIRS]
+                        w += [pair_rows(self, x, blks[l_][y]) for x, y in PAIRS]
                     if self.cross:
-                        a += [_rows(self, x, blks[j][x]) for x, _ in STEP_CROSS]
-                        w += [_rows(self, x, prev[y]) for x, y in STEP_CROSS]
+                        a += [pair_rows(self, x, blks[j][x]) for x, _ in STEP_CROSS]
+                        w += [pair_rows(self, x, prev[y]) for x, y in STEP_CROSS]
                 if self.cross:
                     prev = blks[-1]
                 self._constrain(ca.vertcat(*a) * ca.vertcat(*w) - sigma, -np.inf, 0.0)  # Scholtes
@@ -256,12 +256,6 @@ class RadauTranscription(Transcription):
 
     def diagnose_law(self, x) -> dict:
         return diagnose(self, x)
-
-
-def _rows(tr, a_name, expr):
-    """A pair's rows in the Scholtes constraint: every contact's for the normal pair (multiplier
-    ``pN``), the frictional contacts' for a friction pair."""
-    return expr if a_name == "pN" else friction_rows(tr, expr)
 
 
 def fill_x0(tr, x0, gs, steps) -> None:

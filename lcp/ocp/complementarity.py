@@ -125,7 +125,7 @@ def run_homotopy(tr, x0, P0, options: HomotopyOptions, cache: dict, regularized:
         dt = time.perf_counter() - t0
         xs = np.array(sol["x"]).ravel()
         diag = diagnose(tr, xs)
-        ok = bool(st["success"]) or st["return_status"] == "Solved_To_Acceptable_Level"
+        ok = _converged(st)
         f = float(sol["f"]) - (float(pen(xs)) if reg else 0.0)
         history.append(HomotopyStage(sigma, int(st["iter_count"]), diag["residual"], diag["max_product"],
                                      f, st["return_status"], ok, dt))
@@ -293,17 +293,18 @@ def run_fixed_modes(tr, x0, P0, options: HomotopyOptions, cache: dict):
     """
     P0 = P0.copy()
     P0[0] = 0.0
-    x, f, diag, st, dt, iterations, merged = _fixed_merged(tr, np.asarray(x0, dtype=float), P0, options, cache, False)
+    x0 = np.asarray(x0, dtype=float)
+    x, f, diag, st, dt, iterations, merged = _fixed_merged(tr, x0, P0, options, cache, False)
     note = ""
     if st["return_status"] != "Solve_Succeeded" and step_penalty(tr, cache) is not None:
-        alt = _fixed_merged(tr, np.asarray(x0, dtype=float), P0, options, cache, True)
+        alt = _fixed_merged(tr, x0, P0, options, cache, True)
         dt, iterations = dt + alt[4], iterations + alt[5]
         if _solved(alt[3], alt[2], options) and (not _solved(st, diag, options)
                                                  or alt[1] < f - TAIL_GAIN * max(1.0, abs(f))):
             note = (f" With the step penalty: IPOPT returned {st['return_status']} without it (cost {f:.10g}, "
                     f"Coulomb residual {diag['residual']:.3g}).")
             x, f, diag, st, merged = alt[0], alt[1], alt[2], alt[3], alt[6]
-    ok = bool(st["success"]) or st["return_status"] == "Solved_To_Acceptable_Level"
+    ok = _converged(st)
     history = [HomotopyStage(0.0, iterations, diag["residual"], diag["max_product"], f,
                              st["return_status"], ok, dt)]
     if not ok:
@@ -318,11 +319,15 @@ def run_fixed_modes(tr, x0, P0, options: HomotopyOptions, cache: dict):
                            f"{note})"), history
 
 
+def _converged(st) -> bool:
+    """Whether IPOPT converged, fully or to its acceptable level."""
+    return bool(st["success"]) or st["return_status"] == "Solved_To_Acceptable_Level"
+
+
 def _solved(st, diag, options) -> bool:
-    """Whether a fixed-phase solve ended solved: IPOPT converged (fully or to its acceptable level)
-    and the complementarity within tolerance."""
-    return ((bool(st["success"]) or st["return_status"] == "Solved_To_Acceptable_Level")
-            and diag["residual"] <= options.tol and diag["cross"] <= options.tol)
+    """Whether a fixed-phase solve ended solved: IPOPT converged and the complementarity within
+    tolerance."""
+    return _converged(st) and diag["residual"] <= options.tol and diag["cross"] <= options.tol
 
 
 def _fixed_merged(tr, x0, P0, options, cache, regularized):
@@ -331,7 +336,7 @@ def _fixed_merged(tr, x0, P0, options, cache, regularized):
     solver = ipopt_solver(tr, options, False, cache, regularized)
     pen = step_penalty(tr, cache) if regularized else None
     x, f, diag, st, dt, iterations = _fixed_solve(tr, x0, P0, solver, pen)
-    ok = bool(st["success"]) or st["return_status"] == "Solved_To_Acceptable_Level"
+    ok = _converged(st)
     squeezed = getattr(tr, "squeezed_phases_law", None)  # (Radau collocation: lcp.ocp.collocation)
     merged, f_first = 0, f
     # a phase left on minimum-length steps: once more without it, kept if better; repeated while it
@@ -342,8 +347,7 @@ def _fixed_merged(tr, x0, P0, options, cache, regularized):
             break
         x2, f2, diag2, st2, dt2, it2 = _fixed_solve(tr, x_alt, P0, solver, pen)
         dt, iterations = dt + dt2, iterations + it2
-        ok2 = bool(st2["success"]) or st2["return_status"] == "Solved_To_Acceptable_Level"
-        if not (ok2 and f2 < f and diag2["residual"] <= max(diag["residual"], options.tol) and
+        if not (_converged(st2) and f2 < f and diag2["residual"] <= max(diag["residual"], options.tol) and
                 diag2["cross"] <= max(diag["cross"], options.tol)):
             break
         merged += 1

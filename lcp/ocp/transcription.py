@@ -123,6 +123,7 @@ them, and supports only the velocity law, while this step is exact on the consta
 """
 from __future__ import annotations
 
+import functools
 import time
 
 import casadi as ca
@@ -130,7 +131,7 @@ import numpy as np
 
 from lcp.ocp.pairs import add_pairs
 
-__all__ = ["FRICTION_BLOCKS", "PAIRS", "Transcription", "contact_blocks", "friction_rows", "grid_variables",
+__all__ = ["FRICTION_BLOCKS", "PAIRS", "Transcription", "contact_blocks", "friction_rows", "grid_variables", "pair_rows",
            "step_terms", "terminal_terms"]
 
 #: complementarity pairs (multiplier, slack) of one contact in one step, in the order of the module
@@ -287,12 +288,11 @@ class Transcription:
                     self._constrain(blk["wN"] - sys.gap_fn(qb) / self.gap_scale, 0.0, 0.0)
                 else:
                     self._constrain(blk["wN"] - (uN + e * ca.fmin(ca.mtimes(H[:m, :], va), 0)), 0.0, 0.0)
-                fr = self.friction_rows
-                self._constrain(fr(blk["wp"] - (lam + uT)), 0.0, 0.0)
-                self._constrain(fr(blk["wm"] - (lam - uT)), 0.0, 0.0)
-                self._constrain(fr(blk["wl"] - (mu * blk["pN"] - blk["bp"] - blk["bm"])), 0.0, 0.0)
-                a = [blk["pN"]] + [fr(blk[x]) for x, _ in PAIRS[1:]]
-                w = [blk["wN"]] + [fr(blk[y]) for _, y in PAIRS[1:]]
+                self._constrain(friction_rows(self, blk["wp"] - (lam + uT)), 0.0, 0.0)
+                self._constrain(friction_rows(self, blk["wm"] - (lam - uT)), 0.0, 0.0)
+                self._constrain(friction_rows(self, blk["wl"] - (mu * blk["pN"] - blk["bp"] - blk["bm"])), 0.0, 0.0)
+                a = [pair_rows(self, x, blk[x]) for x, _ in PAIRS]
+                w = [pair_rows(self, x, blk[y]) for x, y in PAIRS]
                 if self.gap_law:
                     a += [blk["pN"]] + imp_pairs[0]
                     w += [gS] + imp_pairs[1]
@@ -301,8 +301,8 @@ class Transcription:
                     names = (("bp", "wp"), ("bm", "wm"), ("wl", "lam"))
                     if not self.gap_law:
                         names = (("pN", "wN"),) + names
-                    a += [blk[x] if x == "pN" else fr(blk[x]) for x, _ in names]
-                    w += [prev[y] if y == "wN" else fr(prev[y]) for _, y in names]
+                    a += [pair_rows(self, x, blk[x]) for x, _ in names]
+                    w += [pair_rows(self, x, prev[y]) for x, y in names]
                     prev = blk
                 self._constrain(ca.vertcat(*a) * ca.vertcat(*w) - sigma, -np.inf, 0.0)  # Scholtes
                 if self.gap_law:
@@ -341,11 +341,6 @@ class Transcription:
             return us[k], us[k + 1]
         return us[2 * k], us[2 * k + 1]
 
-    def friction_rows(self, expr):
-        """The rows of an m-vector (one per contact) that belong to the frictional contacts: the
-        friction pairs and equalities of the others are left out (see :func:`contact_blocks`)."""
-        return friction_rows(self, expr)
-
     def _impulse(self, k, t, q, v, gS, sigma):
         """The impulse at node k (at the start of step k) and the velocity after it.
 
@@ -376,12 +371,12 @@ class Transcription:
             self._constrain(sI - (uN + ca.DM(sys.e) * ca.fmin(ca.mtimes(HN, v), 0)), 0.0, 0.0)
         else:
             sI = sU
-        fr = self.friction_rows
-        self._constrain(fr(imp["Pwp"] - (imp["Plam"] + uT)), 0.0, 0.0)
-        self._constrain(fr(imp["Pwm"] - (imp["Plam"] - uT)), 0.0, 0.0)
-        self._constrain(fr(imp["Pwl"] - (ca.DM(sys.mu) * imp["PN"] - imp["Pbp"] - imp["Pbm"])), 0.0, 0.0)
-        a = [imp["PN"]] + [fr(imp[nm]) for nm in ("Pbp", "Pbm", "Plam")]
-        w = [gS] + [fr(imp[nm]) for nm in ("Pwp", "Pwm", "Pwl")]
+        self._constrain(friction_rows(self, imp["Pwp"] - (imp["Plam"] + uT)), 0.0, 0.0)
+        self._constrain(friction_rows(self, imp["Pwm"] - (imp["Plam"] - uT)), 0.0, 0.0)
+        self._constrain(friction_rows(self, imp["Pwl"] - (ca.DM(sys.mu) * imp["PN"] - imp["Pbp"] - imp["Pbm"])),
+                        0.0, 0.0)
+        a = [imp["PN"]] + [friction_rows(self, imp[nm]) for nm in ("Pbp", "Pbm", "Plam")]
+        w = [gS] + [friction_rows(self, imp[nm]) for nm in ("Pwp", "Pwm", "Pwl")]
         rows = [int(i) for i in self.curved if sys.mu[i] == 0.0]
         if rows:
             # a curved frictionless contact closed at the node does not approach after it (gS = 0:
@@ -400,7 +395,7 @@ class Transcription:
         da = ca.solve(Mq, dF + ca.mtimes(H.T, ca.vertcat(d["dN"], d["dbp"] - d["dbm"])))
         self._constrain(ca.vertcat(s["sN"], s["sT"]) - ca.mtimes(H, da), 0.0, 0.0)
         dwl = mu * d["dN"] - d["dbp"] - d["dbm"]
-        fr = self.friction_rows
+        fr = functools.partial(friction_rows, self)
         for mean, rate in ((blk["pN"], d["dN"]), (fr(blk["bp"]), fr(d["dbp"])), (fr(blk["bm"]), fr(d["dbm"])),
                            (fr(blk["wl"]), fr(dwl))):
             self._constrain(ca.vertcat(mean - 0.5 * rate, mean + 0.5 * rate), 0.0, np.inf)  # >= 0 at both ends
@@ -502,6 +497,13 @@ def contact_blocks(tr, names, tag: str, lb: float = 0.0, ub: float = np.inf) -> 
         else:
             out[nm] = tr._var(f"{nm}{tag}", m, lb, ub, key=nm)
     return out
+
+
+def pair_rows(tr, a_name, expr):
+    """The rows of a contact pair (named by its multiplier ``a_name``) that enter the complementarity
+    constraint: every contact's for a normal pair (``pN``), the frictional contacts' for a friction
+    pair (:func:`friction_rows`)."""
+    return expr if a_name == "pN" else friction_rows(tr, expr)
 
 
 def friction_rows(tr, expr):
