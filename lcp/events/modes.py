@@ -44,8 +44,10 @@ motion_depends) and their order are the plain enumeration's. The sub-problems ca
 problem's impulse scale (the floor of the contacts' tolerances); where a component's rank or
 consistency decision could differ from the whole problem's (a singular value between the two rank
 cuts, which differ by the ratio of the blocks' scales) the whole problem is enumerated instead.
-What is left to floating point is a branch whose inequality sits on its tolerance (1e-11 of the
-contact's scale) to rounding, as in the plain enumeration itself.
+What is left to floating point is a branch whose inequality sits on its tolerance to rounding
+(1e-11 of the contact's scale in ``admissible``, 1e-12 of the largest force in the least-distance
+step of ``branch_forces``, there the component's largest instead of the whole problem's): the
+plain enumeration's answer there is rounding's choice as well.
 """
 from __future__ import annotations
 
@@ -208,14 +210,16 @@ def coupling_components(acc: AccelProblem) -> list:
     are coupled when an entry of W (= H_c S D, folded columns included) in the rows of one and
     the columns of the other is not exactly 0; a list of index arrays, the connected components
     of that graph, ordered by their first contact."""
-    from scipy.sparse.csgraph import connected_components  # only with several closed contacts
-
     k, W = acc.k, acc.pb.W
     Wd = W.toarray() if issparse(W) else W
     # not a tolerance: the enumeration reads W, q and mu only, so an exact zero decouples it exactly,
     # and a coupling however small is kept (NaN is not zero: kept too)
     nz = Wd != 0.0
     C = nz[:k, :k] | nz[:k, k:] | nz[k:, :k] | nz[k:, k:]
+    if C.all():  # every pair coupled (one body, say): one component, without the graph search
+        return [np.arange(k)]
+    from scipy.sparse.csgraph import connected_components  # only where some pair is not coupled
+
     n, labels = connected_components(C | C.T, directed=False)
     comps = [np.flatnonzero(labels == c) for c in range(n)]
     comps.sort(key=lambda J: int(J[0]))
