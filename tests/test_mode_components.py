@@ -40,6 +40,16 @@ def spying(calls):
     return spy
 
 
+def expected_split(acc, comps):
+    """What enumerate_branches does with the components: [] (not split: one component or few
+    branches), [True] (split) or [False] (would not save branch solves)."""
+    n = [2 if x else 4 for x in acc.slide]
+    whole = int(np.prod(n))
+    if len(comps) == 1 or whole <= modes.SPLIT_MIN_BRANCHES:
+        return []
+    return [sum(int(np.prod([n[j] for j in J])) for J in comps) + 2 * len(comps) < whole]
+
+
 def assert_same(got, ref):
     sols, _ = got
     ref_sols, _ = ref
@@ -137,13 +147,7 @@ def test_split_enumeration_is_the_whole_enumeration(case):
     group = [0 if cpl or (stacked and b in (0, 1)) else b for b, _, _, _ in contacts]
     for J in comps:
         assert len({group[j] for j in J.tolist()}) == 1
-    n = [2 if x else 4 for x in acc.slide]
-    if len(comps) == 1:
-        assert split == []
-    elif sum(int(np.prod([n[j] for j in J])) for J in comps) < int(np.prod(n)):
-        assert split == [True]  # it did split (no fall-back to the whole problem)
-    else:
-        assert split == [False]  # the split would solve as many branches
+    assert split == expected_split(acc, comps)  # and a split was never given up (fall-back)
 
 
 @st.composite
@@ -176,8 +180,9 @@ def test_split_enumeration_of_redundant_tables(acc):
         got = enumerate_branches(acc)
     ref = plain(acc)
     assert_same(got, ref)
-    assert [J.tolist() for J in coupling_components(acc)] == [[2 * b, 2 * b + 1] for b in range(acc.k // 2)]
-    assert split == [True]
+    comps = coupling_components(acc)
+    assert [J.tolist() for J in comps] == [[2 * b, 2 * b + 1] for b in range(acc.k // 2)]
+    assert split == expected_split(acc, comps)
     event(f"k={acc.k} solutions={min(len(ref[0]), 3)} redundant={any(s.nullity for s in ref[0])}"
           f" moves={any(s.motion_depends for s in ref[0])} sliding={bool(np.any(acc.slide))}")
 
@@ -228,16 +233,23 @@ def test_table_legs_and_a_slider_split_exactly():
 
 
 def test_scales_far_apart_fall_back_to_the_whole_problem():
-    # a 1e12 kg body beside a 1 kg one: the whole problem cuts ranks at 1e-10 of its largest
-    # singular value, the heavy body's own problem would not; the split must not decide otherwise
-    acc = accel_problem([1e12, 1.0], [(0, 0.0, -0.1, None), (1, 0.0, -0.1, None)], [0.0, 0.0], [0.5, 0.5],
-                        [1.0, -1e12 * G, 0.0, 0.5, -G, 0.0], np.zeros(4))
-    assert len(coupling_components(acc)) == 2
+    # a 1e12 kg block lifted at 1e-9 m/s^2 beside a 1 kg table: the whole problem cuts ranks at
+    # 1e-10 of its largest singular value (the table's, ~1), below which are all of the heavy
+    # contact's (~1e-12), so its stick and slip branches have forces 0 and are admissible to the
+    # whole problem; the heavy block's own problem solves them (N < 0: lifting) and rejects them.
+    # The split must not decide otherwise: it gives up and the whole problem is enumerated.
+    acc = accel_problem([1e12, 1.0], [(0, 0.0, -0.1, None), (1, -0.3, -0.1, None), (1, 0.3, -0.1, None)],
+                        [0.0, 0.0, 0.0], [0.5, 0.5, 0.5], [0.0, 1e3, 0.0, 0.5, -G, 0.0], np.zeros(6))
+    assert [J.tolist() for J in coupling_components(acc)] == [[0], [1, 2]]
+    ref = plain(acc)
+    with mock.patch.object(modes, "_decided_as_whole", lambda infos: True):
+        unguarded = enumerate_branches(acc)
+    assert len(unguarded[0]) < len(ref[0])  # what the split alone would have missed
     split = []
     with mock.patch.object(modes, "_enumerate_components", spying(split)):
         got = enumerate_branches(acc)
-    assert_same(got, plain(acc))
-    assert split == [False] and got[1] == 8 + 16  # the components tried, then the whole problem
+    assert_same(got, ref)
+    assert split == [False] and got[1] == 4 + 16 + 64  # the components tried, then the whole problem
 
 
 def test_coupling_is_any_nonzero_entry():

@@ -63,7 +63,8 @@ from lcp.numerics.lazy import issparse
 from lcp.events.model import EPS, StateData
 from lcp.events.options import ModeSolver
 
-__all__ = ["AccelProblem", "ModeSolution", "ModeSelector", "enumerate_branches", "boundary_alternatives",
+__all__ = ["AccelProblem", "ModeSolution", "ModeSelector", "enumerate_branches", "coupling_components",
+           "SPLIT_MIN_BRANCHES", "boundary_alternatives",
            "closed_variant", "redundant_solution", "null_space_moves",
            "group_motions"]
 
@@ -184,7 +185,8 @@ def enumerate_branches(acc: AccelProblem, allowed=None) -> tuple[list, int]:
         candidates = sorted((md for md in allowed
                              if len(md) == acc.k and all(x in c for x, c in zip(md, choices))),
                             key=lambda md: tuple(c.index(x) for x, c in zip(md, choices)))
-    if acc.k > 1:
+    whole = len(candidates) if allowed is not None else int(np.prod([len(c) for c in choices]))
+    if acc.k > 1 and whole > SPLIT_MIN_BRANCHES:
         comps = coupling_components(acc)
         if len(comps) > 1:
             found, tried = _enumerate_components(acc, choices, comps, None if allowed is None else candidates)
@@ -203,6 +205,11 @@ def enumerate_branches(acc: AccelProblem, allowed=None) -> tuple[list, int]:
         if bf is not None and bf.admissible:
             sols.append(redundant_solution(acc, modes, bf))
     return sols, tried
+
+
+#: below this many branches the whole problem is enumerated without looking for components (their
+#: search and sub-problems cost about as much as 16 branch solves: benchmarks/mode_components.py)
+SPLIT_MIN_BRANCHES = 16
 
 
 def coupling_components(acc: AccelProblem) -> list:
@@ -250,15 +257,14 @@ def _enumerate_components(acc: AccelProblem, choices, comps, candidates):
     order = (lambda md: tuple(c.index(x) for x, c in zip(md, choices)))
     if candidates is None:
         sub_cands = [list(product(*(choices[j] for j in J))) for J in comps]
-        whole = 1
-        for ch in choices:
-            whole *= len(ch)
+        whole = int(np.prod([len(c) for c in choices]))
     else:
         sub_cands = [sorted({tuple(md[j] for j in J) for md in candidates},
                             key=lambda mc, J=J: tuple(choices[j].index(x) for j, x in zip(J, mc)))
                      for J in comps]
         whole = len(candidates)
-    if sum(len(c) for c in sub_cands) >= whole:
+    # a component's sub-problem costs about two branch solves (benchmarks/mode_components.py)
+    if sum(len(c) for c in sub_cands) + 2 * len(comps) >= whole:
         return None, 0
     tried, per, infos = 0, [], []
     for J, cands in zip(comps, sub_cands):
