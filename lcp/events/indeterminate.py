@@ -31,7 +31,7 @@ import numpy as np
 
 from lcp.contact.problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK
 
-__all__ = ["BranchForces", "branch_forces", "admissibility_rows", "force_margin"]
+__all__ = ["BranchForces", "branch_forces", "admissibility_rows", "force_margin", "RANK_RTOL"]
 
 #: relative singular-value threshold below which a branch is treated as singular
 RANK_RTOL = 1e-10
@@ -82,9 +82,10 @@ def admissibility_rows(pb, modes) -> tuple[np.ndarray, np.ndarray, np.ndarray, l
     return np.array(rows), np.array(rhs), np.array(zero_mu), labels
 
 
-def _null_split(E, r):
+def _null_split(E, r, info=None):
     """(p0, Z, consistent): least-norm solution of E p = r, null-space basis of E, and whether
-    E p0 = r holds to rounding."""
+    E p0 = r holds to rounding. ``info`` (a dict), if given, receives the numbers the rank and
+    consistency decisions were made on (see :func:`branch_forces`)."""
     U, s, Vt = np.linalg.svd(E)
     smax = float(s[0]) if s.size else 0.0
     rank = int(np.sum(s > RANK_RTOL * max(smax, 1e-300)))
@@ -94,6 +95,9 @@ def _null_split(E, r):
     res = float(np.max(np.abs(E @ p0 - r))) if r.size else 0.0
     scale = float(np.max(np.abs(r))) if r.size else 0.0
     scale = max(scale, smax * (float(np.max(np.abs(p0))) if p0.size else 0.0), 1e-300)
+    if info is not None:
+        info.update(s=s, smax=smax, res=res, r_max=float(np.max(np.abs(r))) if r.size else 0.0,
+                    p0_max=float(np.max(np.abs(p0))) if p0.size else 0.0, consistent=res <= 1e-9 * scale)
     return p0, Z, res <= 1e-9 * scale
 
 
@@ -112,13 +116,20 @@ def _least_distance(B, c):
     return -res[:d] / res[d]
 
 
-def branch_forces(pb, check_modes, branch_modes) -> BranchForces | None:
+def branch_forces(pb, check_modes, branch_modes, info: dict | None = None) -> BranchForces | None:
     """Forces of one branch of ``pb``: the unique solution when the branch is regular, the
     least-norm admissible one when it is singular; None if the branch's equations are
     inconsistent. ``check_modes`` and ``branch_modes`` are the modes for ``admissible`` and
-    ``solve_branch`` (they differ for sliding contacts folded into the problem)."""
+    ``solve_branch`` (they differ for sliding contacts folded into the problem).
+
+    ``info``, a dict if given, receives what the rank and consistency decisions were made on: the
+    singular values ``s`` of the branch matrix and the largest ``smax``, the residual ``res`` of
+    the least-norm solution, the largest right-hand side ``r_max`` and force ``p0_max``, and
+    ``consistent``. The rank is cut at ``RANK_RTOL * smax`` and the branch is consistent when
+    ``res <= 1e-9 * max(r_max, smax * p0_max)`` (:mod:`lcp.events.modes` checks with these that a
+    sub-problem decides as the whole problem would)."""
     E, r = pb.branch_system(branch_modes)
-    p0, Z, consistent = _null_split(E, r)
+    p0, Z, consistent = _null_split(E, r, info)
     if not consistent:
         return None
     if Z.shape[1] == 0:

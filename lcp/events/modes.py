@@ -26,6 +26,28 @@ The problem is solved by enumerating every branch (open / stick / slide+ / slide
 candidates, open / closed for sliding contacts), which finds *all* solutions, or by Lemke's method
 for many contacts. Solutions with the same acceleration are one motion (ties at a mode boundary,
 broken by looking a short time ahead).
+
+Contacts that do not interact at the acceleration level (separate bodies, or a chain of blocks
+tied by springs: forces, not constraints) make W block-diagonal, and the enumeration is then done
+per connected component of W's coupling graph (:func:`coupling_components`: contacts i and j
+coupled where W has a non-zero entry in the rows of one and the columns of the other). This is
+exact, not an approximation: the enumeration reads the ContactProblem (W, q, mu) only; with W
+block-diagonal every branch's equations, its inequalities
+(:func:`~lcp.events.indeterminate.admissibility_rows`, contact by contact) and its forces' norm
+split into the components, so a whole branch has admissible forces iff each component's branch
+has, and its least-norm admissible forces are the components' put together. The admissible
+branches are therefore the product of the components' (7 x 4 branch solves for seven blocks
+instead of 4^7). The test is W's exact zeros, not a tolerance: an exact zero decouples the problem
+the enumeration reads whatever its origin, and a small coupling is never dropped. Each combination
+is then solved once more on the whole problem, so the solutions (forces, accelerations, nullity,
+motion_depends) and their order are the plain enumeration's. The sub-problems carry the whole
+problem's impulse scale (the floor of the contacts' tolerances); where a component's rank or
+consistency decision could differ from the whole problem's (a singular value between the two rank
+cuts, which differ by the ratio of the blocks' scales) the whole problem is enumerated instead.
+What is left to floating point is a branch whose inequality sits on its tolerance to rounding
+(1e-11 of the contact's scale in ``admissible``, 1e-12 of the largest force in the least-distance
+step of ``branch_forces``, there the component's largest instead of the whole problem's): the
+plain enumeration's answer there is rounding's choice as well.
 """
 from __future__ import annotations
 
@@ -36,11 +58,13 @@ import numpy as np
 
 from lcp.contact.problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem
 from lcp.contact.solvers import make_solver
-from lcp.events.indeterminate import branch_forces
+from lcp.events.indeterminate import RANK_RTOL, branch_forces
+from lcp.numerics.lazy import issparse
 from lcp.events.model import EPS, StateData
 from lcp.events.options import ModeSolver
 
-__all__ = ["AccelProblem", "ModeSolution", "ModeSelector", "enumerate_branches", "boundary_alternatives",
+__all__ = ["AccelProblem", "ModeSolution", "ModeSelector", "enumerate_branches", "coupling_components",
+           "SPLIT_MIN_BRANCHES", "boundary_alternatives",
            "closed_variant", "redundant_solution", "null_space_moves",
            "group_motions"]
 
@@ -91,14 +115,17 @@ class AccelProblem:
     def qdd(self, p) -> np.ndarray:
         return self.qdd_free + self.SD @ p
 
-    def branch_modes(self, modes) -> list:
-        """Modes for ``solve_branch``: a closed sliding contact solves with p_T = 0 (its mu' is 0)."""
-        return [SLIDE_POS if (s != 0 and md != OPEN) else md for md, s in zip(modes, self.slide)]
+    def branch_modes(self, modes, slide=None) -> list:
+        """Modes for ``solve_branch``: a closed sliding contact solves with p_T = 0 (its mu' is 0).
+        ``slide``: the signs of the contacts of ``modes`` when they are a subset (default: all)."""
+        slide = self.slide if slide is None else slide
+        return [SLIDE_POS if (s != 0 and md != OPEN) else md for md, s in zip(modes, slide)]
 
-    def check_modes(self, modes) -> list:
+    def check_modes(self, modes, slide=None) -> list:
         """Modes for ``admissible``: a closed sliding contact is checked as 'stick' with mu' = 0,
         i.e. p_T = 0 and p_N >= 0, with no condition on a_T (the slide direction is the velocity's)."""
-        return [STICK if (s != 0 and md != OPEN) else md for md, s in zip(modes, self.slide)]
+        slide = self.slide if slide is None else slide
+        return [STICK if (s != 0 and md != OPEN) else md for md, s in zip(modes, slide)]
 
 
 @dataclass(eq=False)
@@ -135,7 +162,12 @@ def redundant_solution(acc: AccelProblem, modes, bf) -> ModeSolution:
 
 
 def enumerate_branches(acc: AccelProblem, allowed=None) -> tuple[list, int]:
-    """Every branch of the acceleration problem that satisfies the Coulomb law; (solutions, tried)."""
+    """Every branch of the acceleration problem that satisfies the Coulomb law; (solutions, tried).
+
+    The solutions come in the order of the product of the contacts' modes (the first contact
+    slowest); ``allowed``, a set of mode tuples, restricts the branches to those. Contacts in
+    separate components of W's coupling (:func:`coupling_components`) are enumerated component by
+    component (module docstring); ``tried`` counts the branches solved."""
     pb = acc.pb
     choices = []
     for j in range(acc.k):
@@ -153,6 +185,13 @@ def enumerate_branches(acc: AccelProblem, allowed=None) -> tuple[list, int]:
         candidates = sorted((md for md in allowed
                              if len(md) == acc.k and all(x in c for x, c in zip(md, choices))),
                             key=lambda md: tuple(c.index(x) for x, c in zip(md, choices)))
+    whole = len(candidates) if allowed is not None else int(np.prod([len(c) for c in choices]))
+    if acc.k > 1 and whole > SPLIT_MIN_BRANCHES:
+        comps = coupling_components(acc)
+        if len(comps) > 1:
+            found, tried = _enumerate_components(acc, choices, comps, None if allowed is None else candidates)
+            if found is not None:
+                return found, tried
     for modes in candidates:
         tried += 1
         branch, check = acc.branch_modes(modes), acc.check_modes(modes)
@@ -166,6 +205,124 @@ def enumerate_branches(acc: AccelProblem, allowed=None) -> tuple[list, int]:
         if bf is not None and bf.admissible:
             sols.append(redundant_solution(acc, modes, bf))
     return sols, tried
+
+
+#: below this many branches the whole problem is enumerated without looking for components (their
+#: search and sub-problems cost about as much as 16 branch solves: benchmarks/mode_components.py)
+SPLIT_MIN_BRANCHES = 16
+
+
+def coupling_components(acc: AccelProblem) -> list:
+    """The closed contacts grouped by the coupling of the acceleration problem: contacts i and j
+    are coupled when an entry of W (= H_c S D, folded columns included) in the rows of one and
+    the columns of the other is not exactly 0; a list of index arrays, the connected components
+    of that graph, ordered by their first contact."""
+    k, W = acc.k, acc.pb.W
+    Wd = W.toarray() if issparse(W) else W
+    # not a tolerance: the enumeration reads W, q and mu only, so an exact zero decouples it exactly,
+    # and a coupling however small is kept (NaN is not zero: kept too)
+    nz = Wd != 0.0
+    C = nz[:k, :k] | nz[:k, k:] | nz[k:, :k] | nz[k:, k:]
+    if C.all():  # every pair coupled (one body, say): one component, without the graph search
+        return [np.arange(k)]
+    from scipy.sparse.csgraph import connected_components  # only where some pair is not coupled
+
+    n, labels = connected_components(C | C.T, directed=False)
+    comps = [np.flatnonzero(labels == c) for c in range(n)]
+    comps.sort(key=lambda J: int(J[0]))
+    return comps
+
+
+def _sub_problem(pb: ContactProblem, J) -> ContactProblem:
+    """The problem of the contacts J alone, with the whole problem's impulse scale (the floor of
+    every contact's tolerance in ``admissible`` and ``branch_forces``)."""
+    k = pb.k
+    rows = np.concatenate([J, k + J])
+    W = pb.W.toarray() if issparse(pb.W) else pb.W
+    sub = ContactProblem(W[np.ix_(rows, rows)], pb.q[rows], pb.mu[J])
+    sub.scale = pb.scale
+    return sub
+
+
+def _enumerate_components(acc: AccelProblem, choices, comps, candidates):
+    """:func:`enumerate_branches` component by component: (solutions, branches solved), with
+    solutions None where the split would not save branch solves or where a sub-problem's rank or
+    consistency decision might differ from the whole problem's (the caller then enumerates the
+    whole problem).
+
+    Each component's admissible branches are found on its own problem; their combinations are
+    the whole problem's candidates, each solved once more on the whole problem (so that a
+    returned solution is exactly the one the plain enumeration gives for that branch)."""
+    k = acc.k
+    order = (lambda md: tuple(c.index(x) for x, c in zip(md, choices)))
+    if candidates is None:
+        sub_cands = [list(product(*(choices[j] for j in J))) for J in comps]
+        whole = int(np.prod([len(c) for c in choices]))
+    else:
+        sub_cands = [sorted({tuple(md[j] for j in J) for md in candidates},
+                            key=lambda mc, J=J: tuple(choices[j].index(x) for j, x in zip(J, mc)))
+                     for J in comps]
+        whole = len(candidates)
+    # a component's sub-problem costs about two branch solves (benchmarks/mode_components.py)
+    if sum(len(c) for c in sub_cands) + 2 * len(comps) >= whole:
+        return None, 0
+    tried, per, infos = 0, [], []
+    for J, cands in zip(comps, sub_cands):
+        sub, slide = _sub_problem(acc.pb, J), acc.slide[J]
+        ok = []
+        for mc in cands:
+            tried += 1
+            info = {}
+            bf = branch_forces(sub, acc.check_modes(mc, slide), acc.branch_modes(mc, slide), info)
+            infos.append(info)
+            if bf is not None and bf.admissible:
+                ok.append(mc)
+        per.append(ok)
+    if not _decided_as_whole(infos):
+        return None, tried
+    allowed = None if candidates is None else {md: md for md in candidates}
+    combos = []
+    for pick in product(*per):
+        modes = [None] * k
+        for J, mc in zip(comps, pick):
+            for j, x in zip(J.tolist(), mc):
+                modes[j] = x
+        modes = tuple(modes)
+        if allowed is not None:
+            modes = allowed.get(modes)  # the caller's own tuple, as the plain enumeration returns it
+            if modes is None:
+                continue
+        combos.append(modes)
+    combos.sort(key=order)
+    sols, pb = [], acc.pb
+    for modes in combos:
+        tried += 1
+        bf = branch_forces(pb, acc.check_modes(modes), acc.branch_modes(modes))
+        if bf is not None and bf.admissible:
+            sols.append(redundant_solution(acc, modes, bf))
+    return sols, tried
+
+
+def _decided_as_whole(infos) -> bool:
+    """Whether the rank and consistency decisions of the components' branches (``info`` of
+    :func:`~lcp.events.indeterminate.branch_forces`) are those of any whole branch made of them.
+
+    The whole branch's matrix is block-diagonal (after permuting its rows and columns) with these
+    blocks: its singular values are theirs, its largest ``smax`` is at most the largest of all,
+    its residual and right-hand side are the largest of theirs. Its rank is cut at RANK_RTOL *
+    smax >= a block's own cut, and its consistency scale is at least a block's own: a block's
+    decision holds for the whole unless one of its singular values lies between its own cut and
+    the largest possible one, or it was found inconsistent below the largest possible scale."""
+    smax = max(i["smax"] for i in infos)
+    scale = max(max(i["r_max"] for i in infos), smax * max(i["p0_max"] for i in infos), 1e-300)
+    cut = RANK_RTOL * max(smax, 1e-300)
+    for i in infos:
+        s = i["s"]
+        if np.any((s > RANK_RTOL * max(i["smax"], 1e-300)) & (s <= cut)):
+            return False
+        if not i["consistent"] and i["res"] <= 1e-9 * scale:
+            return False
+    return True
 
 
 def closed_variant(acc: AccelProblem, sol: ModeSolution, rtol: float = 1e-9) -> ModeSolution | None:
