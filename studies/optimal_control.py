@@ -271,19 +271,23 @@ def solve(ocp: OptimalControlProblem, multistart: bool = False, guess=None, phas
     """The study's solve of ``ocp`` (its replay check included, no further replays): from ``guess``
     (default: the u = 0 simulation), or the multi-start (free steps: from rest and from the
     uniform-step solution ``guess``; :data:`AFFINE_STARTS` for the affine hold), or with ``phases``
-    the fixed-phase solve from its own first pass (:meth:`OptimalControlProblem.phase_guess`)."""
+    the fixed-phase solve from its own first pass (:meth:`OptimalControlProblem.phase_guess`).
+    Without the exact-phase shooting: each row is its transcription's own result (the shooting
+    would finish a row that fails its replay on its replay's phases, a linear hold's included, and
+    the row would no longer show its method; ``studies.ocp_examples`` shows the shooting)."""
     if phases:
-        return ocp.solve(method="phases", max_iter=3000)
+        return ocp.solve(method="phases", max_iter=3000, shooting=False)
     if multistart and guess is not None and ocp.hold == "affine":
-        return ocp.solve_multistart(guesses=AFFINE_STARTS(ocp, guess))
+        return ocp.solve_multistart(guesses=AFFINE_STARTS(ocp, guess), shooting=False)
     if multistart and guess is not None:  # free steps: from rest, and from the uniform-step solution
         return ocp.solve_multistart(guesses=[("u = 0", ocp.guess(u=0.0)), ("uniform-step solution", guess),
                                              ("uniform-step solution, sigma0 = 1e-2", guess,
                                               {"sigma0": 1e-2, "max_iter": 3000}),
-                                             ("uniform-step solution, sigma0 = 1e-4", guess, {"sigma0": 1e-4})])
+                                             ("uniform-step solution, sigma0 = 1e-4", guess, {"sigma0": 1e-4})],
+                                    shooting=False)
     if multistart:
-        return ocp.solve_multistart()
-    return ocp.solve(ocp.guess(u=0.0) if guess is None else guess)
+        return ocp.solve_multistart(shooting=False)
+    return ocp.solve(ocp.guess(u=0.0) if guess is None else guess, shooting=False)
 
 
 def solve_and_verify(ocp: OptimalControlProblem, h_fine: float, multistart: bool = False, guess=None,

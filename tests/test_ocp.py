@@ -574,3 +574,25 @@ def test_failure_message_quotes_the_kept_iterates_residual():
     assert r.status == -2
     quoted = float(r.message.split("Residual ")[1].split(" ")[0])
     assert quoted == pytest.approx(r.complementarity_residual, rel=1e-2, abs=1e-300)
+
+
+def test_multistart_passes_its_shooting_flag_to_every_start(monkeypatch):
+    """solve_multistart(shooting=False) solves every start without the exact-phase shooting (a
+    study row that shows its transcription's own result); a flag that is not a bool is refused."""
+    from types import SimpleNamespace
+
+    pb = rest_problem(10)
+    seen = []
+
+    def fake_solve(self, guess=None, options=None, shooting=True):
+        seen.append(shooting)
+        return SimpleNamespace(success=True, cost=1.0 + len(seen), status=0, message="Solved.")
+
+    monkeypatch.setattr(type(pb), "solve", fake_solve)
+    best = pb.solve_multistart(guesses=[("a", None), ("b", None)], shooting=False)
+    assert seen == [False, False] and best.cost == 2.0
+    seen.clear()
+    pb.solve_multistart(guesses=[("a", None)])
+    assert seen == [True]
+    with pytest.raises(ValueError, match="shooting"):
+        pb.solve_multistart(shooting="no")

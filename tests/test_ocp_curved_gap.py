@@ -101,15 +101,18 @@ def test_landing_on_a_curved_floor_meets_newton_and_coulomb():
 def test_box_tipped_over_its_corner_from_a_tipping_guess():
     """studies._ocp_models.box_tip at N = 20 from the event simulation of a push that tips the box
     (4 N for 0.3 s): the box pivots on its bottom-right corner (stuck but for the last step before
-    the landing), its bottom-left corner lifts at once, the top-right corner lands at a node with
+    the landing), its bottom-left corner lifts in the first steps, the top-right corner lands at a node with
     an impulse that stops the box, which then rests on its side. The Coulomb law reads the pivot's
-    velocity with the step's end Jacobian (with the start's the homotopy stalled at residual 0.87)."""
+    velocity with the step's end Jacobian (with the start's the homotopy stalled at residual 0.87).
+    The transcription's own solution: without the exact-phase shooting, which replaces it by a
+    solution on its replay's phases (where the step before the landing carries a normal impulse on
+    the landing corner, 0.09)."""
     from lcp.ocp.guess import event_guess
     from studies._ocp_models import box_tip
 
     ex = box_tip()
     pb = ex.make(20)
-    r = pb.solve(event_guess(pb, lambda t: 4.0 if t < 0.3 else 0.0, 1.0))
+    r = pb.solve(event_guess(pb, lambda t: 4.0 if t < 0.3 else 0.0, 1.0), shooting=False)
     assert r.complementarity_residual <= 1e-8, r.message
     gaps = np.array([pb.system.gaps(qk) for qk in r.q])
     pivot, land = 1, 2
@@ -118,7 +121,9 @@ def test_box_tipped_over_its_corner_from_a_tipping_guess():
     assert 5 <= k_land < 20 and np.all(gaps[k_land:, land] <= 1e-9)
     assert np.all(r.p_N[:k_land, land] == pytest.approx(0.0, abs=1e-9))
     assert np.max(np.abs(r.v[k_land + 1:])) <= 1e-8  # at rest after the landing impulse
-    assert np.min(gaps[1:, 0]) > 0  # the bottom-left corner lifted at the start
+    # the bottom-left corner lifts in the first two steps and stays lifted (the transcription's
+    # solution has it at -2.8e-17 at node 1, zero to rounding, and 6.9e-3 at node 2)
+    assert np.min(gaps[1:, 0]) >= -1e-12 and np.min(gaps[2:, 0]) > 0
     # the step's second-order error: the replay misses, by a few mm, not by the box
     assert r.replay.final_miss <= 2e-2
 

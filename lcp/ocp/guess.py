@@ -243,7 +243,7 @@ def screened_start(pb, tr=None):
     return best
 
 
-def multistart(pb, guesses, options, rtol: float, **option_kw):
+def multistart(pb, guesses, options, rtol: float, shooting: bool = True, **option_kw):
     """:meth:`OptimalControlProblem.solve_multistart` (see there)."""
     if guesses is None:
         cands = [("u_min", pb.u_min), ("zero", np.clip(0.0, pb.u_min, pb.u_max)),
@@ -253,7 +253,7 @@ def multistart(pb, guesses, options, rtol: float, **option_kw):
     for entry in guesses:
         lab, gs, extra = (tuple(entry) + ({},))[:3]
         opts = options if options is not None else HomotopyOptions(**{**option_kw, **extra})
-        results.append((lab, pb.solve(gs, opts)))
+        results.append((lab, pb.solve(gs, opts, shooting=shooting)))
     ok = [(lab, r) for lab, r in results if r.success]
     pool = ok if ok else results
     best_lab, best = min(pool, key=lambda lr: lr[1].cost if np.isfinite(lr[1].cost) else np.inf)

@@ -306,7 +306,7 @@ class OptimalControlProblem:
         return first_pass(self, options, hold)
 
     def solve_multistart(self, guesses=None, options: HomotopyOptions | None = None, rtol: float = 1e-6,
-                         **option_kw) -> OCPResult:
+                         shooting: bool = True, **option_kw) -> OCPResult:
         """Solve from several deterministic starts; return the best, saying whether starts disagree.
 
         Parameters
@@ -317,6 +317,8 @@ class OptimalControlProblem:
             (e.g. ``{"sigma0": 1e-4}`` to stay near a guess that is already a solution).
         rtol : float
             Costs within this relative tolerance count as the same optimum.
+        shooting : bool
+            As for :meth:`solve`, for every start.
 
         Returns
         -------
@@ -324,7 +326,9 @@ class OptimalControlProblem:
             The successful solve of lowest cost; ``starts`` lists every start (label, cost, status),
             ``message`` how many distinct (local) optima were reached: the best found, not proven.
         """
-        return multistart(self, guesses, options, rtol, **option_kw)
+        if not isinstance(shooting, bool):
+            raise ValueError(f"shooting must be True or False, got {shooting!r}")
+        return multistart(self, guesses, options, rtol, shooting, **option_kw)
 
 def _check_node_times(self, node_times) -> dict:
     """The checked ``node_times`` of the problem ``self`` (interior nodes, positive times)."""

@@ -645,6 +645,8 @@ def initial_point(tr, result, states: str = "integrated") -> np.ndarray:
 #: of the NLP's build: 4 instead of 8 took 20-25 % off the motor, the two-block chain and the seven
 #: blocks at the same optima; 2 left the box and the hopper (N = 20) failing their replays
 RK_SUBSTEPS, RK_SUBSTEPS_MAX = 4, 128
+#: the steps of a second try where the first NLP's solve fails (before any solution of its own)
+RK_SUBSTEPS_SAFE = 8
 #: defect corrections tried on one Runge-Kutta NLP before its steps are refined
 CORRECTIONS = 6
 
@@ -714,6 +716,11 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
         if not ok and stats["return_status"] == "Not_Enough_Degrees_Of_Freedom" and zeros and not pair_tol:
             pair_tol, warm = PAIR_TOL, {}  # pair members implied by the modes: held in a band
             check = PhaseShooting(pb, plan, check=True, zeros=zeros, pair_tol=pair_tol, keys=keys)
+            continue
+        if not ok and good is None and M < RK_SUBSTEPS_SAFE:
+            # the coarser steps' NLP did not converge from this start: once more on finer steps
+            # (the convex obstacle, N = 40: at 4 steps IPOPT's iteration limit, at 8 solved)
+            M, warm = RK_SUBSTEPS_SAFE, {}
             continue
         if not ok or diag["dynamics"] <= defect_tol or M >= RK_SUBSTEPS_MAX:
             break
