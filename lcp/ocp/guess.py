@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lcp.ocp.options import HomotopyOptions
+from lcp.ocp.options import HomotopyOptions, check_shooting
 from lcp.ocp.results import OCPGuess
 
 __all__ = ["control_values", "event_guess", "multistart", "pulse_controls", "resample", "screened_start", "simulate_guess",
@@ -245,6 +245,7 @@ def screened_start(pb, tr=None):
 
 def multistart(pb, guesses, options, rtol: float, shooting: bool = True, **option_kw):
     """:meth:`OptimalControlProblem.solve_multistart` (see there)."""
+    check_shooting(shooting)
     if guesses is None:
         cands = [("u_min", pb.u_min), ("zero", np.clip(0.0, pb.u_min, pb.u_max)),
                  ("mid", 0.5 * (pb.u_min + pb.u_max)), ("u_max", pb.u_max)]

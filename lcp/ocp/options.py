@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["OCP_STATUS_MESSAGES", "HomotopyOptions"]
+__all__ = ["OCP_STATUS_MESSAGES", "HomotopyOptions", "check_shooting"]
 
 #: status code -> meaning; success is ``status >= 0``.
 OCP_STATUS_MESSAGES = {
@@ -97,3 +97,9 @@ class HomotopyOptions:
     def n_stages(self) -> int:
         """Most relaxation stages: sigma0, sigma0 factor, ..., down to sigma_min."""
         return 1 + int(np.ceil(np.log(self.sigma_min / self.sigma0) / np.log(self.factor) - 1e-9))
+
+
+def check_shooting(shooting) -> None:
+    """The ``shooting`` flag of a solve: True or False, else a ValueError naming it."""
+    if not isinstance(shooting, bool):
+        raise ValueError(f"shooting must be True or False, got {shooting!r}")

@@ -282,8 +282,6 @@ class OptimalControlProblem:
         >>> r.success, round(r.cost, 6), r.homotopy[-1].iterations < 200
         (True, 86.905749, True)
         """
-        if not isinstance(shooting, bool):
-            raise ValueError(f"shooting must be True or False, got {shooting!r}")
         return solve_defaults(self, guess, options, method, option_kw, shooting)
 
     def phase_guess(self, options: HomotopyOptions | None = None, hold: str = "constant") -> OCPResult:
@@ -326,8 +324,6 @@ class OptimalControlProblem:
             The successful solve of lowest cost; ``starts`` lists every start (label, cost, status),
             ``message`` how many distinct (local) optima were reached: the best found, not proven.
         """
-        if not isinstance(shooting, bool):
-            raise ValueError(f"shooting must be True or False, got {shooting!r}")
         return multistart(self, guesses, options, rtol, shooting, **option_kw)
 
 def _check_node_times(self, node_times) -> dict:

@@ -16,7 +16,7 @@ from lcp.ocp.blas import one_blas_thread
 from lcp.ocp.collocation import RadauTranscription
 from lcp.ocp.complementarity import run_homotopy, run_phases
 from lcp.ocp.guess import event_guess, resample, screened_start, x0_from_guess
-from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions
+from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions, check_shooting
 from lcp.ocp.replay import replay_check
 from lcp.ocp.results import HomotopyStage, OCPGuess, OCPResult
 from lcp.ocp.shooting import CHECK_TOL, NotShootable, refuse, solve_shooting
@@ -478,6 +478,7 @@ def solve_defaults(problem, guess, options, method, option_kw, shooting) -> OCPR
     piecewise-constant control on a ramp) above their optima, after the exact-phase shooting too.
 
     CasADi's OpenBLAS runs on one thread meanwhile (:func:`lcp.ocp.blas.one_blas_thread`)."""
+    check_shooting(shooting)
     with one_blas_thread():
         res = solve_problem(problem, guess, options, method, option_kw, shooting)
         if problem.hold == "affine" and first_pass_route(problem, guess, method):
