@@ -129,16 +129,22 @@ def scenes_(draw, coupled=None):
     return accel_problem(masses, contacts, slide, mu, F, Hdv, cpl), contacts, b_used, cpl
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(scenes_())
-def test_split_enumeration_is_the_whole_enumeration(case):
-    acc, contacts, _, cpl = case
+def _split_against_whole(acc):
+    """The split enumeration of ``acc`` checked against the whole one: (the whole enumeration,
+    the coupling components, which components the split enumerated on their own)."""
     split = []
     with mock.patch.object(modes, "_enumerate_components", spying(split)):
         got = enumerate_branches(acc)
     ref = plain(acc)
     assert_same(got, ref)
-    comps = coupling_components(acc)
+    return ref, coupling_components(acc), split
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(scenes_())
+def test_split_enumeration_is_the_whole_enumeration(case):
+    acc, contacts, _, cpl = case
+    ref, comps, split = _split_against_whole(acc)
     event(f"k={acc.k} components={len(comps)} solutions={min(len(ref[0]), 3)}"
           f" redundant={any(s.nullity for s in ref[0])} sliding={bool(np.any(acc.slide))}")
     # a component never spans bodies that do not touch (body 1 stacked on body 0 joins them; the
@@ -179,12 +185,7 @@ def tables_(draw):
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(tables_())
 def test_split_enumeration_of_redundant_tables(acc):
-    split = []
-    with mock.patch.object(modes, "_enumerate_components", spying(split)):
-        got = enumerate_branches(acc)
-    ref = plain(acc)
-    assert_same(got, ref)
-    comps = coupling_components(acc)
+    ref, comps, split = _split_against_whole(acc)
     assert [J.tolist() for J in comps] == [[2 * b, 2 * b + 1] for b in range(acc.k // 2)]
     assert split == expected_split(acc, comps)
     event(f"k={acc.k} solutions={min(len(ref[0]), 3)} redundant={any(s.nullity for s in ref[0])}"
