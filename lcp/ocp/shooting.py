@@ -651,8 +651,7 @@ RK_SUBSTEPS_SAFE = 8
 CORRECTIONS = 6
 
 
-def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, options: dict | None = None,
-                   substeps: int = RK_SUBSTEPS):
+def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, options: dict | None = None):
     """The shooting polish of ``result`` (module docstring): (x, cost, diag, IPOPT's stats, time,
     the NLP whose ``diagnose`` gave ``diag``).
 
@@ -679,7 +678,7 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
           "mu_strategy": "adaptive", "bound_relax_factor": 0.0, **(options or {})}
     warm_ip = {**ip, "warm_start_init_point": "yes", "mu_init": 1e-8, "warm_start_bound_push": 1e-9,
                "warm_start_mult_bound_push": 1e-9}
-    M, iters, warm, diag, ok, stats, pair_tol = int(substeps), 0, {}, None, False, {}, 0.0
+    M, iters, warm, diag, ok, stats, pair_tol = RK_SUBSTEPS, 0, {}, None, False, {}, 0.0
     cost = float("nan")
     while True:
         tr = PhaseShooting(pb, plan, substeps=M, zeros=zeros, pair_tol=pair_tol, keys=keys, like=check)

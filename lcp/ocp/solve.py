@@ -19,7 +19,7 @@ from lcp.ocp.guess import event_guess, resample, screened_start, x0_from_guess
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions, check_shooting
 from lcp.ocp.replay import replay_check
 from lcp.ocp.results import HomotopyStage, OCPGuess, OCPResult
-from lcp.ocp.shooting import CHECK_TOL, RK_SUBSTEPS, RK_SUBSTEPS_SAFE, NotShootable, refuse, solve_shooting
+from lcp.ocp.shooting import CHECK_TOL, NotShootable, refuse, solve_shooting
 from lcp.ocp.spatial import SpatialTranscription
 from lcp.ocp.transcription import Transcription
 
@@ -149,16 +149,15 @@ def polished(problem, res, t0) -> OCPResult:
     # states and modes (multiple shooting: its defects closed by IPOPT), which keeps a trajectory
     # the open-loop replay leaves (the cart-pole's swing-up: the replay of Radau's control misses
     # the upright by 17, the shooting from its states swings up at a cost 555.9)
-    queue = [("replay", r, RK_SUBSTEPS) for r in range(SHOOTING_ROUNDS)] + [("result", 0, RK_SUBSTEPS)]
+    queue = [("replay", r) for r in range(SHOOTING_ROUNDS)] + [("result", 0)]
     start = res
     while queue:
-        kind, rnd, steps = queue.pop(0)
+        kind, rnd = queue.pop(0)
         if kind == "result":
             start = res
-        label = (f"round {rnd + 1}" if kind == "replay" else "from the transcription's states") + \
-            ("" if steps == RK_SUBSTEPS else f" on {steps} Runge-Kutta steps")
+        label = f"round {rnd + 1}" if kind == "replay" else "from the transcription's states"
         try:
-            x, cost, diag, st, dt, tr = solve_shooting(problem, start, start=kind, substeps=steps)
+            x, cost, diag, st, dt, tr = solve_shooting(problem, start, start=kind)
         except NotShootable as exc:
             notes.append(f"{label} not tried: {exc}")
             queue = [a for a in queue if a[0] != "replay"]
@@ -184,17 +183,8 @@ def polished(problem, res, t0) -> OCPResult:
         out = _checked(problem, out, "shooting")
         if out.success:
             out.message += f" The transcription's result: {res.message}"
-            if notes:
-                out.message += f" (Exact-phase shooting before this one: {'; '.join(notes)})"
             return out
         notes.append(f"{label} ({segments} phases, cost {cost:.10g}): {out.message}")
-        if steps < RK_SUBSTEPS_SAFE:
-            # the same round once more on finer steps: the cart-pole at N = 80, whose swing-up
-            # amplifies errors 4.5e6 times, found the same optimum (5311.28) on 4 and on 8 steps,
-            # but the 4-step control's replay chattered at a stick (Zeno) and the 8-step one's
-            # replayed to 2.2e-9
-            queue.insert(0, (kind, rnd, RK_SUBSTEPS_SAFE))
-            continue
         start = out
     res.message += f" (Exact-phase shooting: {'; '.join(notes)})"
     return res
