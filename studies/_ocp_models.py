@@ -359,11 +359,11 @@ def two_discs() -> Example:
     R = 0.1 I, Q_T = 100 Q; the frictionless contact between the discs, inelastic. T = 3 s. Solved from
     its own start (:func:`discs_start`, disc 1 sent around disc 2): measured at N = 30, the
     transcription reaches cost 222.05 (its theta step on the drag replays to 0.29), and the
-    exact-phase shooting cost 204.27 with replay miss 5.8e-11 when its IPOPT may take 3000 iterations
-    (at its 500 the second round stops at defect 3.3e-8); at N = 60 the transcription 215.46, replay
-    0.044, the shooting's first round stops at 500 iterations (defect 1.2e-12), and at 3000 it ends
-    at cost 209.26 with replay miss 2.7e-10 (J_replay 212.47; nosnoc's control replays to 20488 and
-    7984 on this model at N = 30, 60)."""
+    exact-phase shooting (4 Runge-Kutta steps per quarter segment, IPOPT's default 500 iterations)
+    cost 204.27 with replay miss 1.6e-9 (on 8 steps it needed 3000 iterations); at N = 60 the
+    transcription 215.46, replay 0.044, and the shooting's control replays to 6.6e-2 (on 8 steps with
+    3000 iterations it ended at cost 209.26, replay 2.7e-10, J_replay 212.47; nosnoc's control
+    replays to 20488 and 7984 on this model at N = 30, 60)."""
     p = DISCS
     q, v, u = ca.SX.sym("q", 4), ca.SX.sym("v", 4), ca.SX.sym("u", 2)
     d = q[0:2] - q[2:4]

@@ -184,12 +184,13 @@ def enumerate_branches(acc: AccelProblem, allowed=None) -> tuple[list, int]:
         # entries, 1e12 for 20 closed contacts (a column of beads at rest), where a few are allowed
         candidates = sorted((md for md in allowed
                              if len(md) == acc.k and all(x in c for x, c in zip(md, choices))),
-                            key=lambda md: tuple(c.index(x) for x, c in zip(md, choices)))
+                            key=_product_order(choices))
     whole = len(candidates) if allowed is not None else int(np.prod([len(c) for c in choices]))
     if acc.k > 1 and whole > SPLIT_MIN_BRANCHES:
         comps = coupling_components(acc)
         if len(comps) > 1:
-            found, tried = _enumerate_components(acc, choices, comps, None if allowed is None else candidates)
+            found, tried = _enumerate_components(acc, choices, comps, None if allowed is None else candidates,
+                                                 whole)
             if found is not None:
                 return found, tried
     for modes in candidates:
@@ -205,6 +206,12 @@ def enumerate_branches(acc: AccelProblem, allowed=None) -> tuple[list, int]:
         if bf is not None and bf.admissible:
             sols.append(redundant_solution(acc, modes, bf))
     return sols, tried
+
+
+def _product_order(choices, J=None):
+    """Sort key of mode tuples (of the contacts J, default all) in the product order of ``choices``."""
+    cs = choices if J is None else [choices[j] for j in J]
+    return lambda md: tuple(c.index(x) for x, c in zip(md, cs))
 
 
 #: below this many branches the whole problem is enumerated without looking for components (their
@@ -233,18 +240,17 @@ def coupling_components(acc: AccelProblem) -> list:
     return comps
 
 
-def _sub_problem(pb: ContactProblem, J) -> ContactProblem:
-    """The problem of the contacts J alone, with the whole problem's impulse scale (the floor of
-    every contact's tolerance in ``admissible`` and ``branch_forces``)."""
-    k = pb.k
-    rows = np.concatenate([J, k + J])
-    W = pb.W.toarray() if issparse(pb.W) else pb.W
+def _sub_problem(pb: ContactProblem, W, J) -> ContactProblem:
+    """The problem of the contacts J alone (``W``: the whole problem's W, dense), with the whole
+    problem's impulse scale (the floor of every contact's tolerance in ``admissible`` and
+    ``branch_forces``)."""
+    rows = np.concatenate([J, pb.k + J])
     sub = ContactProblem(W[np.ix_(rows, rows)], pb.q[rows], pb.mu[J])
     sub.scale = pb.scale
     return sub
 
 
-def _enumerate_components(acc: AccelProblem, choices, comps, candidates):
+def _enumerate_components(acc: AccelProblem, choices, comps, candidates, whole: int):
     """:func:`enumerate_branches` component by component: (solutions, branches solved), with
     solutions None where the split would not save branch solves or where a sub-problem's rank or
     consistency decision might differ from the whole problem's (the caller then enumerates the
@@ -254,21 +260,18 @@ def _enumerate_components(acc: AccelProblem, choices, comps, candidates):
     the whole problem's candidates, each solved once more on the whole problem (so that a
     returned solution is exactly the one the plain enumeration gives for that branch)."""
     k = acc.k
-    order = (lambda md: tuple(c.index(x) for x, c in zip(md, choices)))
     if candidates is None:
         sub_cands = [list(product(*(choices[j] for j in J))) for J in comps]
-        whole = int(np.prod([len(c) for c in choices]))
     else:
-        sub_cands = [sorted({tuple(md[j] for j in J) for md in candidates},
-                            key=lambda mc, J=J: tuple(choices[j].index(x) for j, x in zip(J, mc)))
+        sub_cands = [sorted({tuple(md[j] for j in J) for md in candidates}, key=_product_order(choices, J))
                      for J in comps]
-        whole = len(candidates)
     # a component's sub-problem costs about two branch solves (benchmarks/mode_components.py)
     if sum(len(c) for c in sub_cands) + 2 * len(comps) >= whole:
         return None, 0
+    W = acc.pb.W.toarray() if issparse(acc.pb.W) else acc.pb.W
     tried, per, infos = 0, [], []
     for J, cands in zip(comps, sub_cands):
-        sub, slide = _sub_problem(acc.pb, J), acc.slide[J]
+        sub, slide = _sub_problem(acc.pb, W, J), acc.slide[J]
         ok = []
         for mc in cands:
             tried += 1
@@ -293,7 +296,7 @@ def _enumerate_components(acc: AccelProblem, choices, comps, candidates):
             if modes is None:
                 continue
         combos.append(modes)
-    combos.sort(key=order)
+    combos.sort(key=_product_order(choices))
     sols, pb = [], acc.pb
     for modes in combos:
         tried += 1

@@ -140,7 +140,7 @@ def run_homotopy(tr, x0, P0, options: HomotopyOptions, cache: dict, regularized:
             break
         x, lam_x, lam_g = xs, np.array(sol["lam_x"]).ravel(), np.array(sol["lam_g"]).ravel()
         best = (x, f, diag)
-        if diag["residual"] <= options.tol and diag["cross"] <= options.tol:
+        if _within_tol(diag, options.tol):
             status, message = 0, OCP_STATUS_MESSAGES[0]
             break
         sigma = max(sigma * options.factor, options.sigma_min)
@@ -155,7 +155,7 @@ def run_homotopy(tr, x0, P0, options: HomotopyOptions, cache: dict, regularized:
         if okp and diagp["residual"] <= max(best[2]["residual"], options.tol) and \
                 diagp["cross"] <= max(best[2]["cross"], options.tol):
             best = (xp, fp, diagp)
-            if diagp["residual"] <= options.tol and diagp["cross"] <= options.tol and status != 0:
+            if _within_tol(diagp, options.tol) and status != 0:
                 # the last converged stage identified the active set; polishing finished it
                 message = f"{OCP_STATUS_MESSAGES[0]} (By the polishing solve; before it: {message})"
                 status = 0
@@ -301,13 +301,13 @@ def run_fixed_modes(tr, x0, P0, options: HomotopyOptions, cache: dict):
     x, f, diag, st, dt, iterations, merged = _fixed_merged(tr, x0, P0, options, cache, False)
     note = ""
     if st["return_status"] != "Solve_Succeeded" and step_penalty(tr, cache) is not None:
-        alt = _fixed_merged(tr, x0, P0, options, cache, True)
-        dt, iterations = dt + alt[4], iterations + alt[5]
-        if _solved(alt[3], alt[2], options) and (not _solved(st, diag, options)
-                                                 or alt[1] < f - TAIL_GAIN * max(1.0, abs(f))):
+        xa, fa, diag_a, st_a, dt_a, it_a, merged_a = _fixed_merged(tr, x0, P0, options, cache, True)
+        dt, iterations = dt + dt_a, iterations + it_a
+        if _solved(st_a, diag_a, options) and (not _solved(st, diag, options)
+                                               or fa < f - TAIL_GAIN * max(1.0, abs(f))):
             note = (f" With the step penalty: IPOPT returned {st['return_status']} without it (cost {f:.10g}, "
                     f"Coulomb residual {diag['residual']:.3g}).")
-            x, f, diag, st, merged = alt[0], alt[1], alt[2], alt[3], alt[6]
+            x, f, diag, st, merged = xa, fa, diag_a, st_a, merged_a
     ok = _converged(st)
     history = [HomotopyStage(0.0, iterations, diag["residual"], diag["max_product"], f,
                              st["return_status"], ok, dt)]
@@ -315,7 +315,7 @@ def run_fixed_modes(tr, x0, P0, options: HomotopyOptions, cache: dict):
         msg = (f"{OCP_STATUS_MESSAGES[-1]} The fixed-phase solve (the guess's mode sequence): IPOPT returned "
                f"{st['return_status']} (dynamics residual {diag['dynamics']:.3g}).")
         return x, f, diag, -1, msg, history
-    if diag["residual"] > options.tol or diag["cross"] > options.tol:
+    if not _within_tol(diag, options.tol):
         msg = (f"{OCP_STATUS_MESSAGES[-2]} Residual {diag['residual']:.3g}, cross {diag['cross']:.3g} > "
                f"tol = {options.tol:.3g} after the fixed-phase solve{_at(diag)}.")
         return x, f, diag, -2, msg, history
@@ -331,7 +331,12 @@ def _converged(st) -> bool:
 def _solved(st, diag, options) -> bool:
     """Whether a fixed-phase solve ended solved: IPOPT converged and the complementarity within
     tolerance."""
-    return _converged(st) and diag["residual"] <= options.tol and diag["cross"] <= options.tol
+    return _converged(st) and _within_tol(diag, options.tol)
+
+
+def _within_tol(diag, tol) -> bool:
+    """Whether the complementarity residual and the cross residual of ``diag`` are within ``tol``."""
+    return diag["residual"] <= tol and diag["cross"] <= tol
 
 
 def _fixed_merged(tr, x0, P0, options, cache, regularized):
