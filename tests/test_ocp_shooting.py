@@ -154,3 +154,36 @@ def test_hopper_jumps_from_the_defaults():
     assert res.success and "exact-phase shooting" in res.message, res.message
     assert res.replay.final_miss < 1e-9 and res.replay.path_violation < 1e-9
     assert res.modes[0, 0] != 0 and np.all(res.modes[1:10, 0] == 0)  # stance, then flight
+
+
+@pytest.mark.slow
+def test_a_chattering_replay_is_solved_again_on_finer_steps():
+    """nosnoc's cart-pole at N = 80: the 4-step shooting reaches the swing-up (5311.28), but its
+    control's event replay chatters at a stick (Zeno). After every 4-step round has failed, that
+    round is solved again on 8 steps, and the control found there replays."""
+    ex = EXAMPLES["cart_pole"]()
+    res = ex.make(80).solve(**ex.solve_kw)
+    assert res.success, res.message
+    assert "on 8 Runge-Kutta steps per grid interval" in res.message
+    assert "Zeno" in res.message  # the failed 4-step round is reported
+    assert res.cost < 5400 and res.replay.final_miss < 1e-8
+
+
+@pytest.mark.slow
+def test_steps_the_optimum_does_not_need_shrink_in_the_shooting():
+    """Jean-Pratt minimum time at R = 1.0 (N = 20, the defaults): the push barely beats friction,
+    the braking takes 1 % of T*. On the transcriptions' shortest step (0.05 T / N) the last steps
+    braked past the stop and slid back, 7.8e-5 above the closed-form T*; the shooting's steps may
+    shrink to almost nothing, and it lands on T*."""
+    from studies import optimal_control as so
+
+    sc, system = so.controlled_block(R=1.0)
+    d = so.REST["d"]
+    pb = OptimalControlProblem(system, 20, T=0.5, free_time=True, T_bounds=(0.05, 5.0),
+                               terminal_cost=lambda T, q, v: T, q0=sc.q0, v0=sc.v0,
+                               terminal_constraints=lambda q, v: ca.vertcat(q[0] - d, v[0]))
+    r = pb.solve()
+    T_star = so.min_time_bound(R=1.0)
+    assert r.success, r.message
+    assert T_star * (1 - 1e-9) <= r.T <= T_star * (1 + 1e-6), (r.T, T_star)
+    assert r.replay.final_miss <= 1e-8 and np.max(np.abs(r.q[:, 1])) <= 1e-12  # no lift-off

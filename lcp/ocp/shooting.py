@@ -254,7 +254,7 @@ class PhaseShooting(Transcription):
         sys, N, n = pb.system, pb.N, pb.system.n
         m = sys.n_contacts
         mu = np.asarray(sys.mu, dtype=float)
-        sigma, q0p, v0p, Tv, z, hs, us, qs, vs, tk = grid_variables(self)
+        sigma, q0p, v0p, Tv, z, hs, us, qs, vs, tk = grid_variables(self, step_floor=STEP_FLOOR)
         gap = ca.Function("gap", [sys.q_sym], [sys.gap_expr]) if m else None
         Hfn = ca.Function("H", [sys.q_sym], [sys.H_expr]) if m else None
         J, pair_sizes = ca.SX(0), {}
@@ -640,6 +640,13 @@ def initial_point(tr, result, states: str = "integrated") -> np.ndarray:
     return x
 
 
+#: the shortest free step, relative to T / N as ``step_bounds``. The transcriptions keep the
+#: problem's floor (0.05: their short steps carried large forces that the replay refused); here a
+#: step is integrated exactly, so a step the optimum does not need shrinks to almost nothing, as a
+#: phase does. Jean-Pratt minimum time at R = 1.0 (N = 40): the last two steps sat on the floor,
+#: braking past the stop and sliding back, 4.1e-5 above the optimum; with this floor, 1.3e-9
+STEP_FLOOR = 1e-6
+
 #: Runge-Kutta steps per grid interval of the shooting NLP, and the most tried. The deferred
 #: correction, not the step count, sets the accuracy; the count sets the cost of an iteration and
 #: of the NLP's build: 4 instead of 8 took 20-25 % off the motor, the two-block chain and the seven
@@ -651,7 +658,8 @@ RK_SUBSTEPS_SAFE = 8
 CORRECTIONS = 6
 
 
-def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, options: dict | None = None):
+def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, options: dict | None = None,
+                   substeps: int = RK_SUBSTEPS):
     """The shooting polish of ``result`` (module docstring): (x, cost, diag, IPOPT's stats, time,
     the NLP whose ``diagnose`` gave ``diag``).
 
@@ -662,7 +670,7 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
     constraints as a parameter (deferred correction): the next solve, warm-started, lands where
     the accurate integrator's phases join. While the defect exceeds ``defect_tol``: up to
     :data:`CORRECTIONS` corrections, then finer steps (order 4: by (defect / tol)^(1/4)), up to
-    :data:`RK_SUBSTEPS_MAX` per grid interval. ``start="replay"``: the phases and states of the
+    :data:`RK_SUBSTEPS_MAX` per grid interval, from ``substeps``. ``start="replay"``: the phases and states of the
     event replay of ``result``'s control (a feasible start); ``"result"``: ``result``'s own modes
     and states. Raises :class:`NotShootable` where the shooting does not apply."""
     refuse(pb)
@@ -678,7 +686,7 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
           "mu_strategy": "adaptive", "bound_relax_factor": 0.0, **(options or {})}
     warm_ip = {**ip, "warm_start_init_point": "yes", "mu_init": 1e-8, "warm_start_bound_push": 1e-9,
                "warm_start_mult_bound_push": 1e-9}
-    M, iters, warm, diag, ok, stats, pair_tol = RK_SUBSTEPS, 0, {}, None, False, {}, 0.0
+    M, iters, warm, diag, ok, stats, pair_tol = int(substeps), 0, {}, None, False, {}, 0.0
     cost = float("nan")
     while True:
         tr = PhaseShooting(pb, plan, substeps=M, zeros=zeros, pair_tol=pair_tol, keys=keys, like=check)

@@ -557,11 +557,11 @@ def _curved(sys):
                            for i in range(m)])
 
 
-def grid_variables(tr):
+def grid_variables(tr, step_floor: float | None = None):
     """The variables and grid every transcription shares, added to ``tr``: (sigma, q0, v0, T, z,
     steps h_k, controls, node positions, node velocities, node times). T is a variable with
     ``free_time``, z the epigraph variable of ``max_cost``; free steps are variables summing to T
-    within ``step_bounds`` T / N, else uniform or the fixed piecewise-uniform grid of a phase guess
+    within ``step_bounds`` T / N (the lower bound replaced by ``step_floor`` where given), else uniform or the fixed piecewise-uniform grid of a phase guess
     (``step_fractions``); the nodes pinned by ``node_times`` are constraints where the grid moves."""
     pb = tr.pb
     N, n, nu = pb.N, pb.system.n, pb.nu
@@ -570,6 +570,7 @@ def grid_variables(tr):
     z = tr._var("z", 1, -np.inf, np.inf, key="z") if pb.max_cost is not None else None
     if pb.steps == "free":
         lo, hi = pb.step_bounds
+        lo = lo if step_floor is None else step_floor
         Tlo, Thi = (pb.T_bounds if pb.free_time else (pb.T, pb.T))
         hs = [tr._var(f"h{k}", 1, lo * Tlo / N, hi * Thi / N, key="h") for k in range(N)]
         tr._constrain(ca.sum1(ca.vertcat(*hs)) - Tv, 0.0, 0.0)
