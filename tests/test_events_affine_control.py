@@ -251,15 +251,15 @@ def test_ocp_replay_in_one_integration_matches_the_restarted_one():
     """An affine-hold OCP solution replayed over the whole schedule at once (closed form) equals
     the replay restarted at every node, and its per-interval pieces keep their layout."""
     from lcp.ocp import OptimalControlProblem, effort, replay
-    from lcp.ocp.replay import _closed_form_system, event_pieces
+    from lcp.ocp.replay import _whole_schedule_system, event_pieces
 
     sc, system = block(0.5, 0.0)
     ocp = OptimalControlProblem(system, 6, q0=sc.q0, v0=sc.v0, T=1.0, stage_cost=effort, hold="affine",
                                 steps="free", terminal_constraints=lambda q, v: ca.vertcat(q[0] - 0.3, v[0]))
     res = ocp.solve(ocp.guess(u=0.0), sigma0=1e-2, factor=1e-2, max_iter=3000)
     assert res.control.hold == "affine"
-    assert _closed_form_system(res, {"n_eval": 5}) is not None
-    assert _closed_form_system(res, {"n_eval": 5, "rtol": 1e-12}) is None  # other options: restarted
+    assert _whole_schedule_system(res, {"n_eval": 5}) is not None
+    assert _whole_schedule_system(res, {"n_eval": 5, "rtol": 1e-12}) is None  # other options: restarted
     rp = replay(res, method="event", n_eval=5)
     q_r, v_r, pieces_r = event_pieces(res, n_eval=5, rtol=1e-12)
     assert np.max(np.abs(rp.q - q_r)) <= 1e-13 and np.max(np.abs(rp.v - v_r)) <= 1e-13

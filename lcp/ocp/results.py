@@ -132,8 +132,8 @@ class ReplayCheck:
     Attributes
     ----------
     method : str
-        ``"event"``: the event-driven integrator restarted at every node of the control (the
-        control's breakpoints as events; exact for piecewise-polynomial phases), or
+        ``"event"``: the event-driven integrator over the control's schedule (its breakpoints
+        end phases; exact for piecewise-polynomial phases), or
         ``"moreau-jean h=..."``: Moreau-Jean at a fine step (when the event replay is unavailable).
     final_miss : float
         max |state_opt(T) - state_replay(T)| over q and v.
@@ -276,8 +276,8 @@ class ReplayResult:
     Attributes
     ----------
     sim : SimulationResult or EventResult
-        The replay (for the event replay restarted at the nodes, the last piece's result;
-        :attr:`pieces` holds them all).
+        The replay (for the event replay, the last interval's piece; :attr:`pieces` holds them
+        all).
     method : str
     h : float
         Replay step (nan for the event integrator).

@@ -19,7 +19,7 @@ from lcp.ocp.guess import event_guess, resample, screened_start, x0_from_guess
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions, check_shooting
 from lcp.ocp.replay import replay_check
 from lcp.ocp.results import HomotopyStage, OCPGuess, OCPResult
-from lcp.ocp.shooting import CHECK_TOL, RK_SUBSTEPS, RK_SUBSTEPS_SAFE, NotShootable, refuse, solve_shooting
+from lcp.ocp.shooting import CHECK_TOL, MODE_TOL, RK_SUBSTEPS, RK_SUBSTEPS_SAFE, NotShootable, refuse, solve_shooting
 from lcp.ocp.spatial import SpatialTranscription
 from lcp.ocp.transcription import Transcription
 
@@ -177,7 +177,7 @@ def polished(problem, res, t0) -> OCPResult:
         ok = st["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
         stage = HomotopyStage(0.0, int(st["iter_count"]), diag["residual"], 0.0, cost, st["return_status"], ok, dt)
         segments = sum(len(s) for s in tr.plan)
-        if not ok or diag["dynamics"] > 1e-8 or diag["residual"] > 1e-8:
+        if not ok or diag["dynamics"] > MODE_TOL or diag["residual"] > MODE_TOL:
             notes.append(f"{label} ({segments} phases) failed: IPOPT returned {st['return_status']}, "
                          f"defect {diag['dynamics']:.2e}, mode conditions violated by {diag['residual']:.2e}")
             queue = [a for a in queue if a[0] != "replay" or a[2] is not None]  # (the same replay again)
