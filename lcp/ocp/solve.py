@@ -19,7 +19,7 @@ from lcp.ocp.guess import event_guess, resample, screened_start, x0_from_guess
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions, check_shooting
 from lcp.ocp.replay import replay_check
 from lcp.ocp.results import HomotopyStage, OCPGuess, OCPResult
-from lcp.ocp.shooting import CHECK_TOL, MODE_TOL, RK_SUBSTEPS, RK_SUBSTEPS_SAFE, NotShootable, refuse, solve_shooting
+from lcp.ocp.shooting import CHECK_TOL, MODE_TOL, NotShootable, refuse, solve_shooting
 from lcp.ocp.spatial import SpatialTranscription
 from lcp.ocp.transcription import Transcription
 
@@ -149,30 +149,22 @@ def polished(problem, res, t0) -> OCPResult:
     # states and modes (multiple shooting: its defects closed by IPOPT), which keeps a trajectory
     # the open-loop replay leaves (the cart-pole's swing-up: the replay of Radau's control misses
     # the upright by 17, the shooting from its states swings up at a cost 555.9)
-    queue = [("replay", r, None, RK_SUBSTEPS) for r in range(SHOOTING_ROUNDS)] + [("result", 0, res, RK_SUBSTEPS)]
-    start, retry = res, []
-    while queue or retry:
-        if not queue:
-            # a solved round whose control failed its replay, once more on finer steps, after
-            # every 4-step round (so no problem the 4-step rounds solve takes another path): the
-            # cart-pole at N = 80 found the same optimum (5311.28) on 4 and on 8 steps, but the
-            # 4-step control's replay chattered at a stick (Zeno) and the 8-step one's replayed to
-            # 2.2e-9; retried at once instead, the box at N = 40 took another path and failed
-            queue, retry = retry, []
-        kind, rnd, own, steps = queue.pop(0)
-        start = own if own is not None else start
-        label = (f"round {rnd + 1}" if kind == "replay" else "from the transcription's states") + \
-            ("" if steps == RK_SUBSTEPS else f" on {steps} Runge-Kutta steps")
+    queue = [("replay", r) for r in range(SHOOTING_ROUNDS)] + [("result", 0)]
+    start = res
+    while queue:
+        kind, rnd = queue.pop(0)
+        if kind == "result":
+            start = res
+        label = f"round {rnd + 1}" if kind == "replay" else "from the transcription's states"
         try:
-            x, cost, diag, st, dt, tr = solve_shooting(problem, start, start=kind, substeps=steps)
+            x, cost, diag, st, dt, tr = solve_shooting(problem, start, start=kind)
         except NotShootable as exc:
             notes.append(f"{label} not tried: {exc}")
             queue = [a for a in queue if a[0] != "replay"]
             continue
         except RuntimeError as exc:  # the replay that gives the phases, or an integrator, failed
             notes.append(f"{label} failed: {exc}")
-            if kind == "replay":  # the next rounds would replay the same control
-                queue = [a for a in queue if a[0] != "replay" or a[2] is not None]
+            queue = [a for a in queue if a[0] != "replay"]  # the next rounds would replay the same control
             continue
         ok = st["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
         stage = HomotopyStage(0.0, int(st["iter_count"]), diag["residual"], 0.0, cost, st["return_status"], ok, dt)
@@ -180,14 +172,12 @@ def polished(problem, res, t0) -> OCPResult:
         if not ok or diag["dynamics"] > MODE_TOL or diag["residual"] > MODE_TOL:
             notes.append(f"{label} ({segments} phases) failed: IPOPT returned {st['return_status']}, "
                          f"defect {diag['dynamics']:.2e}, mode conditions violated by {diag['residual']:.2e}")
-            queue = [a for a in queue if a[0] != "replay" or a[2] is not None]  # (the same replay again)
+            queue = [a for a in queue if a[0] != "replay"]  # the next rounds would start from the same replay
             continue
         source = ("the event replay of the " + ("transcription" if rnd == 0 else f"shooting round {rnd}")
                   + "'s control" if kind == "replay" else "the transcription's own modes and states")
         how = (f"exact-phase shooting on the {segments} phases of {source} (the phases joined as "
                f"CVODES integrates them at rtol {CHECK_TOL['reltol']:.0e})")
-        if steps != RK_SUBSTEPS:
-            how += f", on {steps} Runge-Kutta steps per grid interval"
         out = result_of(problem, x, cost, diag, 0, f"Solved by {how}: every mode condition holds to "
                         f"{max(diag['residual'], 1e-16):.1e}, the phases join to {max(diag['dynamics'], 1e-16):.1e}.",
                         res.homotopy + [stage], time.perf_counter() - t0, tr=tr)
@@ -198,8 +188,6 @@ def polished(problem, res, t0) -> OCPResult:
                 out.message += f" (Exact-phase shooting before this one: {'; '.join(notes)})"
             return out
         notes.append(f"{label} ({segments} phases, cost {cost:.10g}): {out.message}")
-        if steps == RK_SUBSTEPS:
-            retry.append((kind, rnd, start, RK_SUBSTEPS_SAFE))
         start = out
     res.message += f" (Exact-phase shooting: {'; '.join(notes)})"
     return res
