@@ -7,8 +7,9 @@ until the Coulomb residual, recomputed independently from the optimizer's states
 :meth:`~lcp.contact.problem.ContactProblem.residual`, is below the requested tolerance. A final
 polishing solve fixes, pair by pair, the smaller member at zero (the active set the homotopy has
 identified), which makes the complementarity exact; it is kept only if IPOPT converges and the
-residual does not grow. Where IPOPT stops there at its acceptable level, short of its constraint
-tolerance, the point is projected onto its constraints (:func:`projected`).
+residual does not grow. Where IPOPT stops there at its acceptable level with a dynamics residual
+above its tolerance, the point is projected onto its constraints (:func:`projected`), as is such a
+fixed-phase solution that a solve returns.
 
 Under the velocity law every contact is treated as active at every step. Moreau-Jean also skips a
 contact whose predicted gap is positive; ``inactive_conflicts`` counts the steps where that would
@@ -152,7 +153,7 @@ def run_homotopy(tr, x0, P0, options: HomotopyOptions, cache: dict, regularized:
         message = (f"{OCP_STATUS_MESSAGES[-2]} Residual {best[2]['residual']:.3g} > tol = {options.tol:.3g} "
                    f"at sigma = {history[-1].sigma:.3g}{_at(best[2])}.")
     if best is not None and options.polish and tr.pb.system.n_contacts:
-        xp, fp, diagp, st, dt = _polish(tr, best[0], lam_x, lam_g, P0, warm, pen, project=True)
+        xp, fp, diagp, st, dt = _polish(tr, best[0], lam_x, lam_g, P0, warm, pen, project=options.ipopt_tol)
         okp = bool(st["success"])
         history.append(HomotopyStage(0.0, int(st["iter_count"]), diagp["residual"], diagp["max_product"],
                                      fp, st["return_status"], okp, dt))
@@ -274,10 +275,10 @@ def fixed_mode_bounds_contacts(tr, x):
     return lbx, ubx
 
 
-def _polish(tr, x, lam_x, lam_g, P, solver, pen=None, project=False):
+def _polish(tr, x, lam_x, lam_g, P, solver, pen=None, project=None):
     """Fix the smaller member of each complementarity pair (cross pairs included) at zero and re-solve;
-    with ``project``, a point where IPOPT stopped at its acceptable level is projected onto its
-    constraints (:func:`feasible`)."""
+    with ``project`` (a dynamics residual), a point where IPOPT stopped at its acceptable level with
+    a larger dynamics residual is projected onto its constraints (:func:`feasible`)."""
     lbx, ubx = fixed_mode_bounds(tr, x)
     t0 = time.perf_counter()
     warm = {} if lam_x is None else {"lam_x0": lam_x, "lam_g0": lam_g}
@@ -286,16 +287,17 @@ def _polish(tr, x, lam_x, lam_g, P, solver, pen=None, project=False):
     xs = np.array(sol["x"]).ravel()
     # the problem's own cost: IPOPT's objective without the step penalty of a regularized solver
     f = float(sol["f"]) - (float(pen(xs)) if pen is not None else 0.0)
-    xs, f, diag = feasible(tr, xs, f, st, lbx, ubx, P) if project else (xs, f, diagnose(tr, xs))
+    xs, f, diag = feasible(tr, xs, f, st, lbx, ubx, P, project) if project else (xs, f, diagnose(tr, xs))
     return xs, f, diag, st, time.perf_counter() - t0
 
 
-def feasible(tr, x, f, st, lbx, ubx, P):
-    """(x, cost, diagnosis): where IPOPT (stats ``st``) stopped at its acceptable level, ``x``
-    projected onto its constraints (:func:`projected`) when that lowers the dynamics residual and
-    raises neither complementarity residual; else ``x`` as it is."""
+def feasible(tr, x, f, st, lbx, ubx, P, above):
+    """(x, cost, diagnosis): where IPOPT (stats ``st``) stopped at its acceptable level with a
+    dynamics residual above ``above`` (IPOPT's tolerance: a point within it is left as IPOPT gave
+    it), ``x`` projected onto its constraints (:func:`projected`) when that lowers the dynamics
+    residual and raises neither complementarity residual; else ``x`` as it is."""
     diag = diagnose(tr, x)
-    if st["return_status"] == "Solved_To_Acceptable_Level":
+    if st["return_status"] == "Solved_To_Acceptable_Level" and diag["dynamics"] > above:
         xq = projected(tr, x, lbx, ubx, P)
         if xq is not None:
             dq = diagnose(tr, xq)
@@ -470,8 +472,6 @@ def _fixed_solve(tr, x0, P0, solver, pen=None):
         iterations += int(st2["iter_count"])
         if st2["return_status"] == "Solve_Succeeded":
             x, f, diag, st = x2, f2, diag2, st2
-        else:  # the repeat did not converge fully: the first point, projected onto its constraints
-            x, f, diag = feasible(tr, x, f, st, *fixed_mode_bounds(tr, x0), P0)
     return x, f, diag, st, dt, iterations
 
 
@@ -482,7 +482,15 @@ def run_phases(tr, x0, P0, options: HomotopyOptions, cache: dict):
     tuple of :func:`run_homotopy`, the message saying when the fixed-phase solve failed first."""
     x, cost, diag, status, message, history = run_fixed_modes(tr, x0, P0, options, cache)
     if status >= 0:
-        return _relaxed_tail(tr, x, cost, diag, status, message, history, P0, options, cache)
+        out = _relaxed_tail(tr, x, cost, diag, status, message, history, P0, options, cache)
+        if out[0] is x:
+            # the fixed-phase solution kept: where IPOPT left it at its acceptable level, projected
+            # onto its constraints, after the tail (which starts from IPOPT's point: from the
+            # projected one, the tail of the minimum time at R = 0.7, N = 40 no longer lowered the
+            # cost from 4.0e-4 above T* to 4e-8)
+            st = {"return_status": history[0].return_status}
+            out = feasible(tr, x, cost, st, *fixed_mode_bounds(tr, x), P0, options.ipopt_tol) + out[3:]
+        return out
     if np.all(np.isfinite(x)) and diag["dynamics"] <= 1e-8 and diag["residual"] <= options.tol:
         start = x  # a nearly optimal start: only the tail of the homotopy
         options = replace(options, sigma0=max(min(options.sigma0, 1e-4), options.sigma_min),
