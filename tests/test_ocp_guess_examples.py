@@ -158,21 +158,32 @@ def test_the_ball_example_of_the_study_is_a_checked_success():
 def test_the_box_tip_fails_from_every_start_and_says_where():
     # the box pivots on its bottom-right corner (a contact held closed along a curved gap): at
     # N = 10 no default start gives a control whose replay holds (studies.ocp_examples says why);
-    # the lowest-cost failure is returned, its message names every start, IPOPT's status and the
-    # step and contact of the largest Coulomb residual
+    # the lowest-cost failure is returned, its message names every start and what each did (its
+    # solution's cost, or IPOPT's failure or the residual left, with the step and contact of the
+    # largest Coulomb residual). Measured: only the pulse start converges (cost 2.249, replay miss
+    # 1.4e-2); from Moreau-Jean's start the homotopy ends at a residual of 1.6, and both event starts
+    # end infeasible (an earlier version converged from Moreau-Jean's start too, at cost 19.54): the
+    # costs quoted for other starts are checked where there are any, not required
     import re
 
     from studies._ocp_models import EXAMPLES
 
     r = EXAMPLES["box_tip"]().make(10).solve(shooting=False)
-    assert not r.success
+    assert not r.success and r.status == -3 and r.replay.final_miss > r.problem.replay_tol
+    assert "(Started from the event-method simulation of" in r.message
     assert "the pulse start nearest the terminal constraints" in r.message
-    assert "from the event-method simulation of the mid-range control from sigma0 = 1" in r.message
-    assert "from the Moreau-Jean simulation of the mid-range control" in r.message
-    others = [float(c) for c in re.findall(r"its solution \(cost ([-0-9.e+]+)", r.message)]
-    assert others and all(r.cost <= c for c in others)
-    assert "the Coulomb residual is largest in step" in r.message and "contact '" in r.message
     names = {c.name for c in r.problem.system.contacts}
+    did = (r"(its solution \(cost ([-0-9.e+]+)|IPOPT failed during the relaxation homotopy[^;]*"
+           r"|The homotopy ended with a complementarity residual above tolerance[^;]*)")
+    where = r"; the Coulomb residual is largest in step \d+ \(t = [0-9.e+-]+\), contact '(\w+)'"
+    for label in (ocp_solve.MJ_START, ocp_solve.EVENT_START, ocp_solve.EVENT_START + " from sigma0 = 1"):
+        m = re.search(f"from the {re.escape(label)}: {did}", r.message)
+        assert m, label
+        if m.group(2) is not None:  # it converged: the lowest-cost failure was returned
+            assert r.cost <= float(m.group(2))
+        else:  # it did not: where the Coulomb residual is largest, on a contact of the box
+            w = re.match(where, r.message[m.end():])
+            assert w and w.group(1) in names, (label, r.message[m.end():m.end() + 80])
     assert any(f"contact '{nm}'" in r.message for nm in names)
 
 
