@@ -655,8 +655,7 @@ RK_SUBSTEPS, RK_SUBSTEPS_MAX = 4, 128
 #: the steps of a second try where the first NLP's solve fails (before any solution of its own)
 RK_SUBSTEPS_SAFE = 8
 #: the mode conditions' tolerance of a shooting solution (the admissibility of every segment's
-#: modes, its switches, the user's constraints): above it the steps are doubled once, and a
-#: solution still above it is not taken
+#: modes, its switches, the user's constraints): a solution above it is not taken
 MODE_TOL = 1e-8
 #: defect corrections tried on one Runge-Kutta NLP before its steps are refined
 CORRECTIONS = 6
@@ -673,10 +672,9 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
     constraints as a parameter (deferred correction): the next solve, warm-started, lands where
     the accurate integrator's phases join. While the defect exceeds ``defect_tol``: up to
     :data:`CORRECTIONS` corrections, then finer steps (order 4: by (defect / tol)^(1/4)), up to
-    :data:`RK_SUBSTEPS_MAX` per grid interval; then, where the mode conditions at the check points
-    exceed :data:`MODE_TOL`, twice the steps, once. ``start="replay"``: the phases and states of
-    the event replay of ``result``'s control (a feasible start); ``"result"``: ``result``'s own
-    modes and states. Raises :class:`NotShootable` where the shooting does not apply."""
+    :data:`RK_SUBSTEPS_MAX` per grid interval. ``start="replay"``: the phases and states of the
+    event replay of ``result``'s control (a feasible start); ``"result"``: ``result``'s own modes
+    and states. Raises :class:`NotShootable` where the shooting does not apply."""
     refuse(pb)
     plan = phase_plan(result) if start == "replay" else plan_of_modes(result)
     t0 = time.perf_counter()
@@ -691,7 +689,6 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
     warm_ip = {**ip, "warm_start_init_point": "yes", "mu_init": 1e-8, "warm_start_bound_push": 1e-9,
                "warm_start_mult_bound_push": 1e-9}
     M, iters, warm, diag, ok, stats, pair_tol = RK_SUBSTEPS, 0, {}, None, False, {}, 0.0
-    refined = False
     cost = float("nan")
     while True:
         tr = PhaseShooting(pb, plan, substeps=M, zeros=zeros, pair_tol=pair_tol, keys=keys, like=check)
@@ -735,18 +732,12 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
             # (the convex obstacle, N = 40: at 4 steps IPOPT's iteration limit, at 8 solved)
             M, warm = RK_SUBSTEPS_SAFE, {}
             continue
-        if not ok or M >= RK_SUBSTEPS_MAX:
+        if not ok or diag["dynamics"] <= defect_tol or M >= RK_SUBSTEPS_MAX:
+            # (not refined for the mode conditions at the check points inside the segments, which
+            # see the Runge-Kutta error: doubling the steps once there solved the hopper's first
+            # round at N = 40 (1.8e-8 -> 3.9e-10; its replay then missed by 2.6e-6), but took the
+            # cart-pole at N = 20 through three rounds to worse optima, 10 s -> 220 s, no success)
             break
-        if diag["dynamics"] <= defect_tol:
-            # the joins are corrected, the check points inside the segments are not: there the mode
-            # conditions see the Runge-Kutta error, which twice the steps shrink 16 times (the
-            # hopper at N = 40: violated by 1.8e-8 on 4 steps, 3.9e-10 on 8). Once only: refined
-            # while the violation halved, the cart-pole at N = 20 (4e-7) took 3 rounds to worse
-            # optima, none replaying, in 3 minutes instead of 10 s
-            if diag["residual"] <= MODE_TOL or refined:
-                break
-            refined, M, warm = True, min(RK_SUBSTEPS_MAX, 2 * M), {}
-            continue
         M = min(RK_SUBSTEPS_MAX, int(np.ceil(1.2 * M * (diag["dynamics"] / max(last, defect_tol)) ** 0.25 + M)))
         warm = {}
     stats = {**stats, "iter_count": iters}
