@@ -64,8 +64,9 @@ def solve_problem(problem, guess, options, method, option_kw, shooting: bool = T
     tried, earlier = [], []  # the failed starts' messages and homotopy stages (kept in the history)
     last, message = None, ""
     # default starts whose solve converged but whose result failed (its replay, then the shooting):
-    # the next start is tried too (the box tip at N = 10: from the mid-range control cost 19.54,
-    # replay miss 2.1e-2; from the pulse start cost 2.249, replay miss 1.4e-2)
+    # the next start is tried too (the box tip at N = 10, measured when the mid-range control's
+    # start still converged: from it cost 19.54, replay miss 2.1e-2; from the pulse start cost
+    # 2.249, replay miss 1.4e-2. Now only the pulse start converges there)
     failed, res, where = [], None, None
     for label, gs, sigma0 in starts:
         if history is not None:  # a start before this one failed
