@@ -323,7 +323,6 @@ def _row(problem: str, method: str, N: int, v: dict, reference: float, value: fl
 
 
 # ---------------------------------------------------------------------------------------- figures
-# ---------------------------------------------------------------------------------------- figures
 _MODE_COLORS = {OPEN: "0.75", STICK: "tab:blue", SLIDE_POS: "tab:orange", SLIDE_NEG: "tab:green"}
 
 
