@@ -201,3 +201,32 @@ def test_one_replay_over_the_schedule_matches_the_restarted_one(motor_transcribe
         assert [p.modes for p in a.phases] == [p.modes for p in b.phases]
         assert np.allclose([p.t1 for p in a.phases], [p.t1 for p in b.phases], rtol=0, atol=1e-9)
 
+
+
+def test_a_force_of_t_is_replayed_at_its_own_times():
+    """A block pushed by u + 4 sin(6 t): the event replay restarted at every node would integrate
+    each interval from t = 0 (0.28 m off); it refuses by name, and the shooting's phase plan comes
+    from the one integration, which agrees with a fine Moreau-Jean replay."""
+    from lcp.model.system import Contact, System
+    from lcp.ocp import replay
+
+    q, v, u, t = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1), ca.SX.sym("t")
+    system = System(q, v, ca.SX.eye(2), ca.vertcat(u[0] + 4.0 * ca.sin(6.0 * t), -9.81),
+                    contacts=[Contact(gap=q[1], tangent=q[0], mu=0.3, name="floor")], control=u,
+                    control_bounds=(-10.0, 10.0), t=t)
+    pb = OptimalControlProblem(system, 10, T=1.0, q0=np.zeros(2), v0=np.zeros(2), stage_cost=effort,
+                               terminal_constraints=lambda q, v: ca.vertcat(q[0] - 0.3, v[0]))
+    pb.replay_tol = None
+    res = pb.solve(shooting=False)
+    with pytest.raises(ValueError, match="depend on t"):
+        event_pieces(res, restart=True)
+    qe, _, pieces = event_pieces(res, n_eval=2)
+    assert np.max(np.abs(replay(res, refine=400).q - qe)) < 1e-4  # (measured 1.5e-5: Moreau-Jean's error)
+    plan = phase_plan(res)
+
+    def runs(piece):  # the modes of the piece's phases of positive length, repeats merged
+        names = [tuple(ph.modes) for ph in piece.phases if ph.t1 > ph.t0]
+        return [m for i, m in enumerate(names) if i == 0 or m != names[i - 1]]
+
+    assert [len(segs) for segs in plan] == [len(runs(p)) for p in pieces]
+    assert np.allclose([sum(sg[1] for sg in segs) for segs in plan], np.diff(res.t), rtol=0, atol=1e-12)

@@ -103,7 +103,10 @@ def phase_plan(result):
     rc = getattr(result, "replay", None)
     pieces = rc.pieces if rc is not None and rc.pieces and len(rc.pieces) == len(result.t) - 1 else None
     if pieces is None:  # (the replay check keeps its pieces: they are reused)
-        pieces = event_pieces(result, restart=True)[2]
+        # one integration (not restarted at the nodes, which would integrate a force of t from
+        # t = 0 in every interval: the check has no pieces exactly when it replayed such a force
+        # by Moreau-Jean)
+        pieces = event_pieces(result, n_eval=2)[2]
     mu = np.asarray(result.problem.system.mu, dtype=float)
     plan, carried = [], []
     for k, sim in enumerate(pieces):
