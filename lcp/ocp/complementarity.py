@@ -287,17 +287,18 @@ def _polish(tr, x, lam_x, lam_g, P, solver, pen=None, project=None):
     xs = np.array(sol["x"]).ravel()
     # the problem's own cost: IPOPT's objective without the step penalty of a regularized solver
     f = float(sol["f"]) - (float(pen(xs)) if pen is not None else 0.0)
-    xs, f, diag = feasible(tr, xs, f, st, lbx, ubx, P, project) if project else (xs, f, diagnose(tr, xs))
+    xs, f, diag = (feasible(tr, xs, f, st["return_status"], lbx, ubx, P, project) if project
+                   else (xs, f, diagnose(tr, xs)))
     return xs, f, diag, st, time.perf_counter() - t0
 
 
-def feasible(tr, x, f, st, lbx, ubx, P, above):
-    """(x, cost, diagnosis): where IPOPT (stats ``st``) stopped at its acceptable level with a
-    dynamics residual above ``above`` (IPOPT's tolerance: a point within it is left as IPOPT gave
-    it), ``x`` projected onto its constraints (:func:`projected`) when that lowers the dynamics
+def feasible(tr, x, f, status, lbx, ubx, P, above):
+    """(x, cost, diagnosis): where IPOPT (its return status ``status``) stopped at its acceptable
+    level with a dynamics residual above ``above`` (IPOPT's tolerance: a point within it is left as
+    IPOPT gave it), ``x`` projected onto its constraints (:func:`projected`) when that lowers the dynamics
     residual and raises neither complementarity residual; else ``x`` as it is."""
     diag = diagnose(tr, x)
-    if st["return_status"] == "Solved_To_Acceptable_Level" and diag["dynamics"] > above:
+    if status == "Solved_To_Acceptable_Level" and diag["dynamics"] > above:
         xq = projected(tr, x, lbx, ubx, P)
         if xq is not None:
             dq = diagnose(tr, xq)
@@ -329,7 +330,8 @@ def projected(tr, x, lbx, ubx, P):
     x_in, x = x, np.array(x, dtype=float)
     scale = np.maximum(1.0, np.abs(x))
     free = (x > lbx + 1e-12 * scale) & (x < ubx - 1e-12 * scale)
-    g = np.array(fn(x, P)[0]).ravel()
+    g, J, _ = fn(x, P)
+    g = np.array(g).ravel()
     near = 1e-8 * np.maximum(1.0, np.abs(g))
     up, low = g >= tr.ubg - near, g <= tr.lbg + near
     rows = up | low
@@ -337,9 +339,8 @@ def projected(tr, x, lbx, ubx, P):
     if not rows.any() or not free.any():
         return None
     n_free, n_rows = int(np.sum(free)), int(np.sum(rows))
-    for _ in range(PROJECTION_STEPS):
-        g, J = fn(x, P)[:2]
-        r = np.array(g).ravel()[rows] - target
+    for _ in range(PROJECTION_STEPS):  # (g and J at the current x)
+        r = g[rows] - target
         if np.max(np.abs(r)) <= 1e-15 * max(1.0, float(np.max(np.abs(target)))):
             break
         A = J.sparse().tocsr()[rows][:, free]
@@ -349,7 +350,8 @@ def projected(tr, x, lbx, ubx, P):
         if not np.all(np.isfinite(dx)):
             return None
         x[free] += dx
-    g = np.array(fn(x, P)[0]).ravel()
+        g, J, _ = fn(x, P)
+        g = np.array(g).ravel()
     if np.max(np.abs(x - x_in) / scale) > 1e-6:  # not a point near its constraints: not a projection
         return None
     if np.any(x < lbx - 1e-12 * scale) or np.any(x > ubx + 1e-12 * scale) or \
@@ -488,8 +490,8 @@ def run_phases(tr, x0, P0, options: HomotopyOptions, cache: dict):
             # onto its constraints, after the tail (which starts from IPOPT's point: from the
             # projected one, the tail of the minimum time at R = 0.7, N = 40 no longer lowered the
             # cost from 4.0e-4 above T* to 4e-8)
-            st = {"return_status": history[0].return_status}
-            out = feasible(tr, x, cost, st, *fixed_mode_bounds(tr, x), P0, options.ipopt_tol) + out[3:]
+            out = feasible(tr, x, cost, history[0].return_status, *fixed_mode_bounds(tr, x), P0,
+                           options.ipopt_tol) + out[3:]
         return out
     if np.all(np.isfinite(x)) and diag["dynamics"] <= 1e-8 and diag["residual"] <= options.tol:
         start = x  # a nearly optimal start: only the tail of the homotopy
