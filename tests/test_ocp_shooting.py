@@ -59,6 +59,66 @@ def test_motor_solved_to_its_replay(motor_transcribed):
     assert abs(out.q[-1, 0] - 0.01) < 1e-9 and abs(out.v[-1, 0]) < 1e-9
 
 
+def test_a_stalled_warm_correction_is_solved_again_cold(motor_transcribed, monkeypatch):
+    """A warm-started defect correction that stops at its iteration cap is solved again from the same
+    point with IPOPT's own start, and the shooting lands on the same optimum (the two discs at
+    N = 30: warm corrections ran 500 and 344 iterations where cold solves took 11 to 35)."""
+    import lcp.ocp.shooting as sh
+
+    calls = []
+    real = sh.ca.nlpsol
+
+    def recording(name, plugin, nlp, opts):
+        solver = real(name, plugin, nlp, opts)
+        warm = opts["ipopt"].get("warm_start_init_point") == "yes"
+
+        def call(**kw):
+            out = solver(**kw)
+            calls.append((warm, solver.stats()["return_status"]))
+            return out
+
+        return type("Recorded", (), {"__call__": lambda self, **kw: call(**kw),
+                                     "stats": lambda self: solver.stats()})()
+
+    pb, res = motor_transcribed
+    monkeypatch.setattr(sh.ca, "nlpsol", recording)
+    _, cost_ref, _, _, _, _ = solve_shooting(pb, res)
+    assert any(warm for warm, _ in calls)  # the motor's shooting makes a warm correction
+    assert all(status in ("Solve_Succeeded", "Solved_To_Acceptable_Level") for _, status in calls)
+    calls.clear()
+    monkeypatch.setattr(sh, "WARM_MAX_ITER", 1)
+    _, cost, diag, st, _, _ = solve_shooting(pb, res)
+    stalled = [i for i, (warm, status) in enumerate(calls) if warm and status == "Maximum_Iterations_Exceeded"]
+    assert stalled, calls
+    assert all(i + 1 < len(calls) and not calls[i + 1][0] for i in stalled)  # each followed by a cold solve
+    assert st["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    assert diag["dynamics"] < 1e-9 and diag["residual"] < 1e-9
+    assert cost == pytest.approx(cost_ref, rel=1e-9)
+
+
+def test_the_replay_miss_names_an_impact_the_optimizer_passed_through():
+    """Where the modes agree at the start of the step before the first miss, the replay's impacts
+    inside that step are named (the two discs at N = 30: the first shooting round's disc 1 passed
+    1.5 mm into disc 2 between two check points of a free-flight phase; the replay hit it)."""
+    from types import SimpleNamespace as NS
+
+    from lcp.ocp.replay import _where
+    from lcp.result import Impact
+
+    result = NS(q=np.zeros((3, 2)), t=np.array([0.0, 0.1, 0.2]), modes=np.zeros((2, 1), dtype=int),
+                problem=NS(system=NS(contacts=[NS(name="discs")])))
+    q = np.zeros((3, 2))
+    q[1:, 0] = 0.01
+    rp = NS(q=q, pieces=[NS(modes=[np.zeros(1, dtype=int)], impacts=[Impact(0.0142, 0, "discs", 2.4, 0.0)]),
+                         NS(modes=[np.zeros(1, dtype=int)], impacts=[])])
+    text = _where(result, rp, 1e-6)
+    assert "first misses by more than 1.0e-06 at node 1" in text
+    assert text.endswith("in step 0 every contact has the same mode in both at its start, and inside it "
+                         "the replay resolves an impact of contact 'discs' at t = 0.0142")
+    rp.pieces[0].impacts = []
+    assert _where(result, rp, 1e-6).endswith("in step 0 every contact has the same mode in both")
+
+
 def _pushed_block(mu=0.3, T=1.0, N=6):
     """A block (1 kg) on a floor, pushed from rest to rest 0.2 m further with least effort: a slide
     that stops exactly at T (stick never admissible with |u| bound low)."""

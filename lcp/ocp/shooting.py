@@ -662,6 +662,11 @@ RK_SUBSTEPS_SAFE = 8
 MODE_TOL = 1e-8
 #: defect corrections tried on one Runge-Kutta NLP before its steps are refined
 CORRECTIONS = 6
+#: most IPOPT iterations of a warm-started correction before it is solved again cold (from the
+#: same point). Warm starts near the previous solution (a barrier of 1e-8) usually finish in a few
+#: iterations; where the correction moves an active bound they can stall: the two discs (N = 30),
+#: 500 and 344 warm iterations (47 s) where the cold solves of the same NLPs took 11 to 35
+WARM_MAX_ITER = 40
 
 
 def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, options: dict | None = None):
@@ -690,7 +695,7 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
     ip = {"print_level": 0, "sb": "yes", "tol": 1e-10, "constr_viol_tol": 1e-10, "max_iter": 500,
           "mu_strategy": "adaptive", "bound_relax_factor": 0.0, **(options or {})}
     warm_ip = {**ip, "warm_start_init_point": "yes", "mu_init": 1e-8, "warm_start_bound_push": 1e-9,
-               "warm_start_mult_bound_push": 1e-9}
+               "warm_start_mult_bound_push": 1e-9, "max_iter": min(int(ip["max_iter"]), WARM_MAX_ITER)}
     M, iters, warm, diag, ok, stats, pair_tol = RK_SUBSTEPS, 0, {}, None, False, {}, 0.0
     cost = float("nan")
     while True:
@@ -699,16 +704,21 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
         C = np.zeros(tr.n_corrections)
         last, good = np.inf, None
         for _ in range(CORRECTIONS + 1):
-            key = bool(warm)
-            if key not in solvers:
-                solvers[key] = ca.nlpsol("shooting", "ipopt", tr.nlp, {"print_time": False, "show_eval_warnings": False,
-                                                                        "ipopt": warm_ip if warm else ip})
-            solver = solvers[key]
-            sol = solver(x0=np.clip(x, tr.lbx, tr.ubx), lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg,
-                         p=tr.params(C), **warm)
-            stats = solver.stats()
-            iters += int(stats["iter_count"])
-            ok = stats["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+            for key in ((True, False) if warm else (False,)):
+                if key not in solvers:
+                    solvers[key] = ca.nlpsol("shooting", "ipopt", tr.nlp,
+                                             {"print_time": False, "show_eval_warnings": False,
+                                              "ipopt": warm_ip if key else ip})
+                solver = solvers[key]
+                sol = solver(x0=np.clip(x, tr.lbx, tr.ubx), lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg,
+                             p=tr.params(C), **(warm if key else {}))
+                stats = solver.stats()
+                iters += int(stats["iter_count"])
+                ok = stats["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+                if ok:
+                    break
+                # a warm-started correction that stalls is solved again from the same point with
+                # IPOPT's own barrier start (WARM_MAX_ITER)
             if not ok and good is not None:
                 # a correction's solve failed: keep the last solution (then finer steps), as when a
                 # correction no longer halves the defect (the two discs, N = 30: the first solve's
