@@ -62,7 +62,7 @@ def test_motor_solved_to_its_replay(motor_transcribed):
 def test_a_stalled_warm_correction_is_solved_again_cold(motor_transcribed, monkeypatch):
     """A warm-started defect correction that stops at its iteration cap is solved again from the same
     point with IPOPT's own start, and the shooting lands on the same optimum (the two discs at
-    N = 30: warm corrections ran 500 and 344 iterations where cold solves took 11 to 35)."""
+    N = 30: warm corrections ran 500, 344 and 500 iterations where cold solves took 11 to 35)."""
     import lcp.ocp.shooting as sh
 
     calls = []
@@ -94,6 +94,25 @@ def test_a_stalled_warm_correction_is_solved_again_cold(motor_transcribed, monke
     assert st["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
     assert diag["dynamics"] < 1e-9 and diag["residual"] < 1e-9
     assert cost == pytest.approx(cost_ref, rel=1e-9)
+
+
+def test_the_correction_reaches_every_output_of_the_integrators(motor_transcribed):
+    """The deferred correction is added to the Runge-Kutta outputs themselves: with it, every
+    constraint row of the coarse NLP (the joins, the mode conditions at the interior check points,
+    the force integrals) takes CVODES's value, not only the joins."""
+    pb, res = motor_transcribed
+    plan = phase_plan(res)
+    check = PhaseShooting(pb, plan, check=True)
+    coarse = PhaseShooting(pb, plan, substeps=1, like=check)
+    x = initial_point(check, res)
+    C = check.outputs(x) - coarse.outputs(x)
+    assert C.size == coarse.n_corrections and np.max(np.abs(C)) > 1e-8  # one step per quarter: off
+    g_cvodes = check.constraints(x)
+    g_coarse = coarse.constraints(x)
+    other = np.setdiff1d(np.arange(g_cvodes.size), check.defect_rows)
+    assert np.max(np.abs(g_coarse[other] - g_cvodes[other])) > 1e-10  # the interior rows see the error
+    g_corrected = np.array(coarse.g_fn(x, coarse.params(C))).ravel()
+    assert np.max(np.abs(g_corrected - g_cvodes)) <= 1e-12 * max(1.0, np.max(np.abs(g_cvodes)))
 
 
 def test_the_replay_miss_names_an_impact_the_optimizer_passed_through():
@@ -214,6 +233,18 @@ def test_hopper_jumps_from_the_defaults():
     assert res.success and "exact-phase shooting" in res.message, res.message
     assert res.replay.final_miss < 1e-9 and res.replay.path_violation < 1e-9
     assert res.modes[0, 0] != 0 and np.all(res.modes[1:10, 0] == 0)  # stance, then flight
+
+
+@pytest.mark.slow
+def test_hopper_jumps_at_n40():
+    """The hopper at N = 40: the homotopy fails, and the shooting's first round from its best point
+    needs the correction of the interior check points (its mode conditions there ended 1.8e-8
+    outside on the Runge-Kutta states alone)."""
+    ex = EXAMPLES["hopper"]()
+    res = ex.make(40).solve(**ex.solve_kw)
+    assert res.success and "exact-phase shooting" in res.message, res.message
+    assert res.replay.final_miss < 1e-8 and res.replay.path_violation < 1e-8
+    assert np.any(res.modes[:, 0] == 0) and np.any(res.modes[:, 0] != 0)  # flight and stance
 
 
 @pytest.mark.slow
