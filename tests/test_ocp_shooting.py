@@ -59,6 +59,85 @@ def test_motor_solved_to_its_replay(motor_transcribed):
     assert abs(out.q[-1, 0] - 0.01) < 1e-9 and abs(out.v[-1, 0]) < 1e-9
 
 
+def test_a_stalled_warm_correction_is_solved_again_cold(motor_transcribed, monkeypatch):
+    """A warm-started defect correction that stops at its iteration cap is solved again from the same
+    point with IPOPT's own start, and the shooting lands on the same optimum (the two discs at
+    N = 30: warm corrections ran 500, 344 and 500 iterations where cold solves took 11 to 35)."""
+    import lcp.ocp.shooting as sh
+
+    calls = []
+    real = sh.ca.nlpsol
+
+    def recording(name, plugin, nlp, opts):
+        solver = real(name, plugin, nlp, opts)
+        warm = opts["ipopt"].get("warm_start_init_point") == "yes"
+
+        def call(**kw):
+            out = solver(**kw)
+            calls.append((warm, solver.stats()["return_status"]))
+            return out
+
+        return type("Recorded", (), {"__call__": lambda self, **kw: call(**kw),
+                                     "stats": lambda self: solver.stats()})()
+
+    pb, res = motor_transcribed
+    monkeypatch.setattr(sh.ca, "nlpsol", recording)
+    _, cost_ref, _, _, _, _ = solve_shooting(pb, res)
+    assert any(warm for warm, _ in calls)  # the motor's shooting makes a warm correction
+    assert all(status in ("Solve_Succeeded", "Solved_To_Acceptable_Level") for _, status in calls)
+    calls.clear()
+    monkeypatch.setattr(sh, "WARM_MAX_ITER", 1)
+    _, cost, diag, st, _, _ = solve_shooting(pb, res)
+    stalled = [i for i, (warm, status) in enumerate(calls) if warm and status == "Maximum_Iterations_Exceeded"]
+    assert stalled, calls
+    assert all(i + 1 < len(calls) and not calls[i + 1][0] for i in stalled)  # each followed by a cold solve
+    assert st["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    assert diag["dynamics"] < 1e-9 and diag["residual"] < 1e-9
+    assert cost == pytest.approx(cost_ref, rel=1e-9)
+
+
+def test_the_correction_reaches_every_output_of_the_integrators(motor_transcribed):
+    """The deferred correction is added to the Runge-Kutta outputs themselves: with it, every
+    constraint row of the coarse NLP (the joins, the mode conditions at the interior check points,
+    the force integrals) takes CVODES's value, not only the joins."""
+    pb, res = motor_transcribed
+    plan = phase_plan(res)
+    check = PhaseShooting(pb, plan, check=True)
+    coarse = PhaseShooting(pb, plan, substeps=1, like=check)
+    x = initial_point(check, res)
+    C = check.outputs(x) - coarse.outputs(x)
+    assert C.size == coarse.n_corrections and np.max(np.abs(C)) > 1e-8  # one step per quarter: off
+    g_cvodes = check.constraints(x)
+    g_coarse = coarse.constraints(x)
+    other = np.setdiff1d(np.arange(g_cvodes.size), check.defect_rows)
+    assert np.max(np.abs(g_coarse[other] - g_cvodes[other])) > 1e-10  # the interior rows see the error
+    g_corrected = np.array(coarse.g_fn(x, coarse.params(C))).ravel()
+    assert np.max(np.abs(g_corrected - g_cvodes)) <= 1e-12 * max(1.0, np.max(np.abs(g_cvodes)))
+
+
+def test_the_replay_miss_names_an_impact_the_optimizer_passed_through():
+    """Where the modes agree at the start of the step before the first miss, the replay's impacts
+    inside that step are named (the two discs at N = 30: the first shooting round's disc 1 passed
+    1.5 mm into disc 2 between two check points of a free-flight phase; the replay hit it)."""
+    from types import SimpleNamespace as NS
+
+    from lcp.ocp.replay import _where
+    from lcp.result import Impact
+
+    result = NS(q=np.zeros((3, 2)), t=np.array([0.0, 0.1, 0.2]), modes=np.zeros((2, 1), dtype=int),
+                problem=NS(system=NS(contacts=[NS(name="discs")])))
+    q = np.zeros((3, 2))
+    q[1:, 0] = 0.01
+    rp = NS(q=q, pieces=[NS(modes=[np.zeros(1, dtype=int)], impacts=[Impact(0.0142, 0, "discs", 2.4, 0.0)]),
+                         NS(modes=[np.zeros(1, dtype=int)], impacts=[])])
+    text = _where(result, rp, 1e-6)
+    assert "first misses by more than 1.0e-06 at node 1" in text
+    assert text.endswith("in step 0 every contact has the same mode in both at its start, and inside it "
+                         "the replay resolves an impact of contact 'discs' at t = 0.0142")
+    rp.pieces[0].impacts = []
+    assert _where(result, rp, 1e-6).endswith("in step 0 every contact has the same mode in both")
+
+
 def _pushed_block(mu=0.3, T=1.0, N=6):
     """A block (1 kg) on a floor, pushed from rest to rest 0.2 m further with least effort: a slide
     that stops exactly at T (stick never admissible with |u| bound low)."""
@@ -154,6 +233,18 @@ def test_hopper_jumps_from_the_defaults():
     assert res.success and "exact-phase shooting" in res.message, res.message
     assert res.replay.final_miss < 1e-9 and res.replay.path_violation < 1e-9
     assert res.modes[0, 0] != 0 and np.all(res.modes[1:10, 0] == 0)  # stance, then flight
+
+
+@pytest.mark.slow
+def test_hopper_jumps_at_n40():
+    """The hopper at N = 40: the homotopy fails, and the shooting's first round from its best point
+    needs the correction of the interior check points (its mode conditions there ended 1.8e-8
+    outside on the Runge-Kutta states alone)."""
+    ex = EXAMPLES["hopper"]()
+    res = ex.make(40).solve(**ex.solve_kw)
+    assert res.success and "exact-phase shooting" in res.message, res.message
+    assert res.replay.final_miss < 1e-8 and res.replay.path_violation < 1e-8
+    assert np.any(res.modes[:, 0] == 0) and np.any(res.modes[:, 0] != 0)  # flight and stance
 
 
 @pytest.mark.slow

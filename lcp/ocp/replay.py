@@ -300,4 +300,16 @@ def _where(result, rp, tol) -> str:
             text += f"; in step {k} " + ", ".join(parts)
         else:
             text += f"; in step {k} every contact has the same mode in both"
+            hits = _replay_impacts(rp, k, result.t[k])
+            if hits:  # an open contact that the optimizer's trajectory crosses between its points
+                text += (" at its start, and inside it the replay resolves " +
+                         ", ".join(f"an impact of contact {nm!r} at t = {t:.6g}" for t, nm in hits))
     return text
+
+
+def _replay_impacts(rp, k, t0) -> list:
+    """The event replay's impacts inside interval k: (time, contact name) ([] without pieces)."""
+    try:
+        return [(t0 + float(imp.t), imp.name) for imp in rp.pieces[k].impacts]
+    except (IndexError, AttributeError, TypeError):
+        return []

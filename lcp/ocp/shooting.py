@@ -262,7 +262,7 @@ class PhaseShooting(Transcription):
         Hfn = ca.Function("H", [sys.q_sym], [sys.H_expr]) if m else None
         J, pair_sizes = ca.SX(0), {}
         prev_modes = None
-        self._calls, self._defect_rows, self._corr = [], [], []
+        self._calls, self._defect_rows = [], []
         for k in range(N):
             h = hs[k]
             ua, ub = self.control_pair(us, k)
@@ -308,11 +308,12 @@ class PhaseShooting(Transcription):
                 fixed_pairs(self, k, st)
         J = self._terminal_terms(J, Tv, qs, vs, z)
         g = ca.vertcat(*self._g) if self._g else ca.SX.zeros(0, 1)
-        X, P = ca.vertcat(*self._x), ca.vertcat(sigma, q0p, v0p, *self._corr)
-        self.n_corrections = int(sum(c.shape[0] for c in self._corr))
+        X, P = ca.vertcat(*self._x), ca.vertcat(sigma, q0p, v0p)
         # the integrators can only be called on MX: the NLP is built in SX with their outputs as
         # symbols, then evaluated in MX with the integrator calls in place of those symbols
         outs = ca.vertcat(*[ca.vertcat(ca.vec(c[3]), ca.vec(c[4])) for c in self._calls])
+        #: one correction per integrator output (every state and integral at the check points)
+        self.n_corrections = int(outs.shape[0])
         ins = ca.Function("shooting_inputs", [X, P], [ca.vertcat(*[ca.vertcat(c[2], c[5]) for c in self._calls])])
         jg = ca.Function("shooting_nlp", [X, P, outs], [J, g])
         #: the symbolic NLP without its integrators: sizes of x and p, the calls' inputs, the costs and
@@ -333,8 +334,8 @@ class PhaseShooting(Transcription):
         """The MX NLP: the symbolic NLP (``_sx``) with this NLP's integrators in place of the calls'
         output symbols (the integrators can only be called on MX)."""
         nx, npar, ins, jg, calls = self._sx
-        Xm, Pm = ca.MX.sym("x", nx), ca.MX.sym("p", npar)
-        args = ins(Xm, Pm)
+        Xm, Pm = ca.MX.sym("x", nx), ca.MX.sym("p", npar + self.n_corrections)
+        args = ins(Xm, Pm[:npar])
         results, row = [], 0
         for modes, keep, n_x, n_p in calls:
             a, b = row, row + n_x
@@ -342,9 +343,12 @@ class PhaseShooting(Transcription):
             out = self.integrator(modes, keep)(x0=args[a:b], p=args[b:c])
             results += [ca.vec(out["xf"]), ca.vec(out["qf"])]
             row = c
-        Jm, gm = jg(Xm, Pm, ca.vertcat(*results))
+        outs = ca.vertcat(*results)
+        # the integrators' outputs plus the correction parameters (solve_shooting's deferred correction)
+        Jm, gm = jg(Xm, Pm[:npar], outs + Pm[npar:])
         self.nlp = {"x": Xm, "f": Jm, "g": gm, "p": Pm}
         self.g_fn = ca.Function("shooting_g", [Xm, Pm], [gm])
+        self.outputs_fn = ca.Function("shooting_outputs", [Xm, Pm], [outs])
 
     def _admissible(self, modes, keep, prev, points, mu, gap, Hfn, tag):
         """The segment's mode kept admissible at its points (t, x, u) (start, the integrator's grid,
@@ -395,19 +399,20 @@ class PhaseShooting(Transcription):
         return free
 
     def _defect(self, expr):
-        """A continuity (or impulse) equality: the integrator's value minus the variable, plus a
-        correction parameter (zero, or the accurate integrator's difference: ``solve_shooting``)."""
-        c = ca.SX.sym(f"c{len(self._corr)}", expr.shape[0])
-        self._corr.append(c)
+        """A continuity (or impulse) equality: the integrator's value minus the variable."""
         self._defect_rows.append(np.arange(self._ng, self._ng + expr.shape[0]))
-        self._constrain(expr + c, 0.0, 0.0)
+        self._constrain(expr, 0.0, 0.0)
 
     def constraints(self, x) -> np.ndarray:
         """The constraint values at x, corrections zero (one pass of the integrators)."""
         return np.array(self.g_fn(x, self.params())).ravel()
 
+    def outputs(self, x) -> np.ndarray:
+        """The integrators' outputs at x (the calls' states and integrals at the check points)."""
+        return np.array(self.outputs_fn(x, self.params())).ravel()
+
     def params(self, corrections=None) -> np.ndarray:
-        """The NLP's parameter vector: (sigma = 0, q0, v0, the defect corrections or zeros)."""
+        """The NLP's parameter vector: (sigma = 0, q0, v0, the output corrections or zeros)."""
         c = np.zeros(self.n_corrections) if corrections is None else corrections
         return np.concatenate([[0.0], self.pb.q0, self.pb.v0, c])
 
@@ -662,6 +667,12 @@ RK_SUBSTEPS_SAFE = 8
 MODE_TOL = 1e-8
 #: defect corrections tried on one Runge-Kutta NLP before its steps are refined
 CORRECTIONS = 6
+#: most IPOPT iterations of a warm-started correction before it is solved again cold (from the
+#: same point). Warm starts near the previous solution (a barrier of 1e-8) usually finish in a few
+#: iterations; where the correction moves an active bound they can stall: the two discs (N = 30),
+#: warm corrections of 500, 344 and 500 iterations (70 s of the round's 83 s) where the cold solves
+#: of the same NLPs took 11 to 35
+WARM_MAX_ITER = 40
 
 
 def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, options: dict | None = None):
@@ -671,10 +682,13 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
     The NLP integrates each phase by the classical Runge-Kutta method on fixed steps (an SX
     function: exact first and second derivatives, IPOPT converges in tens of iterations). Its
     solution is checked by CVODES at rtol 1e-12 (``diag["dynamics"]``: the largest defect), and
-    the difference between the two integrators at that solution is added to the NLP's continuity
-    constraints as a parameter (deferred correction): the next solve, warm-started, lands where
-    the accurate integrator's phases join. While the defect exceeds ``defect_tol``: up to
-    :data:`CORRECTIONS` corrections, then finer steps (order 4: by (defect / tol)^(1/4)), up to
+    the difference between the two integrators' outputs at that solution (the states at every
+    check point, the force integrals) is added to the Runge-Kutta outputs as a parameter (deferred
+    correction): the next solve, warm-started, lands where the accurate integrator's phases join
+    and its states meet the mode conditions at the check points inside the segments. While the
+    defect exceeds ``defect_tol`` or the mode conditions :data:`MODE_TOL`: up to
+    :data:`CORRECTIONS` corrections while each halves them; then, for the defect, finer steps
+    (order 4: by (defect / tol)^(1/4)), up to
     :data:`RK_SUBSTEPS_MAX` per grid interval. ``start="replay"``: the phases and states of the
     event replay of ``result``'s control (a feasible start); ``"result"``: ``result``'s own modes
     and states. Raises :class:`NotShootable` where the shooting does not apply."""
@@ -690,25 +704,30 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
     ip = {"print_level": 0, "sb": "yes", "tol": 1e-10, "constr_viol_tol": 1e-10, "max_iter": 500,
           "mu_strategy": "adaptive", "bound_relax_factor": 0.0, **(options or {})}
     warm_ip = {**ip, "warm_start_init_point": "yes", "mu_init": 1e-8, "warm_start_bound_push": 1e-9,
-               "warm_start_mult_bound_push": 1e-9}
+               "warm_start_mult_bound_push": 1e-9, "max_iter": min(int(ip["max_iter"]), WARM_MAX_ITER)}
     M, iters, warm, diag, ok, stats, pair_tol = RK_SUBSTEPS, 0, {}, None, False, {}, 0.0
     cost = float("nan")
     while True:
         tr = PhaseShooting(pb, plan, substeps=M, zeros=zeros, pair_tol=pair_tol, keys=keys, like=check)
         solvers = {}
         C = np.zeros(tr.n_corrections)
-        last, good = np.inf, None
+        last, last_err, good = np.inf, np.inf, None
         for _ in range(CORRECTIONS + 1):
-            key = bool(warm)
-            if key not in solvers:
-                solvers[key] = ca.nlpsol("shooting", "ipopt", tr.nlp, {"print_time": False, "show_eval_warnings": False,
-                                                                        "ipopt": warm_ip if warm else ip})
-            solver = solvers[key]
-            sol = solver(x0=np.clip(x, tr.lbx, tr.ubx), lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg,
-                         p=tr.params(C), **warm)
-            stats = solver.stats()
-            iters += int(stats["iter_count"])
-            ok = stats["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+            for key in ((True, False) if warm else (False,)):
+                if key not in solvers:
+                    solvers[key] = ca.nlpsol("shooting", "ipopt", tr.nlp,
+                                             {"print_time": False, "show_eval_warnings": False,
+                                              "ipopt": warm_ip if key else ip})
+                solver = solvers[key]
+                sol = solver(x0=np.clip(x, tr.lbx, tr.ubx), lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg,
+                             p=tr.params(C), **(warm if key else {}))
+                stats = solver.stats()
+                iters += int(stats["iter_count"])
+                ok = stats["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+                if ok:
+                    break
+                # a warm-started correction that stalls is solved again from the same point with
+                # IPOPT's own barrier start (WARM_MAX_ITER)
             if not ok and good is not None:
                 # a correction's solve failed: keep the last solution (then finer steps), as when a
                 # correction no longer halves the defect (the two discs, N = 30: the first solve's
@@ -722,10 +741,12 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
             warm = {"lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
             g = check.constraints(x)
             diag = check.diagnose(x, g)
-            if diag["dynamics"] <= defect_tol or diag["dynamics"] > 0.5 * last:
+            # the joins to defect_tol and the mode conditions at the check points to MODE_TOL
+            err = max(diag["dynamics"] / defect_tol, diag["residual"] / MODE_TOL)
+            if err <= 1.0 or err > 0.5 * last_err:
                 break  # (met, or no longer halved by a correction)
-            last = diag["dynamics"]
-            C = C + g[check.defect_rows]
+            last, last_err = diag["dynamics"], err
+            C = check.outputs(x) - tr.outputs(x)
         if not ok and stats["return_status"] == "Not_Enough_Degrees_Of_Freedom" and zeros and not pair_tol:
             pair_tol, warm = PAIR_TOL, {}  # pair members implied by the modes: held in a band
             check = PhaseShooting(pb, plan, check=True, zeros=zeros, pair_tol=pair_tol, keys=keys)
