@@ -30,15 +30,15 @@ A row is a success only when the replay is within tolerance; where the replay mi
 are recorded as they are (``message`` says what the solver reported). The study runs without
 nosnoc and says so. ``--quick``: six examples at one N each (what the test suite runs).
 
-The motor, the two-block chain, the seven blocks, the box and the hopper at N = 20 end in the
+The motor, the two-block chain, the seven blocks, the box and the hopper end in the
 shooting: replays within 1e-10 (the transcription's alone missed by 0.5 and 1e-2 on the first two).
 The box rests on two stuck corners for part of its motion: four contact rows on three velocities,
 which the shooting holds by an independent subset of them, the modes admissible for some split of
 the forces (:mod:`lcp.ocp.phase_dynamics`). Not solved from the defaults (measured, ``message`` says
 where): the cart-pole at N = 20 and 40 (the default theta solve converges to a control that never
 swings the pole up, replayed exactly, so it counts as solved at cost 6472; a swing-up's open-loop
-replay amplifies errors about 4.5e6 times, so no replay certifies 1e-6 on it), the hopper at N = 40
-(the homotopy stops at IPOPT's iteration limit) and the two discs. The two discs start on one line
+replay amplifies errors about 4.5e6 times, so no replay certifies 1e-6 on it) and the two discs at
+N = 60 (the shooting's rounds approach to a replay miss of 9.9e-6). The two discs start on one line
 with swapped targets, but nosnoc's drag cv v / |v + eps| (eps added to both components) has no
 mirror symmetry: the solves leave the line.
 From rest the relaxed homotopy parks the pushed disc against the other (a local optimum, cost 8511
