@@ -757,10 +757,10 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
             M, warm = RK_SUBSTEPS_SAFE, {}
             continue
         if not ok or diag["dynamics"] <= defect_tol or M >= RK_SUBSTEPS_MAX:
-            # (not refined for the mode conditions at the check points inside the segments, which
-            # see the Runge-Kutta error: doubling the steps once there solved the hopper's first
-            # round at N = 40 (1.8e-8 -> 3.9e-10; its replay then missed by 2.6e-6), but took the
-            # cart-pole at N = 20 through three rounds to worse optima, 10 s -> 220 s, no success)
+            # (not refined for the mode conditions at the interior check points: the correction
+            # reaches them. Doubling the steps there, tried before the correction did, solved the
+            # hopper's first round at N = 40 (1.8e-8 -> 3.9e-10; its replay then missed by 2.6e-6),
+            # but took the cart-pole at N = 20 through three rounds to worse optima, 10 s -> 220 s)
             break
         M = min(RK_SUBSTEPS_MAX, int(np.ceil(1.2 * M * (diag["dynamics"] / max(last, defect_tol)) ** 0.25 + M)))
         warm = {}
