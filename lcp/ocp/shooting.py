@@ -403,9 +403,13 @@ class PhaseShooting(Transcription):
         self._defect_rows.append(np.arange(self._ng, self._ng + expr.shape[0]))
         self._constrain(expr, 0.0, 0.0)
 
-    def constraints(self, x) -> np.ndarray:
-        """The constraint values at x, corrections zero (one pass of the integrators)."""
-        return np.array(self.g_fn(x, self.params())).ravel()
+    def constraints(self, x, outputs=None) -> np.ndarray:
+        """The constraint values at x, corrections zero (one pass of the integrators, or none
+        where their ``outputs`` at x are given)."""
+        if outputs is None:
+            return np.array(self.g_fn(x, self.params())).ravel()
+        nx, npar, ins, jg, calls = self._sx
+        return np.array(jg(x, self.params()[:npar], outputs)[1]).ravel()
 
     def outputs(self, x) -> np.ndarray:
         """The integrators' outputs at x (the calls' states and integrals at the check points)."""
@@ -739,14 +743,15 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
             good = stats
             x, cost = np.array(sol["x"]).ravel(), float(sol["f"])
             warm = {"lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
-            g = check.constraints(x)
+            out = check.outputs(x)  # (one CVODES pass: the check's constraints and the correction)
+            g = check.constraints(x, out)
             diag = check.diagnose(x, g)
             # the joins to defect_tol and the mode conditions at the check points to MODE_TOL
             err = max(diag["dynamics"] / defect_tol, diag["residual"] / MODE_TOL)
             if err <= 1.0 or err > 0.5 * last_err:
                 break  # (met, or no longer halved by a correction)
             last, last_err = diag["dynamics"], err
-            C = check.outputs(x) - tr.outputs(x)
+            C = out - tr.outputs(x)
         if not ok and stats["return_status"] == "Not_Enough_Degrees_Of_Freedom" and zeros and not pair_tol:
             pair_tol, warm = PAIR_TOL, {}  # pair members implied by the modes: held in a band
             check = PhaseShooting(pb, plan, check=True, zeros=zeros, pair_tol=pair_tol, keys=keys)

@@ -161,11 +161,11 @@ def polished(problem, res, t0) -> OCPResult:
             x, cost, diag, st, dt, tr = solve_shooting(problem, start, start=kind)
         except NotShootable as exc:
             notes.append(f"{label} not tried: {exc}")
-            queue = [a for a in queue if a[0] != "replay"]
+            queue = _without_rounds(queue)
             continue
         except RuntimeError as exc:  # the replay that gives the phases, or an integrator, failed
             notes.append(f"{label} failed: {exc}")
-            queue = [a for a in queue if a[0] != "replay"]  # the next rounds would replay the same control
+            queue = _without_rounds(queue)  # the next rounds would replay the same control
             continue
         ok = st["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
         stage = HomotopyStage(0.0, int(st["iter_count"]), diag["residual"], 0.0, cost, st["return_status"], ok, dt)
@@ -173,7 +173,7 @@ def polished(problem, res, t0) -> OCPResult:
         if not ok or diag["dynamics"] > MODE_TOL or diag["residual"] > MODE_TOL:
             notes.append(f"{label} ({segments} phases) failed: IPOPT returned {st['return_status']}, "
                          f"defect {diag['dynamics']:.2e}, mode conditions violated by {diag['residual']:.2e}")
-            queue = [a for a in queue if a[0] != "replay"]  # the next rounds would start from the same replay
+            queue = _without_rounds(queue)  # the next rounds would start from the same replay
             continue
         source = ("the event replay of the " + ("transcription" if rnd == 0 else f"shooting round {rnd}")
                   + "'s control" if kind == "replay" else "the transcription's own modes and states")
@@ -196,9 +196,14 @@ def polished(problem, res, t0) -> OCPResult:
             # of cost 644 whose replay misses by 24: rounds at 125889 and 92139, then IPOPT's
             # iteration limit, 80 s; the start from the transcription's own states comes next)
             notes[-1] += f" (more than twice the transcription's cost {res.cost:.10g}: no further replay rounds)"
-            queue = [a for a in queue if a[0] != "replay"]
+            queue = _without_rounds(queue)
     res.message += f" (Exact-phase shooting: {'; '.join(notes)})"
     return res
+
+
+def _without_rounds(queue):
+    """The shooting queue of :func:`polished` without its remaining replay rounds."""
+    return [a for a in queue if a[0] != "replay"]
 
 
 def _checked(problem, res, method):
