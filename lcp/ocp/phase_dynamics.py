@@ -308,7 +308,8 @@ def rk4_segment(name, x, p, tau, ode, quad, substeps):
     # its inputs, CasADi builds the segment's Jacobian once rather than that many directional
     # derivatives (the seven blocks at N = 50: 21 segment functions, each forward(64) 7.3e5
     # instructions against 7.1e4 for the Jacobian; the shooting NLP's build 5.4 -> 2.9 s, its
-    # solve 1.9 -> 1.1 s at the same optimum)
+    # solve 1.9 -> 1.1 s at the same optimum; the same derivatives rounded differently sent IPOPT
+    # another way through the cart-pole's failing swing-up round at N = 40, 63 -> 126 s)
     return ca.Function(name, [x0, p0], [ca.horzcat(*outs_x), ca.horzcat(*outs_q)], ["x0", "p"], ["xf", "qf"],
                        {"jac_penalty": JAC_PENALTY})
 
