@@ -308,8 +308,8 @@ def _where(result, rp, tol) -> str:
 
 
 def _replay_impacts(rp, k, t0) -> list:
-    """The event replay's impacts inside interval k: (time, contact name) ([] without pieces)."""
-    try:
-        return [(t0 + float(imp.t), imp.name) for imp in rp.pieces[k].impacts]
-    except (IndexError, AttributeError, TypeError):
+    """The event replay's impacts inside interval k: (time, contact name) ([] without pieces: a
+    Moreau-Jean replay)."""
+    if k >= len(rp.pieces):
         return []
+    return [(t0 + float(imp.t), imp.name) for imp in rp.pieces[k].impacts]
