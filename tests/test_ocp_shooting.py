@@ -96,6 +96,39 @@ def test_a_stalled_warm_correction_is_solved_again_cold(motor_transcribed, monke
     assert cost == pytest.approx(cost_ref, rel=1e-9)
 
 
+def test_cold_solves_from_a_solution_are_capped(motor_transcribed, monkeypatch):
+    """A cold solve that starts from a solution (a stalled warm correction's retry, the refined
+    steps' NLP) stops at NEAR_MAX_ITER iterations; the round's first solve keeps IPOPT's limit (the
+    cart-pole at N = 40: such solves ran 500 iterations, 54 s and 139 s, and failed)."""
+    import lcp.ocp.shooting as sh
+
+    calls = []
+    real = sh.ca.nlpsol
+
+    def recording(name, plugin, nlp, opts):
+        solver = real(name, plugin, nlp, opts)
+        ip = opts["ipopt"]
+
+        def call(**kw):
+            out = solver(**kw)
+            st = solver.stats()
+            calls.append((ip.get("warm_start_init_point") == "yes", ip["max_iter"], st["iter_count"],
+                          st["return_status"]))
+            return out
+
+        return type("Recorded", (), {"__call__": lambda self, **kw: call(**kw),
+                                     "stats": lambda self: solver.stats()})()
+
+    pb, res = motor_transcribed
+    monkeypatch.setattr(sh.ca, "nlpsol", recording)
+    monkeypatch.setattr(sh, "WARM_MAX_ITER", 1)  # every warm correction stalls: a cold retry follows
+    monkeypatch.setattr(sh, "NEAR_MAX_ITER", 3)
+    solve_shooting(pb, res)
+    cold = [c for c in calls if not c[0]]
+    assert cold[0][1] == 500 and cold[0][3] in ("Solve_Succeeded", "Solved_To_Acceptable_Level"), calls
+    assert len(cold) > 1 and all(c[1] == 3 and c[2] <= 3 for c in cold[1:]), calls
+
+
 def test_the_correction_reaches_every_output_of_the_integrators(motor_transcribed):
     """The deferred correction is added to the Runge-Kutta outputs themselves: with it, every
     constraint row of the coarse NLP (the joins, the mode conditions at the interior check points,

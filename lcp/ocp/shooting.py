@@ -677,6 +677,14 @@ CORRECTIONS = 6
 #: warm corrections of 500, 344 and 500 iterations (70 s of the round's 83 s) where the cold solves
 #: of the same NLPs took 11 to 35
 WARM_MAX_ITER = 40
+#: most IPOPT iterations of a cold solve that starts from a solution of the same NLP (a stalled
+#: warm correction's retry) or of a coarser one (the refined steps' NLP). Such solves took 11 to 35
+#: iterations where they converged (the two discs, N = 30); where they did not, they ran to the
+#: iteration limit: the cart-pole at N = 40, a retry of 500 iterations (54 s) and a refined NLP of
+#: 500 (139 s), both failed. With the cap the cart-pole took 157 s instead of 254 s (side by side,
+#: both loaded) for the same result; the two discs, the box, the hopper and the seven blocks ended
+#: at the same costs in the same iterations
+NEAR_MAX_ITER = 150
 #: the barrier parameter a warm-started correction starts from, decreased monotonically. Measured on
 #: the two discs at N = 30 against the adaptive barrier (mu_init 1e-8, inert): the first round's
 #: correction took 11 IPOPT iterations instead of 40 stalled ones and a cold solve; the second
@@ -720,22 +728,24 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
     warm_ip = {**ip, "warm_start_init_point": "yes", "mu_strategy": "monotone", "mu_init": WARM_MU,
                "warm_start_bound_push": 1e-9, "warm_start_mult_bound_push": 1e-9,
                "max_iter": min(int(ip["max_iter"]), WARM_MAX_ITER)}
+    # a cold solve from a solution (a stalled correction's retry, the refined steps' NLP) is capped
+    near_ip = {**ip, "max_iter": min(int(ip["max_iter"]), NEAR_MAX_ITER)}
     M, iters, warm, diag, ok, stats, pair_tol = RK_SUBSTEPS, 0, {}, None, False, {}, 0.0
-    cost = float("nan")
+    cost, solved = float("nan"), False
     while True:
         tr = PhaseShooting(pb, plan, substeps=M, zeros=zeros, pair_tol=pair_tol, keys=keys, like=check)
         solvers = {}
         C = np.zeros(tr.n_corrections)
         last, last_err, good = np.inf, np.inf, None
         for _ in range(CORRECTIONS + 1):
-            for key in ((True, False) if warm else (False,)):
+            for key in (("warm", "near") if warm else ("near" if solved else "cold",)):
                 if key not in solvers:
                     solvers[key] = ca.nlpsol("shooting", "ipopt", tr.nlp,
                                              {"print_time": False, "show_eval_warnings": False,
-                                              "ipopt": warm_ip if key else ip})
+                                              "ipopt": {"warm": warm_ip, "near": near_ip, "cold": ip}[key]})
                 solver = solvers[key]
                 sol = solver(x0=np.clip(x, tr.lbx, tr.ubx), lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg,
-                             p=tr.params(C), **(warm if key else {}))
+                             p=tr.params(C), **(warm if key == "warm" else {}))
                 stats = solver.stats()
                 iters += int(stats["iter_count"])
                 ok = stats["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
@@ -751,7 +761,7 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
                 break
             if not ok:
                 break
-            good = stats
+            good, solved = stats, True
             x, cost = np.array(sol["x"]).ravel(), float(sol["f"])
             warm = {"lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
             out = check.outputs(x)  # (one CVODES pass: the check's constraints and the correction)
