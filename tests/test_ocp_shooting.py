@@ -59,47 +59,9 @@ def test_motor_solved_to_its_replay(motor_transcribed):
     assert abs(out.q[-1, 0] - 0.01) < 1e-9 and abs(out.v[-1, 0]) < 1e-9
 
 
-def test_a_stalled_warm_correction_is_solved_again_cold(motor_transcribed, monkeypatch):
-    """A warm-started defect correction that stops at its iteration cap is solved again from the same
-    point with IPOPT's own start, and the shooting lands on the same optimum (the two discs at
-    N = 30: warm corrections ran 500, 344 and 500 iterations where cold solves took 11 to 35)."""
-    import lcp.ocp.shooting as sh
-
-    calls = []
-    real = sh.ca.nlpsol
-
-    def recording(name, plugin, nlp, opts):
-        solver = real(name, plugin, nlp, opts)
-        warm = opts["ipopt"].get("warm_start_init_point") == "yes"
-
-        def call(**kw):
-            out = solver(**kw)
-            calls.append((warm, solver.stats()["return_status"]))
-            return out
-
-        return type("Recorded", (), {"__call__": lambda self, **kw: call(**kw),
-                                     "stats": lambda self: solver.stats()})()
-
-    pb, res = motor_transcribed
-    monkeypatch.setattr(sh.ca, "nlpsol", recording)
-    _, cost_ref, _, _, _, _ = solve_shooting(pb, res)
-    assert any(warm for warm, _ in calls)  # the motor's shooting makes a warm correction
-    assert all(status in ("Solve_Succeeded", "Solved_To_Acceptable_Level") for _, status in calls)
-    calls.clear()
-    monkeypatch.setattr(sh, "WARM_MAX_ITER", 1)
-    _, cost, diag, st, _, _ = solve_shooting(pb, res)
-    stalled = [i for i, (warm, status) in enumerate(calls) if warm and status == "Maximum_Iterations_Exceeded"]
-    assert stalled, calls
-    assert all(i + 1 < len(calls) and not calls[i + 1][0] for i in stalled)  # each followed by a cold solve
-    assert st["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
-    assert diag["dynamics"] < 1e-9 and diag["residual"] < 1e-9
-    assert cost == pytest.approx(cost_ref, rel=1e-9)
-
-
-def test_cold_solves_from_a_solution_are_capped(motor_transcribed, monkeypatch):
-    """A cold solve that starts from a solution (a stalled warm correction's retry, the refined
-    steps' NLP) stops at NEAR_MAX_ITER iterations; the round's first solve keeps IPOPT's limit (the
-    cart-pole at N = 40: such solves ran 500 iterations, 54 s and 139 s, and failed)."""
+def _record_solves(monkeypatch) -> list:
+    """Every IPOPT solve the shooting makes, as (warm-started, max_iter, iterations, status), in a
+    list filled while the test runs (``ca.nlpsol`` wrapped in :mod:`lcp.ocp.shooting`)."""
     import lcp.ocp.shooting as sh
 
     calls = []
@@ -119,8 +81,40 @@ def test_cold_solves_from_a_solution_are_capped(motor_transcribed, monkeypatch):
         return type("Recorded", (), {"__call__": lambda self, **kw: call(**kw),
                                      "stats": lambda self: solver.stats()})()
 
-    pb, res = motor_transcribed
     monkeypatch.setattr(sh.ca, "nlpsol", recording)
+    return calls
+
+
+def test_a_stalled_warm_correction_is_solved_again_cold(motor_transcribed, monkeypatch):
+    """A warm-started defect correction that stops at its iteration cap is solved again from the same
+    point with IPOPT's own start, and the shooting lands on the same optimum (the two discs at
+    N = 30: warm corrections ran 500, 344 and 500 iterations where cold solves took 11 to 35)."""
+    import lcp.ocp.shooting as sh
+
+    calls = _record_solves(monkeypatch)
+    pb, res = motor_transcribed
+    _, cost_ref, _, _, _, _ = solve_shooting(pb, res)
+    assert any(warm for warm, *_ in calls)  # the motor's shooting makes a warm correction
+    assert all(status in ("Solve_Succeeded", "Solved_To_Acceptable_Level") for *_, status in calls)
+    calls.clear()
+    monkeypatch.setattr(sh, "WARM_MAX_ITER", 1)
+    _, cost, diag, st, _, _ = solve_shooting(pb, res)
+    stalled = [i for i, (warm, *_, status) in enumerate(calls) if warm and status == "Maximum_Iterations_Exceeded"]
+    assert stalled, calls
+    assert all(i + 1 < len(calls) and not calls[i + 1][0] for i in stalled)  # each followed by a cold solve
+    assert st["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    assert diag["dynamics"] < 1e-9 and diag["residual"] < 1e-9
+    assert cost == pytest.approx(cost_ref, rel=1e-9)
+
+
+def test_cold_solves_from_a_solution_are_capped(motor_transcribed, monkeypatch):
+    """A cold solve that starts from a solution (a stalled warm correction's retry, the refined
+    steps' NLP) stops at NEAR_MAX_ITER iterations; the round's first solve keeps IPOPT's limit (the
+    cart-pole at N = 40: such solves ran 500 iterations, 54 s and 139 s, and failed)."""
+    import lcp.ocp.shooting as sh
+
+    calls = _record_solves(monkeypatch)
+    pb, res = motor_transcribed
     monkeypatch.setattr(sh, "WARM_MAX_ITER", 1)  # every warm correction stalls: a cold retry follows
     monkeypatch.setattr(sh, "NEAR_MAX_ITER", 3)
     solve_shooting(pb, res)
