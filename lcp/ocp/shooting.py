@@ -53,8 +53,12 @@ moves with the segment durations. Not modelled (:class:`NotShootable` says which
 closes without an impact, the Painleve fallback's impulses and accumulations, spatial contacts, the user's complementarity pairs, contacts or constraints
 that move with t, kinematic maps.
 
-Imports CasADi, NumPy, the contact modes, the replay and the theta transcription (whose NLP
-bookkeeping it reuses); it must not import the solve or the problem (they call it).
+The plans (phase sequences) are made in :mod:`lcp.ocp.plans`; where IPOPT cannot solve an NLP
+whose iterate shrinks segments to zero, the NLP is solved again on the plan without them
+(:func:`~lcp.ocp.plans.pruned_plan`).
+
+Imports CasADi, NumPy, the contact modes, the phase dynamics, the plans and the theta
+transcription (whose NLP bookkeeping it reuses); it must not import the solve or the problem (they call it).
 """
 from __future__ import annotations
 
@@ -65,112 +69,20 @@ import numpy as np
 
 from lcp.contact.modes import OPEN, SLIDE_NEG, SLIDE_POS, STICK
 from lcp.ocp.phase_dynamics import (
+    CHECK_TOL,
     GRID,
+    INTEGRATOR_TOL,
     POINT_WEIGHTS,
     NotShootable,
-    impact_rows,
     impulse_dv,
-    independent_rows,
     mode_dynamics,
     segment_integrator,
 )
-from lcp.ocp.replay import event_pieces
+from lcp.ocp.plans import iterate_of, phase_plan, plan_keys, plan_of_modes, pruned_plan
 from lcp.ocp.transcription import Transcription, grid_variables, step_terms
 
 __all__ = ["CHECK_TOL", "INTEGRATOR_TOL", "NotShootable", "PhaseShooting", "impact_law", "initial_point", "phase_plan", "plan_keys", "plan_of_modes",
            "refuse", "solve_shooting"]
-
-#: the event method's mode names -> codes
-MODE_CODES = {"open": OPEN, "stick": STICK, "slide+": SLIDE_POS, "slide-": SLIDE_NEG}
-#: CVODES's options: Adams (the phases are smooth; 2.2x faster than BDF on the motor at the same
-#: tolerance) at rtol 1e-10, four orders below the replay tolerance 1e-6 (the event replay
-#: integrates with DOP853 at rtol 1e-12); the motor at rtol 1e-12 took 3.8x longer for a cost
-#: that differs by 1e-11
-INTEGRATOR_TOL = {"reltol": 1e-10, "abstol": 1e-12, "linear_multistep_method": "adams"}
-#: CVODES's options for the check of a solution (one pass: tight)
-CHECK_TOL = {"reltol": 1e-12, "abstol": 1e-14, "linear_multistep_method": "adams"}
-
-
-
-
-def phase_plan(result):
-    """The phase sequence of the event replay of a solution's control: for each control interval
-    a list of segments (modes, duration, impacts), modes a tuple of codes (one per contact),
-    durations summing to the interval's length, impacts the impacts at the segment's start as
-    (contact, tangential mode, P_N, P_T) (the replay's impulses: the start of the shooting).
-    Raises :class:`NotShootable` on other impulses (the Painleve fallback, accumulations) and on a
-    contact that closes without an impact."""
-    rc = getattr(result, "replay", None)
-    pieces = rc.pieces if rc is not None and rc.pieces and len(rc.pieces) == len(result.t) - 1 else None
-    if pieces is None:  # (the replay check keeps its pieces: they are reused)
-        # one integration (not restarted at the nodes, which would integrate a force of t from
-        # t = 0 in every interval: the check has no pieces exactly when it replayed such a force
-        # by Moreau-Jean)
-        pieces = event_pieces(result, n_eval=2)[2]
-    mu = np.asarray(result.problem.system.mu, dtype=float)
-    plan, carried = [], []
-    for k, sim in enumerate(pieces):
-        h = float(result.t[k + 1] - result.t[k])
-        hits = carried
-        carried = []
-        for imp in sim.impulses:
-            if imp.kind != "impact":
-                raise NotShootable(f"the replay has an impulse ({imp.kind}) on contact {imp.contact} at "
-                                   f"t = {result.t[k] + imp.t:.6g}: only impacts are modelled")
-            pT, pN, j = float(imp.P_T), float(imp.P_N), int(imp.contact)
-            if mu[j] == 0.0:  # frictionless: no tangential impulse, whatever the direction
-                tmode = OPEN
-            else:
-                tmode = STICK if abs(pT) < mu[j] * pN * (1 - 1e-6) else (SLIDE_POS if pT < 0 else SLIDE_NEG)
-            if imp.t >= h * (1 - 1e-12):  # at the interval's end: the next interval's start
-                carried.append((0.0, (j, tmode, pN, pT)))
-            else:
-                hits.append((float(imp.t), (j, tmode, pN, pT)))
-        segs = []
-        for ph in sim.phases:
-            dur = float(ph.t1 - ph.t0)
-            modes = tuple(MODE_CODES[nm] for nm in ph.modes)
-            if dur <= 0.0:
-                continue
-            at = tuple(hit for t_i, hit in hits if abs(t_i - ph.t0) <= 1e-9 * h)
-            if segs and segs[-1][0] == modes and not at:
-                segs[-1] = (modes, segs[-1][1] + dur, segs[-1][2])
-            else:
-                segs.append((modes, dur, at))
-        placed = sum(len(sg[2]) for sg in segs)
-        if placed != len(hits):
-            raise NotShootable(f"an impact in interval {k} (t = {result.t[k]:.6g}) does not start a smooth phase")
-        if not segs:
-            raise NotShootable(f"the replay of interval {k} has no smooth phase")
-        total = sum(sg[1] for sg in segs)
-        plan.append([(md, d * h / total, at) for md, d, at in segs])  # round-off in the phase times
-    previous = None
-    for k, segs in enumerate(plan):
-        for md, _, at in segs:
-            if previous is not None:
-                hit = {i[0] for i in at}
-                for j, (a, b) in enumerate(zip(previous, md)):
-                    if a == OPEN and b != OPEN and j not in hit:
-                        raise NotShootable(f"contact {j} closes without an impact in interval {k} (t = "
-                                           f"{result.t[k]:.6g} to {result.t[k + 1]:.6g})")
-            previous = md
-    return plan
-
-
-def plan_of_modes(result):
-    """The phase sequence of a solution's own modes: one segment per interval in the interval's
-    mode, and where the mode changes at a node a first short segment in the previous mode (the
-    switch may move into the interval)."""
-    modes = [tuple(int(c) for c in row) for row in np.asarray(result.modes)]
-    plan = []
-    for k, md in enumerate(modes):
-        h = float(result.t[k + 1] - result.t[k])
-        if k and modes[k - 1] != md:
-            plan.append([(modes[k - 1], 1e-3 * h, ()), (md, (1 - 1e-3) * h, ())])
-        else:
-            plan.append([(md, h, ())])
-    return plan
-
 
 def refuse(problem) -> None:
     """NotShootable when the problem has what the shooting does not model."""
@@ -539,40 +451,6 @@ def fixed_pairs(tr, k, st) -> None:
             tr._constrain(other, 0.0, np.inf)
 
 
-def plan_keys(pb, plan, result, states: str = "integrated") -> list:
-    """The rows each segment of ``plan`` holds, for :class:`PhaseShooting`'s ``keys``: per
-    interval and segment the pair (:func:`~lcp.ocp.phase_dynamics.independent_rows`,
-    :func:`~lcp.ocp.phase_dynamics.impact_rows` of its impacts) at the segment's start state (None
-    where every row is independent), the states integrated by CVODES through the plan
-    at ``result``'s control and steps, from the problem's start or with ``states="result"`` from
-    ``result``'s node state at each interval's start (the walk of :func:`initial_point`, whose
-    states the rank is decided on). Raises :class:`NotShootable` where a mode's accelerations are
-    not unique."""
-    sys, n = pb.system, pb.system.n
-    t, u = np.asarray(result.t, dtype=float), np.asarray(result.u, dtype=float)
-    fns, keys = {}, []
-    xs = np.concatenate([pb.q0, pb.v0])
-    for k, segs in enumerate(plan):
-        h, j0 = t[k + 1] - t[k], {"constant": k, "linear": k}.get(pb.hold, 2 * k)
-        ua, ub = u[j0], u[j0] if pb.hold == "constant" else u[j0 + 1]
-        if states != "integrated":
-            xs = np.concatenate([result.q[k], result.v[k]])
-        t_seg, row = t[k], []
-        for modes, dur, *rest in segs:
-            modes = tuple(int(c) for c in modes)
-            impacts = tuple(rest[0]) if rest else ()
-            if impacts:
-                xs = np.concatenate([xs[:n], xs[n:] + impulse_dv(sys, xs[:n], impacts)])
-            keep = independent_rows(pb, modes, t_seg, xs[:n]) if sys.n_contacts else None
-            row.append((keep, impact_rows(sys, impacts, xs[:n]) if impacts else None))
-            if (modes, keep) not in fns:
-                fns[modes, keep] = segment_integrator(pb, mode_dynamics(pb, modes, keep), "seg", CHECK_TOL)
-            out = fns[modes, keep](x0=xs, p=np.concatenate([[t_seg, dur, t[k], h], ua, ub]))
-            xs, t_seg = np.array(out["xf"])[:, -1], t_seg + dur
-        keys.append(row)
-    return keys
-
-
 def _free_forces(tr, modes, keep, points):
     """Least-norm z of the free force directions at the points (t, x, u) of a segment in ``tr``
     (numbers), and the Newton-Cotes integral of Z z per unit duration: the initial point's."""
@@ -711,7 +589,10 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
     (order 4: by (defect / tol)^(1/4)), up to
     :data:`RK_SUBSTEPS_MAX` per grid interval. ``start="replay"``: the phases and states of the
     event replay of ``result``'s control (a feasible start); ``"result"``: ``result``'s own modes
-    and states. Raises :class:`NotShootable` where the shooting does not apply."""
+    and states. Where IPOPT fails on an NLP (before any solution of it) whose last iterate shrinks
+    segments below :data:`~lcp.ocp.plans.PRUNE_TOL` of their interval, the NLP is solved again on
+    the plan without them (:func:`~lcp.ocp.plans.pruned_plan`; ``stats["pruned"]`` counts the
+    segments removed). Raises :class:`NotShootable` where the shooting does not apply."""
     refuse(pb)
     plan = phase_plan(result) if start == "replay" else plan_of_modes(result)
     t0 = time.perf_counter()
@@ -731,7 +612,7 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
     # a cold solve from a solution (a stalled correction's retry, the refined steps' NLP) is capped
     near_ip = {**ip, "max_iter": min(int(ip["max_iter"]), NEAR_MAX_ITER)}
     M, iters, warm, diag, ok, stats, pair_tol = RK_SUBSTEPS, 0, {}, None, False, {}, 0.0
-    cost, solved = float("nan"), False
+    cost, solved, pruned = float("nan"), False, 0
     while True:
         tr = PhaseShooting(pb, plan, substeps=M, zeros=zeros, pair_tol=pair_tol, keys=keys, like=check)
         solvers = {}
@@ -777,6 +658,20 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
             pair_tol, warm = PAIR_TOL, {}  # pair members implied by the modes: held in a band
             check = PhaseShooting(pb, plan, check=True, zeros=zeros, pair_tol=pair_tol, keys=keys)
             continue
+        if not ok and good is None:
+            cut = pruned_plan(tr, np.array(sol["x"]).ravel())
+            if cut is not None:
+                # segments that shrank to zero: their conditions at coinciding points repeat each
+                # other, and IPOPT's multipliers grew without bound (the two discs, N = 60: 4e8 at
+                # the iteration limit; without those three segments solved in 15 iterations).
+                # Each such solve removes at least one segment: this ends
+                plan, removed = cut
+                pruned += removed
+                it = iterate_of(tr, np.array(sol["x"]).ravel())
+                keys = plan_keys(pb, plan, it)
+                check = PhaseShooting(pb, plan, check=True, zeros=zeros, pair_tol=pair_tol, keys=keys)
+                x, warm = initial_point(check, it), {}
+                continue
         if not ok and good is None and M < RK_SUBSTEPS_SAFE:
             # the coarser steps' NLP did not converge from this start: once more on finer steps
             # (the convex obstacle, N = 40: at 4 steps IPOPT's iteration limit, at 8 solved)
@@ -790,5 +685,5 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
             break
         M = min(RK_SUBSTEPS_MAX, int(np.ceil(1.2 * M * (diag["dynamics"] / max(last, defect_tol)) ** 0.25 + M)))
         warm = {}
-    stats = {**stats, "iter_count": iters}
+    stats = {**stats, "iter_count": iters, "pruned": pruned}
     return x, cost, diag if diag is not None else check.diagnose(x), stats, time.perf_counter() - t0, check

@@ -177,7 +177,9 @@ def polished(problem, res, t0) -> OCPResult:
             continue
         source = ("the event replay of the " + ("transcription" if rnd == 0 else f"shooting round {rnd}")
                   + "'s control" if kind == "replay" else "the transcription's own modes and states")
-        how = (f"exact-phase shooting on the {segments} phases of {source} (the phases joined as "
+        cut = (f", without the {st['pruned']} phases that IPOPT's iterate shrank to zero length"
+               if st.get("pruned") else "")
+        how = (f"exact-phase shooting on the {segments} phases of {source}{cut} (the phases joined as "
                f"CVODES integrates them at rtol {CHECK_TOL['reltol']:.0e})")
         out = result_of(problem, x, cost, diag, 0, f"Solved by {how}: every mode condition holds to "
                         f"{max(diag['residual'], 1e-16):.1e}, the phases join to {max(diag['dynamics'], 1e-16):.1e}.",
