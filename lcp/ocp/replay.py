@@ -266,15 +266,16 @@ def replay_check(result: OCPResult, tol: float, refine: int = 50) -> ReplayCheck
 
 
 def _replay_modes(rp, k):
-    """The replay's contact modes at the start of interval k (None when it does not record them)."""
-    try:
-        if rp.pieces:
-            return np.asarray(rp.pieces[k].modes[0])
-        sim = rp.sim
-        j = int(np.searchsorted(sim.t, rp.t[k] + 1e-12 * max(1.0, float(rp.t[-1])))) - 1
-        return np.asarray(sim.modes[max(j, 0)])
-    except (IndexError, AttributeError, TypeError):
+    """The replay's contact modes at the start of interval k (None where the replay has no row
+    for it: an interval without a piece, or a piece or simulation without output points)."""
+    if rp.pieces:
+        modes = rp.pieces[k].modes if k < len(rp.pieces) else ()
+        return np.asarray(modes[0]) if len(modes) else None
+    sim = rp.sim
+    if not len(sim.modes):
         return None
+    j = int(np.searchsorted(sim.t, rp.t[k] + 1e-12 * max(1.0, float(rp.t[-1])))) - 1
+    return np.asarray(sim.modes[min(max(j, 0), len(sim.modes) - 1)])
 
 
 def _where(result, rp, tol) -> str:
