@@ -361,8 +361,9 @@ def two_discs() -> Example:
     transcription reaches cost 222.05 (its theta step on the drag replays to 0.29), and the
     exact-phase shooting (4 Runge-Kutta steps per quarter segment, IPOPT's default 500 iterations)
     cost 204.27 with replay miss 1.6e-9 (on 8 steps it needed 3000 iterations); at N = 60 the
-    transcription 215.46, replay 0.044, and the shooting's control replays to 6.6e-2 (on 8 steps with
-    3000 iterations it ended at cost 209.26, replay 2.7e-10, J_replay 212.47; nosnoc's control
+    transcription 215.46, replay 0.044; the shooting's second round stops at IPOPT's iteration limit
+    with three segments shrunk to zero, and without them it ends at cost 208.358, replay 5.0e-12,
+    J_replay 211.69 (before the pruning, on 8 steps with 3000 iterations, 209.26; nosnoc's control
     replays to 20488 and 7984 on this model at N = 30, 60)."""
     p = DISCS
     q, v, u = ca.SX.sym("q", 4), ca.SX.sym("v", 4), ca.SX.sym("u", 2)

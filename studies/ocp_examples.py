@@ -37,8 +37,9 @@ which the shooting holds by an independent subset of them, the modes admissible 
 the forces (:mod:`lcp.ocp.phase_dynamics`). Not solved from the defaults (measured, ``message`` says
 where): the cart-pole at N = 20 and 40 (the default theta solve converges to a control that never
 swings the pole up, replayed exactly, so it counts as solved at cost 6472; a swing-up's open-loop
-replay amplifies errors about 4.5e6 times, so no replay certifies 1e-6 on it) and the two discs at
-N = 60 (the shooting's rounds approach to a replay miss of 9.9e-6). The two discs start on one line
+replay amplifies errors about 4.5e6 times, so no replay certifies 1e-6 on it, and the message says
+so). The two discs are solved from the example's own start at N = 30 and 60 (at N = 60 once the
+shooting prunes the phases that shrink to zero, :func:`lcp.ocp.plans.pruned_plan`). They start on one line
 with swapped targets, but nosnoc's drag cv v / |v + eps| (eps added to both components) has no
 mirror symmetry: the solves leave the line.
 From rest the relaxed homotopy parks the pushed disc against the other (a local optimum, cost 8511

@@ -425,3 +425,32 @@ def test_the_discs_at_n60_are_solved_once_shrunk_phases_are_pruned():
     assert "shrank to zero length" in res.message
     assert res.replay.final_miss < 1e-9
     assert res.cost < 209.0
+
+
+def test_a_replay_near_an_unstable_upright_reports_its_amplification():
+    """The cart-pole's control held at zero from the upright at rest: the pole falls away from it
+    exponentially (rate sqrt(g / l), about e^15 over 5 s), and the amplification of the replay's
+    start errors says so; from the hanging pole the same control amplifies nothing. A check that
+    misses on such a trajectory says, in its message, how exact the optimizer would have to be."""
+    import copy
+    import dataclasses
+
+    from lcp.ocp.replay import amplification, replay
+    from lcp.ocp.solve import _checked
+
+    ex = EXAMPLES["cart_pole"]()
+    pb = ex.make(20)
+    pb.replay_tol = None
+    res = pb.solve(pb.guess(u=np.zeros((pb.N, 1))), shooting=False)
+    zero = np.zeros_like(res.u)
+    hanging = dataclasses.replace(res, u=zero, control=pb.schedule(res.t, zero))
+    assert amplification(hanging, replay(hanging, method="event", n_eval=2)) < 10.0
+    up = copy.copy(pb)
+    up.q0 = np.array([1.0, np.pi, 0.0])
+    up.replay_tol = 1e-6
+    upright = dataclasses.replace(hanging, problem=up)
+    a = amplification(upright, replay(upright, method="event", n_eval=2))
+    assert 1e5 < a < 1e9
+    out = _checked(up, upright, "homotopy")  # (its optimizer's states: the hanging pole's)
+    assert out.status == -3 and out.replay.amplification == pytest.approx(a, rel=1e-6)
+    assert "The replay amplifies errors" in out.message

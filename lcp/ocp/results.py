@@ -148,6 +148,9 @@ class ReplayCheck:
         Where the replay leaves the optimizer's trajectory: the first node whose position misses by
         more than ``tol``, the node of the largest miss, and the contacts whose mode differs in the
         step before that first node ("" when every node is within ``tol``).
+    amplification : float
+        Where the event replay misses: how far its final state moves per unit change of the start
+        state (:func:`lcp.ocp.replay.amplification`); nan otherwise.
     """
 
     method: str
@@ -159,6 +162,7 @@ class ReplayCheck:
     #: the event replay's per-interval results (None for a Moreau-Jean replay): their phases give
     #: the exact-phase shooting its phase sequence (:mod:`lcp.ocp.shooting`)
     pieces: list | None = field(default=None, repr=False, compare=False)
+    amplification: float = float("nan")
 
     @property
     def ok(self) -> bool:

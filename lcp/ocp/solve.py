@@ -230,12 +230,24 @@ def _checked(problem, res, method):
                     "contact_law='gap'." if problem.contact_law == "velocity" else "")
             res.message = (f"{OCP_STATUS_MESSAGES[-3]} Replayed by {rc.method}: final-state miss "
                            f"{rc.final_miss:.2e}, path violation {rc.path_violation:.2e} > {problem.replay_tol:.1e}"
-                           f"{'; ' + rc.where if rc.where else ''}.{hint}{unbounded_note(problem)} "
+                           f"{'; ' + rc.where if rc.where else ''}.{amplified_note(rc)}{hint}"
+                           f"{unbounded_note(problem)} "
                            f"Before the replay: {solved}")
         elif res.status >= 0:
             res.message += (f" Replayed by {rc.method}: final-state miss {rc.final_miss:.2e}, path violation "
                             f"{rc.path_violation:.2e}, within replay_tol = {problem.replay_tol:.1e}.")
     return res
+
+
+def amplified_note(rc) -> str:
+    """Said when a missing replay amplifies start-state errors so much that the optimizer's
+    trajectory would need to be exact below 1e-10 for the replay to land within tolerance."""
+    a = rc.amplification
+    if not np.isfinite(a) or rc.tol / max(a, 1e-300) > 1e-10:
+        return ""
+    return (f" The replay amplifies errors: a change of the start state moves its final state {a:.1e} "
+            f"times as far, so the optimizer's trajectory would have to be exact to about {rc.tol / a:.0e} "
+            f"for its replay to land within {rc.tol:.1e} (an unstable trajectory, open loop).")
 
 
 def unbounded_note(problem) -> str:
