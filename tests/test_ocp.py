@@ -596,3 +596,16 @@ def test_multistart_passes_its_shooting_flag_to_every_start(monkeypatch):
     assert seen == [True]
     with pytest.raises(ValueError, match="shooting"):
         pb.solve_multistart(shooting="no")
+
+
+def test_a_moreau_jean_replay_check_names_the_modes_where_it_misses():
+    """The linear hold is replayed by Moreau-Jean: where that replay leaves the optimizer, the check
+    still reads the replay's contact modes (its simulation's rows) and compares them; the
+    amplification is measured for event replays only."""
+    from lcp.ocp.replay import replay_check
+
+    res = rest_problem(10, hold="linear", replay_tol=None).solve()
+    rc = replay_check(res, 1e-14)
+    assert rc.method.startswith("moreau-jean") and rc.final_miss > 1e-6
+    assert "in step 0 every contact has the same mode in both" in rc.where
+    assert math.isnan(rc.amplification)
