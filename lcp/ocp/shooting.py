@@ -665,10 +665,13 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
                 # other, and IPOPT's multipliers grew without bound (the two discs, N = 60: 4e8 at
                 # the iteration limit; without those three segments solved in 15 iterations).
                 # Each such solve removes at least one segment: this ends
-                plan, removed = cut
-                pruned += removed
                 it = iterate_of(tr, np.array(sol["x"]).ravel())
-                keys = plan_keys(pb, plan, it)
+                try:  # (a mode of the pruned plan whose accelerations are not unique at its new start)
+                    cut_keys = plan_keys(pb, cut[0], it)
+                except NotShootable:
+                    cut = None
+            if cut is not None:
+                plan, keys, pruned = cut[0], cut_keys, pruned + cut[1]
                 check = PhaseShooting(pb, plan, check=True, zeros=zeros, pair_tol=pair_tol, keys=keys)
                 x, warm = initial_point(check, it), {}
                 continue
