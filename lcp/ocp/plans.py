@@ -48,8 +48,8 @@ def phase_plan(result):
     a list of segments (modes, duration, impacts), modes a tuple of codes (one per contact),
     durations summing to the interval's length, impacts the impacts at the segment's start as
     (contact, tangential mode, P_N, P_T) (the replay's impulses: the start of the shooting).
-    Raises :class:`~lcp.ocp.phase_dynamics.NotShootable` on other impulses (the Painleve fallback, accumulations) and on a
-    contact that closes without an impact."""
+    Raises :class:`~lcp.ocp.phase_dynamics.NotShootable` on other impulses (the Painleve fallback,
+    accumulations) and on a contact that closes without an impact."""
     rc = getattr(result, "replay", None)
     pieces = rc.pieces if rc is not None and rc.pieces and len(rc.pieces) == len(result.t) - 1 else None
     if pieces is None:  # (the replay check keeps its pieces: they are reused)
@@ -153,7 +153,8 @@ def pruned_plan(tr, x):
 
 
 def iterate_of(tr, x):
-    """What :func:`~lcp.ocp.shooting.initial_point` and :func:`plan_keys` read of a result, from ``tr``'s variables x."""
+    """What :func:`~lcp.ocp.shooting.initial_point` and :func:`plan_keys` read of a result (node
+    times, steps, states, controls, impulses), from ``tr``'s variables x."""
     T, hs, q, v, u, pN, pT = tr.unpack(x)
     peak = float(x[tr.ix["z"]].ravel()[0]) if tr.pb.max_cost is not None else float("nan")
     return SimpleNamespace(t=np.concatenate([[0.0], np.cumsum(hs)]), T=T, steps=hs, q=q, v=v, u=u,
@@ -181,9 +182,9 @@ def plan_keys(pb, plan, result, states: str = "integrated") -> list:
     :func:`~lcp.ocp.phase_dynamics.impact_rows` of its impacts) at the segment's start state (None
     where every row is independent), the states integrated by CVODES through the plan
     at ``result``'s control and steps, from the problem's start or with ``states="result"`` from
-    ``result``'s node state at each interval's start (the walk of :func:`~lcp.ocp.shooting.initial_point`, whose
-    states the rank is decided on). Raises :class:`~lcp.ocp.phase_dynamics.NotShootable` where a mode's accelerations are
-    not unique."""
+    ``result``'s node state at each interval's start (the walk of
+    :func:`~lcp.ocp.shooting.initial_point`, whose states the rank is decided on). Raises
+    :class:`~lcp.ocp.phase_dynamics.NotShootable` where a mode's accelerations are not unique."""
     sys, n = pb.system, pb.system.n
     t, u = np.asarray(result.t, dtype=float), np.asarray(result.u, dtype=float)
     fns, keys = {}, []
