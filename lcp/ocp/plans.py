@@ -37,7 +37,7 @@ from lcp.ocp.phase_dynamics import (
 from lcp.ocp.replay import event_pieces
 
 __all__ = ["MODE_CODES", "PRUNE_TOL", "check_plan", "iterate_of", "phase_plan", "plan_keys", "plan_of_modes",
-           "pruned_plan"]
+           "pruned_plan", "pruned_start"]
 
 #: the event method's mode names -> codes
 MODE_CODES = {"open": OPEN, "stick": STICK, "slide+": SLIDE_POS, "slide-": SLIDE_NEG}
@@ -150,6 +150,21 @@ def pruned_plan(tr, x):
     except NotShootable:
         return None
     return plan, removed
+
+
+def pruned_start(pb, tr, x):
+    """(plan, keys, segments removed, the iterate as a result) to solve again from, where ``x``,
+    an iterate of ``tr``'s NLP, shrinks segments to zero (:func:`pruned_plan`); None where none can
+    be removed, or where the pruned plan's kept rows cannot be chosen at its new start (a mode
+    whose accelerations are not unique there: :func:`plan_keys`)."""
+    cut = pruned_plan(tr, x)
+    if cut is None:
+        return None
+    it = iterate_of(tr, x)
+    try:
+        return cut[0], plan_keys(pb, cut[0], it), cut[1], it
+    except NotShootable:
+        return None
 
 
 def iterate_of(tr, x):

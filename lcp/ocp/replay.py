@@ -312,8 +312,8 @@ def amplification(result: OCPResult, rp) -> float:
     eps = PERTURBATION * max(1.0, float(np.max(np.abs(np.concatenate([q0, v0])))))
     moved = copy.copy(pb)
     moved.q0, moved.v0 = _lift(sys, q0 + eps / size * dq), v0 + eps / size * dv
+    events = sum(len(p.t_events) for p in rp.pieces) if rp.pieces else len(rp.sim.t_events)
     try:
-        events = sum(len(p.t_events) for p in rp.pieces) if rp.pieces else len(rp.sim.t_events)
         q, v, _ = event_pieces(dataclasses.replace(result, problem=moved), n_eval=2,
                                max_events=AMPLIFICATION_EVENTS * events + 100)
     except RuntimeError:  # (the replay failed, or took too many events)

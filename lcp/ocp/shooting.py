@@ -78,7 +78,7 @@ from lcp.ocp.phase_dynamics import (
     mode_dynamics,
     segment_integrator,
 )
-from lcp.ocp.plans import iterate_of, phase_plan, plan_keys, plan_of_modes, pruned_plan
+from lcp.ocp.plans import phase_plan, plan_keys, plan_of_modes, pruned_start
 from lcp.ocp.transcription import Transcription, grid_variables, step_terms
 
 __all__ = ["CHECK_TOL", "INTEGRATOR_TOL", "NotShootable", "PhaseShooting", "impact_law", "initial_point", "phase_plan", "plan_keys", "plan_of_modes",
@@ -658,23 +658,17 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
             pair_tol, warm = PAIR_TOL, {}  # pair members implied by the modes: held in a band
             check = PhaseShooting(pb, plan, check=True, zeros=zeros, pair_tol=pair_tol, keys=keys)
             continue
-        if not ok and good is None:
-            cut = pruned_plan(tr, np.array(sol["x"]).ravel())
-            if cut is not None:
-                # segments that shrank to zero: their conditions at coinciding points repeat each
-                # other, and IPOPT's multipliers grew without bound (the two discs, N = 60: 4e8 at
-                # the iteration limit; without those three segments solved in 15 iterations).
-                # Each such solve removes at least one segment: this ends
-                it = iterate_of(tr, np.array(sol["x"]).ravel())
-                try:  # (a mode of the pruned plan whose accelerations are not unique at its new start)
-                    cut_keys = plan_keys(pb, cut[0], it)
-                except NotShootable:
-                    cut = None
-            if cut is not None:
-                plan, keys, pruned = cut[0], cut_keys, pruned + cut[1]
-                check = PhaseShooting(pb, plan, check=True, zeros=zeros, pair_tol=pair_tol, keys=keys)
-                x, warm = initial_point(check, it), {}
-                continue
+        cut = pruned_start(pb, tr, np.array(sol["x"]).ravel()) if not ok and good is None else None
+        if cut is not None:
+            # segments that shrank to zero: their conditions at coinciding points repeat each
+            # other, and IPOPT's multipliers grew without bound (the two discs, N = 60: 4e8 at the
+            # iteration limit; without those three segments solved in 15 iterations). Each such
+            # solve removes at least one segment: this ends
+            plan, keys, removed, it = cut
+            pruned += removed
+            check = PhaseShooting(pb, plan, check=True, zeros=zeros, pair_tol=pair_tol, keys=keys)
+            x, warm = initial_point(check, it), {}
+            continue
         if not ok and good is None and M < RK_SUBSTEPS_SAFE:
             # the coarser steps' NLP did not converge from this start: once more on finer steps
             # (the convex obstacle, N = 40: at 4 steps IPOPT's iteration limit, at 8 solved)
