@@ -58,14 +58,14 @@ def _lift(system, q, tol=1e-12):
 
 def _whole_schedule_system(result: OCPResult, options: dict):
     """The problem's System under the solution's whole control schedule, for one event integration
-    over [0, T], when only ``n_eval`` (and ``max_events``) are asked for and the contacts are planar;
+    over [0, T], when only ``n_eval`` (and ``max_events``, ``rtol``) are asked for and the contacts are planar;
     else None.
 
     Restarting at every node built a System and an event model per interval, and cost the motor
     (N = 30) 0.10 s per replay against 0.05 s in one integration, at the same replay misses. The
     force's time dependence excludes nothing here: the replay check sends such a system to
     Moreau-Jean, and the optimal control refuses contacts that move with t."""
-    if set(options) - {"n_eval", "max_events"} or result.control is None or result.problem.system.is_spatial:
+    if set(options) - {"n_eval", "max_events", "rtol"} or result.control is None or result.problem.system.is_spatial:
         return None  # (spatial contacts: the spatial event integrator, restarted at the nodes)
     return result.problem.system.with_control(result.control)
 
@@ -229,7 +229,8 @@ def replay(result: OCPResult, refine: int = 10, method: str = "moreau-jean", sol
                         error_v=np.max(np.abs(v - result.v), axis=0), pieces=pieces)
 
 
-def replay_check(result: OCPResult, tol: float, refine: int = 50) -> ReplayCheck:
+def replay_check(result: OCPResult, tol: float, refine: int = 50, rtol: float | None = None,
+                 estimate_rtol: float | None = None) -> ReplayCheck:
     """The replay miss of a solution: final state and path constraints, replayed open loop.
 
     The event-driven replay (exact: closed-form phases, the control's nodes ending phases) for a piecewise-constant
@@ -237,13 +238,25 @@ def replay_check(result: OCPResult, tol: float, refine: int = 50) -> ReplayCheck
     otherwise (continuous linear hold) Moreau-Jean at T / (N refine), which reports its method and step.
     Path constraints (the largest value) and path equalities (the largest magnitude) are
     evaluated on the replayed states at the nodes (with the optimizer's impulses and controls).
+    ``rtol``: the event integrator's tolerance for phases without closed forms (its own default
+    otherwise); with ``estimate_rtol`` the final state is replayed once more at that tolerance,
+    restarted at every node, and the two replays' difference is the check's ``integration_error``
+    (counted in ``ok``).
     """
     pb = result.problem
     # the event replay is exact for the constant and the affine hold (polynomial phases in closed
     # form); for the linear hold the Moreau-Jean replay is kept as before (a pinned, cheaper check)
+    tight = {} if rtol is None else {"rtol": float(rtol)}
+    err = float("nan")
     if result.hold in ("constant", "affine") and _event_available() and not pb.system.force_depends_on_t:
-        rp = replay(result, method="event", n_eval=2)  # the nodes only: no dense output to evaluate
-        method = "event"
+        rp = replay(result, method="event", n_eval=2, **tight)  # the nodes only: no dense output to evaluate
+        method = "event" if rtol is None else f"event rtol={rtol:.0e}"
+        if estimate_rtol is not None:
+            # restarted at every node: another sequence of steps as well as another tolerance (on the
+            # cart-pole's landed swing-up the one integration at 1e-13 and 3e-14 differed by 1.6e-6,
+            # while both converged, restarted and by Radau, to within 1.5e-7 of the 3e-14 one)
+            q2, v2, _ = event_pieces(result, restart=True, n_eval=2, rtol=float(estimate_rtol))
+            err = float(max(np.max(np.abs(q2[-1] - rp.q[-1])), np.max(np.abs(v2[-1] - rp.v[-1]))))
     else:
         rp = replay(result, refine=refine)
         method = f"moreau-jean h={rp.h:.3g}"
@@ -269,13 +282,14 @@ def replay_check(result: OCPResult, tol: float, refine: int = 50) -> ReplayCheck
                     viol = max(viol, float(np.max(np.abs(val) if absolute else val)))
             if pairs:  # the user's complementarity pairs on the replayed states (lcp.ocp.pairs)
                 viol = max(viol, pair_violation(pairs, st))
-    amp = amplification(result, rp) if method == "event" and final > tol else float("nan")
+    event = method.startswith("event")
+    amp = amplification(result, rp, **tight) if event and final > tol else float("nan")
     return ReplayCheck(method=method, final_miss=final, node_miss=nodes, path_violation=viol, tol=tol,
-                       where=_where(result, rp, tol), pieces=rp.pieces if method == "event" else None,
-                       amplification=amp)
+                       where=_where(result, rp, tol), pieces=rp.pieces if event else None,
+                       amplification=amp, integration_error=err)
 
 
-def amplification(result: OCPResult, rp) -> float:
+def amplification(result: OCPResult, rp, **options) -> float:
     """How far the event replay ``rp`` of ``result``'s control moves its final state per unit change
     of the start state: one more event replay, from the start moved by :data:`PERTURBATION` (times
     its size) along a fixed pseudo-random direction that keeps the closed contacts' gaps and the
@@ -315,7 +329,7 @@ def amplification(result: OCPResult, rp) -> float:
     events = sum(len(p.t_events) for p in rp.pieces) if rp.pieces else len(rp.sim.t_events)
     try:
         q, v, _ = event_pieces(dataclasses.replace(result, problem=moved), n_eval=2,
-                               max_events=AMPLIFICATION_EVENTS * events + 100)
+                               max_events=AMPLIFICATION_EVENTS * events + 100, **options)
     except RuntimeError:  # (the replay failed, or took too many events)
         return float("nan")
     return float(max(np.max(np.abs(q[-1] - rp.q[-1])), np.max(np.abs(v[-1] - rp.v[-1])))) / eps

@@ -16,6 +16,7 @@ from lcp.ocp.blas import one_blas_thread
 from lcp.ocp.collocation import RadauTranscription
 from lcp.ocp.complementarity import run_homotopy, run_phases
 from lcp.ocp.guess import event_guess, resample, screened_start, x0_from_guess
+from lcp.ocp.landing import landable, landed
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions, check_shooting
 from lcp.ocp.replay import replay_check
 from lcp.ocp.results import HomotopyStage, OCPGuess, OCPResult
@@ -223,6 +224,11 @@ def _checked(problem, res, method):
                            f"Before the replay: {solved}")
             return res
         rc = res.replay
+        landing = ""
+        if method == "shooting" and res.status >= 0 and not rc.ok and landable(rc, problem.replay_tol):
+            out, landing = landed(res, rc, problem.replay_tol)
+            if out is not None:
+                res, rc = out, out.replay
         if res.status >= 0 and not rc.ok:
             solved = res.message
             res.status = -3
@@ -230,12 +236,14 @@ def _checked(problem, res, method):
                     "contact_law='gap'." if problem.contact_law == "velocity" else "")
             res.message = (f"{OCP_STATUS_MESSAGES[-3]} Replayed by {rc.method}: final-state miss "
                            f"{rc.final_miss:.2e}, path violation {rc.path_violation:.2e} > {problem.replay_tol:.1e}"
-                           f"{'; ' + rc.where if rc.where else ''}.{amplified_note(rc)}{hint}"
-                           f"{unbounded_note(problem)} "
+                           f"{'; ' + rc.where if rc.where else ''}.{amplified_note(rc) if not landing else landing}"
+                           f"{hint}{unbounded_note(problem)} "
                            f"Before the replay: {solved}")
         elif res.status >= 0:
-            res.message += (f" Replayed by {rc.method}: final-state miss {rc.final_miss:.2e}, path violation "
-                            f"{rc.path_violation:.2e}, within replay_tol = {problem.replay_tol:.1e}.")
+            err = (f" (the integrator's error estimated {rc.integration_error:.1e})"
+                   if np.isfinite(rc.integration_error) else "")
+            res.message += (f"{landing} Replayed by {rc.method}: final-state miss {rc.final_miss:.2e}{err}, path "
+                            f"violation {rc.path_violation:.2e}, within replay_tol = {problem.replay_tol:.1e}.")
     return res
 
 
