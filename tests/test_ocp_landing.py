@@ -18,39 +18,40 @@ def unstable():
 
 
 def _unstable(T=14.0, N=8):
-    """x'' = x + u on a frictional floor that the block never leaves (y = 0): growth e^t, an
-    amplification of about e^14 = 1.2e6 over the horizon; a push u = 3 N keeps it sliding."""
+    """x'' = x + u on a frictionless floor that the block never leaves (y = 0), from x = 1 at
+    velocity -1 (the stable manifold of u = 0: x = e^-t): growth e^t of any error, an amplification
+    of about e^14 = 1.2e6 over the horizon."""
     q, v, u = ca.SX.sym("q", 2), ca.SX.sym("v", 2), ca.SX.sym("u", 1)
     F = ca.vertcat(q[0] + u[0], -1.0)
-    sys = System(q, v, np.eye(2), F, contacts=[Contact(gap=q[1], tangent=q[0], mu=0.5, name="floor")],
+    sys = System(q, v, np.eye(2), F, contacts=[Contact(gap=q[1], tangent=q[0], mu=0.0, name="floor")],
                  control=u, control_bounds=(np.array([-10.0]), np.array([10.0])), names=["x", "y"])
-    pb = OptimalControlProblem(sys, N, T=T, q0=np.array([0.0, 0.0]), v0=np.array([1.0, 0.0]),
+    pb = OptimalControlProblem(sys, N, T=T, q0=np.array([1.0, 0.0]), v0=np.array([-1.0, 0.0]),
                                stage_cost=lambda s: s.u0[0] ** 2, replay_tol=None)
-    res = pb.solve(pb.guess(u=3.0), shooting=False)
+    res = pb.solve(pb.guess(u=0.0), shooting=False)
     pb.replay_tol = 1e-6
     return pb, res
 
 
 def _exact(pb, res, u):
     """``res`` with control ``u`` and, as its optimizer's trajectory, the tight event replay of
-    a control slightly off ``u`` (an optimizer whose trajectory errs by 1e-12 in the first push)."""
+    a control slightly off ``u`` (an optimizer whose trajectory errs by 1e-10 in the first push)."""
     off = u.copy()
-    off[0, 0] += 1e-12
+    off[0, 0] += 1e-10
     ref = dataclasses.replace(res, u=off, control=pb.schedule(res.t, off))
-    q, v, _ = event_pieces(ref, n_eval=2, rtol=LANDING_RTOL)
+    q, v, _ = event_pieces(ref, restart=True, n_eval=2, rtol=LANDING_RTOL)
     return dataclasses.replace(res, u=u, control=pb.schedule(res.t, u), q=q, v=v)
 
 
 def test_a_control_whose_replay_misses_an_unstable_trajectory_is_landed_on_it(unstable):
     pb, res = unstable
-    u = np.full((pb.control_rows, 1), 3.0) + 0.1 * np.sin(np.arange(pb.control_rows))[:, None]
+    u = 1e-7 * np.sin(1.0 + np.arange(pb.control_rows))[:, None]
     out = _exact(pb, res, u)
     rc = replay_check(out, 1e-6)
     assert not rc.ok and rc.amplification > 1e5
     assert landable(rc, 1e-6)
     ld = land(out, 1e-6)
     assert ld is not None and ld.miss_after <= 1e-8
-    assert 0.0 < ld.change < 1e-6  # (the optimizer's error was 1e-12 in a control)
+    assert 0.0 < ld.change < 1e-4  # (the optimizer's error was 1e-10 in a control)
     assert ld.u[0, 0] == u[0, 0]  # the last controls moved: the first one stays
     new, note = landed(out, rc, 1e-6)
     assert new is not None and new.replay.ok, note
@@ -58,13 +59,13 @@ def test_a_control_whose_replay_misses_an_unstable_trajectory_is_landed_on_it(un
     assert new.replay.final_miss <= 1e-8
     assert "Newton steps on the control" in note
     # the landed control, replayed on its own, ends on the optimizer's final state
-    q, v, _ = event_pieces(new, n_eval=2, rtol=LANDING_RTOL)
+    q, v, _ = event_pieces(new, restart=True, n_eval=2, rtol=LANDING_RTOL)
     assert np.max(np.abs(q[-1] - out.q[-1])) <= 1e-8 and np.max(np.abs(v[-1] - out.v[-1])) <= 1e-8
 
 
 def test_misses_that_are_not_conditioning_are_not_landed(unstable):
     pb, res = unstable
-    u = np.full((pb.control_rows, 1), 3.0)
+    u = 1e-7 * np.cos(np.arange(pb.control_rows))[:, None]
     out = _exact(pb, res, u)
     rc = replay_check(out, 1e-6)
     # a miss larger than the shooting's errors could explain: another trajectory
@@ -88,10 +89,11 @@ def test_controls_at_their_bounds_are_not_moved(unstable):
 
 def test_the_check_counts_its_integration_error(unstable):
     pb, res = unstable
-    u = np.full((pb.control_rows, 1), 3.0)
+    u = 1e-7 * np.cos(np.arange(pb.control_rows))[:, None]
     out = _exact(pb, res, u)
     rc = replay_check(out, 1.0, rtol=LANDING_RTOL, estimate_rtol=1e-10)
     assert rc.method == "event rtol=3e-14"
+    assert replay_check(out, 1.0, rtol=LANDING_RTOL, restart=True).method == "event rtol=3e-14, restarted at every node"
     assert rc.integration_error > 0.0
     assert dataclasses.replace(rc, tol=0.5 * rc.integration_error).ok is False
     plain = replay_check(out, 1.0)

@@ -74,10 +74,22 @@ def landable(rc, tol: float) -> bool:
                 and rc.final_miss <= JOIN_ERROR * a and rc.path_violation <= tol)
 
 
-def _final(result, u):
+def _replay(result, u, first: int = 0, start=None):
+    """The nodes (q, v) from node ``first`` of the event replay of control ``u``, restarted at every
+    node (from ``start`` at node ``first``)."""
     res = dataclasses.replace(result, u=u, control=result.problem.schedule(result.t, u))
-    q, v, _ = event_pieces(res, n_eval=2, rtol=LANDING_RTOL)
-    return np.concatenate([q[-1], v[-1]])
+    q, v, _ = event_pieces(res, restart=True, first=first, start=start, n_eval=2, rtol=LANDING_RTOL)
+    return q, v
+
+
+def _interval_of(pb, row: int) -> int:
+    """The first control interval that control row ``row`` acts on (the affine hold has two rows per
+    interval, the linear hold one per node)."""
+    if pb.hold == "affine":
+        return row // 2
+    if pb.hold == "linear":
+        return max(row - 1, 0)
+    return row
 
 
 def land(result, tol: float) -> Landing | None:
@@ -91,7 +103,8 @@ def land(result, tol: float) -> Landing | None:
     u0 = np.array(result.u, dtype=float)
     lo, hi = np.broadcast_to(pb.u_min, u0.shape[1:]), np.broadcast_to(pb.u_max, u0.shape[1:])
     span = np.where(np.isfinite(hi - lo), hi - lo, 1.0)
-    f0 = _final(result, u0)
+    qb, vb = _replay(result, u0)
+    f0 = np.concatenate([qb[-1], vb[-1]])
     r = f0 - target
     before = float(np.max(np.abs(r)))
     goal = tol / 100.0
@@ -104,7 +117,9 @@ def land(result, tol: float) -> Landing | None:
             eps = FD_STEP * span[j]
             up = u0.copy()
             up[k, j] += eps
-            cols.append((_final(result, up) - f0) / eps)
+            k0 = _interval_of(pb, k)  # (the replay before that interval is unchanged)
+            q1, v1 = _replay(result, up, k0, (qb[k0], vb[k0]))
+            cols.append((np.concatenate([q1[-1], v1[-1]]) - f0) / eps)
             idx.append((k, j))
             replays += 1
         if not cols:
@@ -123,7 +138,8 @@ def land(result, tol: float) -> Landing | None:
     for _ in range(NEWTON_STEPS):
         for (k, j), d in zip(idx, alpha):
             u[k, j] += d
-        r = _final(result, u) - target
+        q1, v1 = _replay(result, u)
+        r = np.concatenate([q1[-1], v1[-1]]) - target
         replays, steps = replays + 1, steps + 1
         if np.max(np.abs(r)) <= goal:
             break
@@ -151,7 +167,7 @@ def landed(result, rc, tol: float):
         return None, (f"{head}; no control change below {MAX_CHANGE:g} of the control's range lands its "
                       f"replay at rtol {LANDING_RTOL:.0e} within {tol / 100:.1e}.")
     out = dataclasses.replace(result, u=ld.u, control=result.problem.schedule(result.t, ld.u))
-    check = replay_check(out, tol, rtol=LANDING_RTOL, estimate_rtol=ESTIMATE_RTOL)
+    check = replay_check(out, tol, rtol=LANDING_RTOL, estimate_rtol=ESTIMATE_RTOL, restart=True)
     note = (f"{head}; Newton steps on the control against its event replay at rtol {LANDING_RTOL:.0e} "
             f"({ld.steps} {'step' if ld.steps == 1 else 'steps'}, {ld.columns} controls differenced, "
             f"{ld.replays} replays, {ld.time:.1f} s) changed it by at most {ld.change:.1e} and landed "

@@ -130,12 +130,15 @@ def _replay_event_whole(result: OCPResult, sysw, n_eval: int = 1000, **sim_optio
     return sim.q[idx], sim.v[idx], _cut(sim, t, [int(n_eval)] * (len(t) - 1))
 
 
-def event_pieces(result: OCPResult, restart: bool = False, **options):
+def event_pieces(result: OCPResult, restart: bool = False, first: int = 0, start=None, **options):
     """Event-driven replay: (q, v) at the nodes, the piece results. One integration over the whole
     schedule for planar contacts unless ``restart``; else restarted at every node with that
-    interval's schedule."""
+    interval's schedule, from node ``first`` (0: the problem's start; else ``start`` = (q, v)
+    there, and the nodes from ``first`` on are returned)."""
     from lcp.simulation import simulate
 
+    if first and (not restart or start is None):
+        raise ValueError("a replay from node first > 0 is restarted at every node and needs start = (q, v)")
     sysw = None if restart else _whole_schedule_system(result, options)
     if sysw is not None:
         return _replay_event_whole(result, sysw, **options)
@@ -147,9 +150,10 @@ def event_pieces(result: OCPResult, restart: bool = False, **options):
         # fine Moreau-Jean replay to 1.5e-5)
         raise ValueError("the event replay restarted at every node needs a force that does not depend on t "
                          "explicitly; replay with method='moreau-jean', or the event method with n_eval only")
-    q, v = [pb.q0.copy()], [pb.v0.copy()]
+    q0, v0 = (pb.q0, pb.v0) if start is None else start
+    q, v = [np.array(q0, dtype=float)], [np.array(v0, dtype=float)]
     pieces = []
-    for k in range(len(t) - 1):
+    for k in range(int(first), len(t) - 1):
         h = t[k + 1] - t[k]
         if sched.hold == "constant":
             piece = ControlSchedule([0.0, h], sched.values[k:k + 1])
@@ -230,7 +234,7 @@ def replay(result: OCPResult, refine: int = 10, method: str = "moreau-jean", sol
 
 
 def replay_check(result: OCPResult, tol: float, refine: int = 50, rtol: float | None = None,
-                 estimate_rtol: float | None = None) -> ReplayCheck:
+                 estimate_rtol: float | None = None, restart: bool = False) -> ReplayCheck:
     """The replay miss of a solution: final state and path constraints, replayed open loop.
 
     The event-driven replay (exact: closed-form phases, the control's nodes ending phases) for a piecewise-constant
@@ -239,18 +243,20 @@ def replay_check(result: OCPResult, tol: float, refine: int = 50, rtol: float | 
     Path constraints (the largest value) and path equalities (the largest magnitude) are
     evaluated on the replayed states at the nodes (with the optimizer's impulses and controls).
     ``rtol``: the event integrator's tolerance for phases without closed forms (its own default
-    otherwise); with ``estimate_rtol`` the final state is replayed once more at that tolerance,
+    otherwise); ``restart``: the event replay restarted at every node (every interval integrated on
+    its own); with ``estimate_rtol`` the final state is replayed once more at that tolerance,
     restarted at every node, and the two replays' difference is the check's ``integration_error``
     (counted in ``ok``).
     """
     pb = result.problem
     # the event replay is exact for the constant and the affine hold (polynomial phases in closed
     # form); for the linear hold the Moreau-Jean replay is kept as before (a pinned, cheaper check)
-    tight = {} if rtol is None else {"rtol": float(rtol)}
+    tight = ({} if rtol is None else {"rtol": float(rtol)}) | ({"restart": True} if restart else {})
     err = float("nan")
     if result.hold in ("constant", "affine") and _event_available() and not pb.system.force_depends_on_t:
         rp = replay(result, method="event", n_eval=2, **tight)  # the nodes only: no dense output to evaluate
-        method = "event" if rtol is None else f"event rtol={rtol:.0e}"
+        method = ("event" + ("" if rtol is None else f" rtol={rtol:.0e}")
+                  + (", restarted at every node" if restart else ""))
         if estimate_rtol is not None:
             # restarted at every node: another sequence of steps as well as another tolerance (on the
             # cart-pole's landed swing-up the one integration at 1e-13 and 3e-14 differed by 1.6e-6,
