@@ -454,3 +454,33 @@ def test_a_replay_near_an_unstable_upright_reports_its_amplification():
     out = _checked(up, upright, "homotopy")  # (its optimizer's states: the hanging pole's)
     assert out.status == -3 and out.replay.amplification == pytest.approx(a, rel=1e-6)
     assert "The replay amplifies errors" in out.message
+
+
+def test_a_hybrid_plan_takes_the_replays_phases_only_where_the_replay_follows():
+    """The cart-pole at rest (the hanging pole, the cart stuck), its control raised just past the
+    cart's friction (2 N) in one interval: the replay slides the cart there (by about 1e-8 m) while
+    the result's own plan sticks throughout. Near 1e-4 the hybrid plan takes the replay's slide; at
+    a nearness no node meets, it is the result's own plan again (None)."""
+    import dataclasses
+
+    from lcp.ocp.plans import hybrid_plan, plan_of_modes
+    from lcp.ocp.replay import replay_check
+
+    ex = EXAMPLES["cart_pole"]()
+    pb = ex.make(20)
+    pb.replay_tol = None
+    res = pb.solve(pb.guess(u=np.zeros((pb.N, 1))), shooting=False)
+    u = np.zeros_like(res.u)
+    u[10] = 2.0 + 1e-6
+    pushed = dataclasses.replace(res, u=u, control=pb.schedule(res.t, u))
+    pushed.replay = replay_check(pushed, 1e-6)
+    assert 0.0 < pushed.replay.final_miss < 1e-4
+    own = plan_of_modes(pushed)
+    assert all(segs[0][0] == (STICK,) for segs in own)
+    plan = hybrid_plan(pushed, own, 1e-4)
+    assert plan is not None
+    assert (SLIDE_POS,) in [md for md, _, _ in plan[10]]
+    assert all([md for md, _, _ in plan[k]] == [(STICK,)] for k in range(10))
+    for k, segs in enumerate(plan):
+        assert sum(d for _, d, _ in segs) == pytest.approx(res.t[k + 1] - res.t[k], rel=1e-12)
+    assert hybrid_plan(pushed, own, 1e-300) is None

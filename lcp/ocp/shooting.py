@@ -573,7 +573,8 @@ NEAR_MAX_ITER = 150
 WARM_MU = 1e-6
 
 
-def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, options: dict | None = None):
+def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, options: dict | None = None,
+                   plan=None):
     """The shooting polish of ``result`` (module docstring): (x, cost, diag, IPOPT's stats, time,
     the NLP whose ``diagnose`` gave ``diag``).
 
@@ -589,12 +590,15 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
     (order 4: by (defect / tol)^(1/4)), up to
     :data:`RK_SUBSTEPS_MAX` per grid interval. ``start="replay"``: the phases and states of the
     event replay of ``result``'s control (a feasible start); ``"result"``: ``result``'s own modes
-    and states. Where IPOPT fails on an NLP (before any solution of it) whose last iterate shrinks
+    and states (on ``plan`` where given, as :func:`~lcp.ocp.plans.hybrid_plan` makes it, else on
+    its modes). Where IPOPT fails on an NLP (before any solution of it) whose last iterate shrinks
     segments below :data:`~lcp.ocp.plans.PRUNE_TOL` of their interval, the NLP is solved again on
     the plan without them (:func:`~lcp.ocp.plans.pruned_plan`; ``stats["pruned"]`` counts the
     segments removed). Raises :class:`NotShootable` where the shooting does not apply."""
     refuse(pb)
-    plan = phase_plan(result) if start == "replay" else plan_of_modes(result)
+    if plan is not None and start != "result":
+        raise ValueError("a plan is solved from the result's own states: start='result'")
+    plan = phase_plan(result) if start == "replay" else plan if plan is not None else plan_of_modes(result)
     t0 = time.perf_counter()
     zeros = pair_zeros(pb, result) if pb.complementarity else None
     states = "integrated" if start == "replay" else "result"

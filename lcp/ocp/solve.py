@@ -18,6 +18,7 @@ from lcp.ocp.complementarity import run_homotopy, run_phases
 from lcp.ocp.guess import event_guess, resample, screened_start, x0_from_guess
 from lcp.ocp.landing import landable, landed
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions, check_shooting
+from lcp.ocp.plans import hybrid_plan
 from lcp.ocp.replay import replay_check
 from lcp.ocp.results import HomotopyStage, OCPGuess, OCPResult
 from lcp.ocp.shooting import CHECK_TOL, MODE_TOL, NotShootable, refuse, solve_shooting
@@ -133,6 +134,10 @@ def finished(problem, x, cost, diag, status, message, history, t0, method, shoot
 #: round's control (a slide of the cart-pole that grazed zero velocity inside a phase stuck in
 #: the replay: the next round has that stick phase)
 SHOOTING_ROUNDS = 3
+#: shooting solves on hybrid plans (:func:`~lcp.ocp.plans.hybrid_plan`) after the one from the
+#: transcription's states, and how near (in replay tolerances) the replay must stay for its phases
+HYBRID_ROUNDS = 2
+HYBRID_NEAR = 100.0
 
 
 def polished(problem, res, t0) -> OCPResult:
@@ -152,14 +157,16 @@ def polished(problem, res, t0) -> OCPResult:
     # the open-loop replay leaves (the cart-pole's swing-up: the replay of Radau's control misses
     # the upright by 17, the shooting from its states swings up at a cost 555.9)
     queue = [("replay", r) for r in range(SHOOTING_ROUNDS)] + [("result", 0)]
-    start = res
+    start, plan = res, None
     while queue:
         kind, rnd = queue.pop(0)
         if kind == "result":
             start = res
-        label = f"round {rnd + 1}" if kind == "replay" else "from the transcription's states"
+        label = {"replay": f"round {rnd + 1}", "result": "from the transcription's states",
+                 "hybrid": f"hybrid {rnd + 1}"}[kind]
         try:
-            x, cost, diag, st, dt, tr = solve_shooting(problem, start, start=kind)
+            x, cost, diag, st, dt, tr = solve_shooting(problem, start, start="result" if kind == "hybrid" else kind,
+                                                       plan=plan if kind == "hybrid" else None)
         except NotShootable as exc:
             notes.append(f"{label} not tried: {exc}")
             queue = _without_rounds(queue)
@@ -176,8 +183,10 @@ def polished(problem, res, t0) -> OCPResult:
                          f"defect {diag['dynamics']:.2e}, mode conditions violated by {diag['residual']:.2e}")
             queue = _without_rounds(queue)  # the next rounds would start from the same replay
             continue
-        source = ("the event replay of the " + ("transcription" if rnd == 0 else f"shooting round {rnd}")
-                  + "'s control" if kind == "replay" else "the transcription's own modes and states")
+        source = {"replay": "the event replay of the " + ("transcription" if rnd == 0 else f"shooting round {rnd}")
+                  + "'s control", "result": "the transcription's own modes and states",
+                  "hybrid": "the previous shooting's plan, with the phases of its control's event replay where "
+                  f"that replay stays within {HYBRID_NEAR:g} replay_tol of it"}[kind]
         cut = (f", without the {st['pruned']} phases that IPOPT's iterate shrank to zero length"
                if st.get("pruned") else "")
         how = (f"exact-phase shooting on the {segments} phases of {source}{cut} (the phases joined as "
@@ -193,6 +202,17 @@ def polished(problem, res, t0) -> OCPResult:
             return out
         notes.append(f"{label} ({segments} phases, cost {cost:.10g}): {out.message}")
         start = out
+        following = 0 if kind == "result" else rnd + 1
+        if kind != "replay" and following < HYBRID_ROUNDS and out.replay is not None and out.replay.pieces:
+            # its replay follows it for a while, then leaves (hybrid_plan): once more on the replay's
+            # phases where it follows
+            try:
+                plan = hybrid_plan(out, tr.plan, HYBRID_NEAR * problem.replay_tol)
+            except NotShootable as exc:
+                plan = None
+                notes[-1] += f" (no hybrid plan: {exc})"
+            if plan is not None:
+                queue.append(("hybrid", following))
         if kind == "replay" and np.isfinite(res.cost) and cost - res.cost > abs(res.cost):
             # the replay's phases led far from the transcription's solution: the next rounds would
             # follow this control's replay further (the cart-pole at N = 20, from a transcription
