@@ -125,3 +125,20 @@ def test_the_cart_pole_swings_up_at_n20_with_its_replay_landed():
     assert rc.final_miss + rc.integration_error <= 1e-6
     assert "Newton steps on the control" in res.message
     assert abs(res.q[-1][1] - np.pi) < 0.1  # upright
+
+
+@pytest.mark.slow
+def test_the_cart_pole_swings_up_at_n40_on_a_hybrid_plan():
+    """The cart-pole at N = 40: the shooting from the transcription's states (647.44) missed its
+    replay by 5.1, the replay sticking 14 ms where the shooting slid. On the hybrid plan (the
+    replay's phases where it follows) the shooting swings up (621.81) and is landed."""
+    from studies._ocp_models import EXAMPLES
+
+    ex = EXAMPLES["cart_pole"]()
+    pb = ex.make(40)
+    res = pb.solve(ex.start(pb) if ex.start is not None else None, **ex.solve_kw)
+    assert res.success, res.message
+    assert res.cost < 700.0
+    assert res.message.startswith("Solved by exact-phase shooting on the") and "previous shooting's plan" in res.message
+    assert res.replay.final_miss + res.replay.integration_error <= 1e-6
+    assert abs(res.q[-1][1] - np.pi) < 0.1

@@ -15,10 +15,17 @@ miss by a small change; controls at their bounds are kept. The landed result is 
 the event replay at that tolerance, whose own error is estimated by one more replay at
 :data:`ESTIMATE_RTOL` and counted in the check (:func:`lcp.ocp.replay.replay_check`).
 
-Measured on the cart-pole's swing-up at N = 20 (cost 571.12, replay miss 5.6e-5): ten replays
-(0.55 s each; the last eight controls act while the cart sticks and move nothing), one Newton
-step, control change 8.7e-6; the replay at rtol 3e-14 then misses by 3e-11, the one at 1e-13
-by 2.4e-7 (the estimate), the one at the event integrator's default 1e-12 by 1.9e-6.
+The replays are restarted at every node (each interval integrated on its own; a difference then
+replays only from its interval on). The one integration over the whole schedule was less
+accurate there: on the cart-pole's landed swing-up at N = 40 it moved by 3e-6 between rtol 1e-12
+and 3e-14, not monotonically, while the restarted replays converged (2.0e-6 at 1e-12, 5.5e-7 at
+1e-13, 5.3e-8 at 2.3e-14 from the landed 1.1e-9 at 3e-14) and Radau's at 1e-12 was 1.8e-7 from
+it. A landing on the one integration would have left a true miss of 3e-6.
+
+Measured on the cart-pole's swing-up at N = 20 (cost 571.12, replay miss 5.6e-5): nine controls
+differenced (the last eight act while the cart sticks and move nothing), one Newton step, control
+change 6.3e-6, 11 replays in 7.3 s; the replay at rtol 3e-14 then ends 1.7e-9 from the
+optimizer's final state, the one at 1e-13 2.4e-7 (the estimate).
 """
 from __future__ import annotations
 
