@@ -23,8 +23,12 @@ an edge, and a ball (e = 0.5) bounced to a target height. For each, at N control
   its control through the package's event method (one integration over the horizon, Moreau-Jean at T / 20000 if the event method
   fails), measured on the coordinates both models share;
 - both controls scored by one measure, ``J_replay``: the example's continuous cost integrated
-  (midpoint rule, 200 subintervals per control interval, the states interpolated from a Moreau-Jean
-  replay of the control at T / (200 N)), plus the terminal cost at the replay's end (the objectives of the two transcriptions use different quadratures).
+  (midpoint rule, 200 subintervals per control interval, the states at the midpoints from the event
+  method's replay of the control over the horizon, or, where it fails, interpolated from a
+  Moreau-Jean replay at T / (200 N)), plus the terminal cost at the replay's end (the objectives of
+  the two transcriptions use different quadratures). The Moreau-Jean replay alone could not follow
+  the cart-pole's swing-up to its unstable upright: it scored the control 8808.68 where the event
+  replay, at rtol 1e-12 and 3e-14 alike, scores 692.66.
 
 A row is a success only when the replay is within tolerance; where the replay misses, the numbers
 are recorded as they are (``message`` says what the solver reported). The study runs without
@@ -98,20 +102,28 @@ def replay_control(ex, schedule):
 
 
 def score(ex, schedule, N):
-    """J_replay: the example's cost along a Moreau-Jean replay of the control at T / (SCORE_REFINE N)."""
+    """J_replay: the example's cost along the event replay of the control (states at the midpoints of
+    SCORE_REFINE subintervals per control interval), or, where that replay fails, along a
+    Moreau-Jean replay at T / (SCORE_REFINE N)."""
     T = float(schedule.times[-1])
-    sim = lcp.simulate(ex.system, T, h=T / (SCORE_REFINE * N), control=schedule, q0=ex.q0, v0=ex.v0)
-    if not sim.success:
-        return float("nan")
-    t = np.asarray(sim.t)
     # midpoint rule on SCORE_REFINE subintervals of every control interval (the control's jumps are
-    # ends of subintervals, so a piecewise-constant control's effort is exact), the states
-    # interpolated linearly from the replay
+    # ends of subintervals, so a piecewise-constant control's effort is exact)
     nodes = np.asarray(schedule.times, dtype=float)
     edges = np.concatenate([np.linspace(a, b, SCORE_REFINE + 1)[:-1] for a, b in itertools.pairwise(nodes)]
                            + [nodes[-1:]])
     tm, dt = 0.5 * (edges[1:] + edges[:-1]), np.diff(edges)
     u = np.asarray(schedule(tm), dtype=float).reshape(len(tm), -1)
+    try:
+        sim = lcp.simulate(ex.system, T, method="event", control=schedule, q0=ex.q0, v0=ex.v0,
+                           t_eval=np.concatenate([tm, [T]]))
+        if sim.success:
+            return float(np.sum(dt * ex.integrand(tm, sim.q[:-1], sim.v[:-1], u)) + ex.terminal(sim.q[-1], sim.v[-1]))
+    except (ValueError, RuntimeError):
+        pass
+    sim = lcp.simulate(ex.system, T, h=T / (SCORE_REFINE * N), control=schedule, q0=ex.q0, v0=ex.v0)
+    if not sim.success:
+        return float("nan")
+    t = np.asarray(sim.t)  # (the states interpolated linearly from the replay)
     qm = np.column_stack([np.interp(tm, t, sim.q[:, j]) for j in range(sim.q.shape[1])])
     vm = np.column_stack([np.interp(tm, t, sim.v[:, j]) for j in range(sim.v.shape[1])])
     return float(np.sum(dt * ex.integrand(tm, qm, vm, u)) + ex.terminal(sim.q[-1], sim.v[-1]))
