@@ -34,7 +34,7 @@ import time
 
 import numpy as np
 
-from lcp.ocp.replay import event_pieces
+from lcp.ocp.replay import event_pieces, replay_check
 
 __all__ = ["ESTIMATE_RTOL", "JOIN_ERROR", "LANDING_RTOL", "Landing", "land", "landable"]
 
@@ -162,8 +162,6 @@ def landed(result, rc, tol: float):
     """``result`` with its control landed (:func:`land`) and checked again by the event replay at
     :data:`LANDING_RTOL` (its integration error estimated at :data:`ESTIMATE_RTOL`), and a note
     saying what was done; (None, why not) where the landing fails or its check misses."""
-    from lcp.ocp.replay import replay_check
-
     head = (f" The replay of the optimizer's control missed by {rc.final_miss:.2e} and amplifies start-state "
             f"errors {rc.amplification:.1e} times (an unstable trajectory)")
     try:
