@@ -142,3 +142,17 @@ def test_the_cart_pole_swings_up_at_n40_on_a_hybrid_plan():
     assert res.message.startswith("Solved by exact-phase shooting on the") and "previous shooting's plan" in res.message
     assert res.replay.final_miss + res.replay.integration_error <= 1e-6
     assert abs(res.q[-1][1] - np.pi) < 0.1
+
+
+def test_a_replay_from_a_later_node_repeats_the_restarted_replay(unstable):
+    """event_pieces from node k with that node's state (restarted) gives the same later nodes as the
+    restarted replay from the start, and asks for the state it starts from."""
+    pb, res = unstable
+    q, v, _ = event_pieces(res, restart=True, n_eval=2)
+    q3, v3, pieces = event_pieces(res, restart=True, first=3, start=(q[3], v[3]), n_eval=2)
+    assert len(pieces) == pb.N - 3 and q3.shape == (pb.N - 2, 2)
+    assert np.array_equal(q3, q[3:]) and np.array_equal(v3, v[3:])
+    with pytest.raises(ValueError, match="start"):
+        event_pieces(res, restart=True, first=3, n_eval=2)
+    with pytest.raises(ValueError, match="restarted"):
+        event_pieces(res, first=3, start=(q[3], v[3]), n_eval=2)
