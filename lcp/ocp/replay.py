@@ -27,7 +27,8 @@ from lcp.model.control import ControlSchedule
 from lcp.ocp.pairs import pair_violation
 from lcp.ocp.results import OCPResult, ReplayCheck, ReplayResult
 
-__all__ = ["AMPLIFICATION_EVENTS", "PERTURBATION", "amplification", "event_pieces", "replay", "replay_check"]
+__all__ = ["AMPLIFICATION_EVENTS", "PERTURBATION", "amplification", "event_pieces", "node_objective", "replay",
+           "replay_check"]
 
 #: the start-state change (relative to the start state's size, at least 1) by which an event replay
 #: that misses measures how much it amplifies errors (:func:`amplification`)
@@ -271,19 +272,11 @@ def replay_check(result: OCPResult, tol: float, refine: int = 50, rtol: float | 
     viol = 0.0
     pairs = getattr(pb, "complementarity", [])
     if pb.path_constraints is not None or pb.path_equalities is not None or pairs:
-        u = result.u
-        for k in range(len(result.t) - 1):
-            j = 2 * k if result.hold == "affine" else k
-            ua, ub = u[j], u[j] if result.hold == "constant" else u[j + 1]
-            st = pb.make_step(k, result.t[k], result.steps[k], rp.q[k], rp.q[k + 1], rp.v[k], rp.v[k + 1],
-                              ua, ub, result.p_N[k], result.p_T[k])
+        for st in _steps(result, rp.q, rp.v):
             for fn, absolute in ((pb.path_constraints, False), (pb.path_equalities, True)):
                 if fn is None:
                     continue
-                val = fn(st)
-                if isinstance(val, ca.SX):  # built with CasADi operations on numbers: constant
-                    val = ca.evalf(val)
-                val = np.array(val, dtype=float).ravel()
+                val = _numbers(fn(st))
                 if val.size:
                     viol = max(viol, float(np.max(np.abs(val) if absolute else val)))
             if pairs:  # the user's complementarity pairs on the replayed states (lcp.ocp.pairs)
@@ -293,6 +286,51 @@ def replay_check(result: OCPResult, tol: float, refine: int = 50, rtol: float | 
     return ReplayCheck(method=method, final_miss=final, node_miss=nodes, path_violation=viol, tol=tol,
                        where=_where(result, rp, tol), pieces=rp.pieces if event else None,
                        amplification=amp, integration_error=err)
+
+
+def _steps(result: OCPResult, q, v, wrap=None):
+    """The Steps of ``result``'s intervals on the node states (q, v), with its controls and impulses
+    (each array passed through ``wrap`` where given)."""
+    pb, u = result.problem, result.u
+    w = (lambda x: x) if wrap is None else wrap
+    for k in range(len(result.t) - 1):
+        j = 2 * k if result.hold == "affine" else k
+        ua, ub = u[j], u[j] if result.hold == "constant" else u[j + 1]
+        yield pb.make_step(k, result.t[k], result.steps[k], w(q[k]), w(q[k + 1]), w(v[k]), w(v[k + 1]),
+                           w(ua), w(ub), w(result.p_N[k]), w(result.p_T[k]))
+
+
+def _numbers(val) -> np.ndarray:
+    """A callable's value as a flat float array (an SX built from numbers is constant)."""
+    if isinstance(val, ca.SX):
+        val = ca.evalf(val)
+    return np.array(val, dtype=float).ravel()
+
+
+def node_objective(result: OCPResult, q, v) -> float:
+    """The problem's objective on the node states (q, v) with ``result``'s controls and impulses:
+    terminal cost, the stage costs summed as sum_k h_k stage_cost(step_k) on the nodes, and
+    max_cost's largest value. Not the transcription's own quadrature: for comparing two sets of
+    node states (the optimizer's and its replay's) by one rule.
+
+    Examples
+    --------
+    >>> from studies.optimal_control import rest_to_rest_problem
+    >>> res = rest_to_rest_problem(10, "effort", "constant", "uniform").solve()
+    >>> float(node_objective(res, res.q, res.v)) == float(node_objective(res, res.q.copy(), res.v.copy()))
+    True
+    """
+    pb = result.problem
+    J, top = 0.0, -np.inf
+    # as CasADi matrices: a cost written with CasADi's functions (ca.sumsqr, ca.dot) takes them
+    for st in _steps(result, q, v, wrap=ca.DM):
+        if pb.stage_cost is not None:
+            J += float(st.h) * float(_numbers(pb.stage_cost(st))[0])
+        if pb.max_cost is not None:
+            top = max(top, float(_numbers(pb.max_cost(st))[0]))
+    if pb.terminal_cost is not None:
+        J += float(_numbers(pb.terminal_cost(result.T, ca.DM(q[-1]), ca.DM(v[-1])))[0])
+    return J + (top if pb.max_cost is not None else 0.0)
 
 
 def amplification(result: OCPResult, rp, **options) -> float:

@@ -19,7 +19,7 @@ from lcp.ocp.guess import event_guess, resample, screened_start, x0_from_guess
 from lcp.ocp.landing import landable, landed
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions, check_shooting
 from lcp.ocp.plans import hybrid_plan
-from lcp.ocp.replay import replay_check
+from lcp.ocp.replay import node_objective, replay_check
 from lcp.ocp.results import HomotopyStage, OCPGuess, OCPResult
 from lcp.ocp.shooting import CHECK_TOL, MODE_TOL, NotShootable, refuse, solve_shooting
 from lcp.ocp.spatial import SpatialTranscription
@@ -28,7 +28,7 @@ from lcp.ocp.transcription import Transcription
 __all__ = ["bound_steps_note", "default_starts", "first_pass", "guess_from", "piecewise_uniform", "polished",
            "result_of", "same_guess",
            "finished", "solve_problem", "stuck_at_start", "unbounded_note", "uniform_fallback", "unstuck",
-           "affine_first_pass", "first_pass_route", "solve_defaults"]
+           "affine_first_pass", "first_pass_route", "solve_defaults", "replay_objective_ratio", "FAR_REPLAY"]
 
 
 def solve_problem(problem, guess, options, method, option_kw, shooting: bool = True,
@@ -157,10 +157,20 @@ def polished(problem, res, t0) -> OCPResult:
     # the open-loop replay leaves (the cart-pole's swing-up: the replay of Radau's control misses
     # the upright by 17, the shooting from its states swings up at a cost 555.9)
     queue = [("replay", r) for r in range(SHOOTING_ROUNDS)] + [("result", 0)]
+    far = replay_objective_ratio(res)
+    if far > FAR_REPLAY:
+        # the replay is another trajectory: the transcription's states first (the cart-pole at
+        # N = 40: a first round from the replay, whose objective is 143 times the transcription's,
+        # ran into IPOPT's iteration limit, 90 s; from the states and one hybrid plan, 20 s)
+        queue = [("result", 0)] + queue[:-1]
+        first = (f" (The objective on the event replay's nodes is {far:.3g} times the transcription's: the "
+                 "shooting started from the transcription's states, before the replay's phases.)")
+    else:
+        first = ""
     start, plan = res, None
     while queue:
         kind, rnd = queue.pop(0)
-        if kind == "result":
+        if kind == "result" or (kind, rnd) == ("replay", 0):
             start = res
         label = {"replay": f"round {rnd + 1}", "result": "from the transcription's states",
                  "hybrid": f"hybrid {rnd + 1}"}[kind]
@@ -169,11 +179,12 @@ def polished(problem, res, t0) -> OCPResult:
                                                        plan=plan if kind == "hybrid" else None)
         except NotShootable as exc:
             notes.append(f"{label} not tried: {exc}")
-            queue = _without_rounds(queue)
+            queue = _without_rounds(queue) if kind == "replay" else queue
             continue
         except RuntimeError as exc:  # the replay that gives the phases, or an integrator, failed
             notes.append(f"{label} failed: {exc}")
-            queue = _without_rounds(queue)  # the next rounds would replay the same control
+            # the next rounds would replay the same control
+            queue = _without_rounds(queue) if kind == "replay" else queue
             continue
         ok = st["return_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
         stage = HomotopyStage(0.0, int(st["iter_count"]), diag["residual"], 0.0, cost, st["return_status"], ok, dt)
@@ -181,7 +192,8 @@ def polished(problem, res, t0) -> OCPResult:
         if not ok or diag["dynamics"] > MODE_TOL or diag["residual"] > MODE_TOL:
             notes.append(f"{label} ({segments} phases) failed: IPOPT returned {st['return_status']}, "
                          f"defect {diag['dynamics']:.2e}, mode conditions violated by {diag['residual']:.2e}")
-            queue = _without_rounds(queue)  # the next rounds would start from the same replay
+            # the next rounds would start from the same replay
+            queue = _without_rounds(queue) if kind == "replay" else queue
             continue
         source = {"replay": "the event replay of the " + ("transcription" if rnd == 0 else f"shooting round {rnd}")
                   + "'s control", "result": "the transcription's own modes and states",
@@ -199,6 +211,7 @@ def polished(problem, res, t0) -> OCPResult:
             out.message += f" The transcription's result: {res.message}"
             if notes:
                 out.message += f" (Exact-phase shooting before this one: {'; '.join(notes)})"
+            out.message += first
             return out
         notes.append(f"{label} ({segments} phases, cost {cost:.10g}): {out.message}")
         start = out
@@ -211,8 +224,8 @@ def polished(problem, res, t0) -> OCPResult:
             except NotShootable as exc:
                 plan = None
                 notes[-1] += f" (no hybrid plan: {exc})"
-            if plan is not None:
-                queue.append(("hybrid", following))
+            if plan is not None:  # next: it follows this shooting, whose plan it amends
+                queue.insert(0, ("hybrid", following))
         if kind == "replay" and np.isfinite(res.cost) and cost - res.cost > abs(res.cost):
             # the replay's phases led far from the transcription's solution: the next rounds would
             # follow this control's replay further (the cart-pole at N = 20, from a transcription
@@ -220,8 +233,29 @@ def polished(problem, res, t0) -> OCPResult:
             # iteration limit, 80 s; the start from the transcription's own states comes next)
             notes[-1] += f" (more than twice the transcription's cost {res.cost:.10g}: no further replay rounds)"
             queue = _without_rounds(queue)
-    res.message += f" (Exact-phase shooting: {'; '.join(notes)})"
+    res.message += f" (Exact-phase shooting: {'; '.join(notes)}){first}"
     return res
+
+
+#: the objective on the event replay's nodes, over the transcription's (:func:`replay_objective_ratio`),
+#: above which the exact-phase shooting starts from the transcription's states, not from the
+#: replay's phases (measured: the cart-pole 240, 143 and 11 at N = 20, 40 and 80; the two discs
+#: 2.9 at N = 30, which succeed from the replay's phases; the motor, the chain, the box, the hopper
+#: about 1)
+FAR_REPLAY = 100.0
+
+
+def replay_objective_ratio(res) -> float:
+    """The objective on the nodes of the event replay of ``res``'s control, over the same on its own
+    nodes (:func:`lcp.ocp.replay.node_objective`: one rule for both); nan without an event replay
+    or where the objective on its own nodes is not positive."""
+    rc = res.replay
+    if rc is None or not rc.pieces:
+        return float("nan")
+    q = np.array([p.q[0] for p in rc.pieces] + [rc.pieces[-1].q[-1]])
+    v = np.array([p.v[0] for p in rc.pieces] + [rc.pieces[-1].v[-1]])
+    own = node_objective(res, res.q, res.v)
+    return node_objective(res, q, v) / own if own > 0 else float("nan")
 
 
 def _without_rounds(queue):
