@@ -140,6 +140,9 @@ def test_the_cart_pole_swings_up_at_n40_on_a_hybrid_plan():
     assert res.success, res.message
     assert res.cost < 700.0
     assert res.message.startswith("Solved by exact-phase shooting on the") and "previous shooting's plan" in res.message
+    # the replay of the transcription's control is another trajectory (143 times its objective):
+    # the shooting from the transcription's states came first, not a round on the replay's phases
+    assert "the shooting started from the transcription's states" in res.message
     assert res.replay.final_miss + res.replay.integration_error <= 1e-6
     assert abs(res.q[-1][1] - np.pi) < 0.1
 
