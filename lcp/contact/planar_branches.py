@@ -18,7 +18,7 @@ from lcp.contact.modes import OPEN, SLIDE_NEG, SLIDE_POS, STICK
 from lcp.numerics.lazy import issparse
 from lcp.numerics.lazy import sparse as sp
 
-__all__ = ["PlanarBranches"]
+__all__ = ["PlanarBranches", "branch_system", "dense_branch_solution"]
 
 
 class PlanarBranches:
@@ -30,61 +30,17 @@ class PlanarBranches:
         open: p_N = p_T = 0; closed: u_N = 0; stick: u_T = 0; slide+: p_T = -mu p_N;
         slide-: p_T = +mu p_N. The result satisfies the Coulomb law iff :meth:`admissible`.
         """
-        k = self.k
-        if k == 1:  # one contact: the closed form, without assembling a 2 x 2 system
-            return self._solve_branch_planar(int(modes[0]))
-        if issparse(self.W):
+        if issparse(self.W) and self.k > 1:
             return self._solve_branch_sparse(np.asarray(modes))
-        E, r = self.branch_system(modes)
-        try:
-            p = np.linalg.solve(E, r)
-        except np.linalg.LinAlgError:
-            return None
-        if not np.all(np.isfinite(p)):
-            return None
-        return p
+        return dense_branch_solution(self.W, self.q, self.mu, modes)
 
     def branch_system(self, modes) -> tuple[np.ndarray, np.ndarray]:
         """The linear system E p = r of one branch (see :meth:`solve_branch`); E is singular when
         the branch's forces are not unique (redundant contacts)."""
-        k = self.k
-        E = np.zeros((2 * k, 2 * k))
-        r = np.zeros(2 * k)
-        for j, md in enumerate(modes):
-            if md == OPEN:
-                E[j, j] = 1.0
-                E[k + j, k + j] = 1.0
-                continue
-            E[j] = self.W[j]
-            r[j] = -self.q[j]
-            if md == STICK:
-                E[k + j] = self.W[k + j]
-                r[k + j] = -self.q[k + j]
-            else:
-                E[k + j, k + j] = 1.0
-                E[k + j, j] = self.mu[j] if md == SLIDE_POS else -self.mu[j]
-        return E, r
+        return branch_system(self.W, self.q, self.mu, modes)
 
     def _solve_branch_sparse(self, modes: np.ndarray) -> np.ndarray | None:
         return _sparse_branch_solve(self, modes)
-
-    def _solve_branch_planar(self, mode: int) -> np.ndarray | None:
-        (W00, W01), (W10, W11) = self.W.tolist()
-        qN, qT = self.q.tolist()
-        mu = float(self.mu[0])
-        if mode == OPEN:
-            return np.zeros(2)
-        if mode == STICK:
-            det = W00 * W11 - W01 * W10
-            if det == 0.0:
-                return None
-            return np.array([(-qN * W11 + qT * W01) / det, (-qT * W00 + qN * W10) / det])
-        sgn = 1.0 if mode == SLIDE_POS else -1.0
-        a = W00 - sgn * mu * W01
-        if a == 0.0:
-            return None
-        pN = -qN / a
-        return np.array([pN, -sgn * mu * pN])
 
     def admissible(self, p: np.ndarray, modes, rtol: float = 1e-11) -> bool:
         """Whether a branch solution p satisfies the inequalities of its modes (within rtol * scale)."""
@@ -233,3 +189,59 @@ def _lcp_form(self) -> tuple[np.ndarray, np.ndarray]:
     b = np.concatenate([self.q[:k], self.q[k:], -self.q[k:], np.zeros(k)])
     return M, b
 
+
+def dense_branch_solution(W, q, mu, modes) -> np.ndarray | None:
+    """:meth:`PlanarBranches.solve_branch` of the dense problem (W, q, mu): None if the branch is
+    singular. Also called without a problem object, by the event integrator's smooth phases
+    (:class:`lcp.events.modes.PhaseBranch`), whose branch is the same at every state."""
+    if len(modes) == 1:  # one contact: the closed form, without assembling a 2 x 2 system
+        return _planar_branch(W, q, mu, int(modes[0]))
+    E, r = branch_system(W, q, mu, modes)
+    try:
+        p = np.linalg.solve(E, r)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.isfinite(p)):
+        return None
+    return p
+
+
+def branch_system(W, q, mu, modes) -> tuple[np.ndarray, np.ndarray]:
+    """The linear system E p = r of one branch of the problem (W, q, mu) (see
+    :meth:`PlanarBranches.solve_branch`)."""
+    k = len(modes)
+    E = np.zeros((2 * k, 2 * k))
+    r = np.zeros(2 * k)
+    for j, md in enumerate(modes):
+        if md == OPEN:
+            E[j, j] = 1.0
+            E[k + j, k + j] = 1.0
+            continue
+        E[j] = W[j]
+        r[j] = -q[j]
+        if md == STICK:
+            E[k + j] = W[k + j]
+            r[k + j] = -q[k + j]
+        else:
+            E[k + j, k + j] = 1.0
+            E[k + j, j] = mu[j] if md == SLIDE_POS else -mu[j]
+    return E, r
+
+
+def _planar_branch(W, q, mu, mode: int) -> np.ndarray | None:
+    (W00, W01), (W10, W11) = W.tolist()
+    qN, qT = q.tolist()
+    mu = float(mu[0])
+    if mode == OPEN:
+        return np.zeros(2)
+    if mode == STICK:
+        det = W00 * W11 - W01 * W10
+        if det == 0.0:
+            return None
+        return np.array([(-qN * W11 + qT * W01) / det, (-qT * W00 + qN * W10) / det])
+    sgn = 1.0 if mode == SLIDE_POS else -1.0
+    a = W00 - sgn * mu * W01
+    if a == 0.0:
+        return None
+    pN = -qN / a
+    return np.array([pN, -sgn * mu * pN])

@@ -15,6 +15,7 @@ import numpy as np
 
 from lcp.events.forcing import time_forcing
 from lcp.model.kinematics import normalize_quaternions, normalized_expr
+from lcp.numerics.casadi_eval import evaluate_kept
 
 __all__ = [
     "EPS",
@@ -22,6 +23,7 @@ __all__ = [
     "StateData",
     "SystemModel",
     "absmax",
+    "accel_arrays",
     "accel_function",
     "all_finite",
     "check_state",
@@ -81,6 +83,30 @@ def accel_function(system) -> ca.Function:
                          [system.mass_expr, system.force_expr, G, zeta, H, Hdv, system.gap_expr])
         ACCEL_FUNCTIONS[system] = fn
     return fn
+
+
+DENSE_ACCEL: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def accel_arrays(system, t, q, v) -> tuple:
+    """The outputs of :func:`accel_function` at (t, q, v) as C-ordered NumPy arrays of their shapes
+    (A, F, G, zeta, H, Hdot v, gap; the vectors as columns), evaluated into NumPy buffers: the
+    event integrator's ODE phases evaluate them at every stage of every step, and converting to and
+    from CasADi matrices cost three times the evaluation (the cart-pole: 100 of 170 us). The
+    Function's outputs are densified and transposed, so that CasADi's column-major writes fill
+    row-major arrays: the same numbers as ``accel_function(system)(t, q, v)``, bit for bit."""
+    entry = DENSE_ACCEL.get(system)
+    if entry is None:
+        fn = accel_function(system)
+        args = [ca.SX.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
+        outs = fn(*args)
+        dense = ca.Function("event_accel_dense", args, [ca.densify(o).T for o in outs])
+        entry = DENSE_ACCEL[system] = (dense, [(fn.size1_out(i), fn.size2_out(i)) for i in range(fn.n_out())])
+    dense, shapes = entry
+    outs = [np.empty(shape) for shape in shapes]
+    evaluate_kept(dense, (np.array([t], dtype=float), np.ascontiguousarray(q, dtype=float),
+                          np.ascontiguousarray(v, dtype=float)), outs)
+    return tuple(outs)
 
 
 def _kinematic_accel_function(system) -> ca.Function:
@@ -275,8 +301,6 @@ class SystemModel(ContactKinematics):
             self.phase_memo = {}
             self.impact_memo = {}
             self.free_ready = {}  # closed-form phase data with no closed contact (ClosedFormPhase.ready)
-        else:
-            self.fn = accel_function(system)
 
     def data(self, t, q, v) -> StateData:
         if self.constant:
@@ -290,7 +314,7 @@ class SystemModel(ContactKinematics):
             d._qdd_free = None
             return d
         n, m, nb = self.n, self.m, self.sys.n_bilateral
-        A, F, G, zeta, H, Hdv, gap = (np.array(x, dtype=float) for x in self.fn(t, q, v))
+        A, F, G, zeta, H, Hdv, gap = accel_arrays(self.sys, t, q, v)
         if not all_finite(F.ravel()):
             bad = [self.sys.names[i] for i in np.flatnonzero(~np.isfinite(F.ravel()))]
             raise FloatingPointError(f"the force F(t, q, v) is not finite at t = {t:.10g} (coordinates {bad})")

@@ -57,13 +57,14 @@ from itertools import product
 import numpy as np
 
 from lcp.contact.problem import OPEN, SLIDE_NEG, SLIDE_POS, STICK, ContactProblem
+from lcp.contact.planar_branches import dense_branch_solution
 from lcp.contact.solvers import make_solver
 from lcp.events.indeterminate import RANK_RTOL, branch_forces
 from lcp.numerics.lazy import issparse
 from lcp.events.model import EPS, StateData
 from lcp.events.options import ModeSolver
 
-__all__ = ["AccelProblem", "ModeSolution", "ModeSelector", "enumerate_branches", "coupling_components",
+__all__ = ["AccelProblem", "ModeSolution", "PhaseBranch", "ModeSelector", "enumerate_branches", "coupling_components",
            "SPLIT_MIN_BRANCHES", "boundary_alternatives",
            "closed_variant", "redundant_solution", "null_space_moves",
            "group_motions"]
@@ -126,6 +127,47 @@ class AccelProblem:
         i.e. p_T = 0 and p_N >= 0, with no condition on a_T (the slide direction is the velocity's)."""
         slide = self.slide if slide is None else slide
         return [STICK if (s != 0 and md != OPEN) else md for md, s in zip(modes, slide)]
+
+
+class PhaseBranch:
+    """:class:`AccelProblem` and its branch solve for one smooth phase's closed contacts, slide
+    signs and friction, which stay fixed over the phase: what depends on them alone is set up once,
+    and a state costs only its numbers (the same operations in the same order as
+    ``AccelProblem(data, idx, slide, mu)`` with ``pb.solve_branch`` on its branch modes: the same
+    bits). An ODE phase evaluates this at every stage of every step; building the problem objects
+    there cost the cart-pole's replays half their time. Not for indeterminate phases (redundant
+    contacts), whose forces come from :func:`~lcp.events.indeterminate.branch_forces`."""
+
+    def __init__(self, m: int, idx, slide, mu):
+        self.idx = idx = np.asarray(idx, dtype=int)
+        self.slide = slide = np.asarray(slide, dtype=float)
+        self.k = k = idx.size
+        self.rows = np.concatenate([idx, m + idx])
+        self.mu = mu[idx]
+        self.sl = sl = np.flatnonzero(slide != 0)
+        self.fold = self.mu[sl] * slide[sl]
+        self.k_sl = k + sl
+        self.mu_p = np.where(slide != 0, 0.0, self.mu)
+        self.modes = [SLIDE_POS if s != 0 else STICK for s in slide.tolist()]
+        self.f_slide = -self.mu * self.slide
+
+    def __call__(self, data: StateData):
+        """(qdd, N, f) at a state (its data); None where the branch is singular."""
+        rows, sl, k = self.rows, self.sl, self.k
+        Hc = data.H[rows]
+        D = Hc.T.copy()
+        if sl.size:
+            D[:, sl] = Hc[sl].T - self.fold * Hc[self.k_sl].T
+        SD = data.solve_dirs(D)
+        W = Hc @ SD
+        qdd_free = data.qdd_free
+        b = Hc @ qdd_free + data.Hdv[rows]
+        p = dense_branch_solution(W, b, self.mu_p, self.modes)
+        if p is None:
+            return None
+        N = p[:k]
+        f = np.where(self.slide != 0, self.f_slide * N, p[k:])
+        return qdd_free + SD @ p, N, f
 
 
 @dataclass(eq=False)

@@ -19,7 +19,7 @@ from lcp.contact.problem import MODE_NAMES, OPEN, SLIDE_NEG, SLIDE_POS
 from lcp.events.event_location import first_landing, first_stop
 from lcp.events.indeterminate import branch_forces, force_margin
 from lcp.events.model import EPS, coordinate_rows, mass_projection
-from lcp.events.modes import AccelProblem, null_space_moves
+from lcp.events.modes import AccelProblem, PhaseBranch, null_space_moves
 
 __all__ = ["phase_static", "SmoothPhase", "ClosedFormPhase", "closed_form_output"]
 
@@ -75,16 +75,23 @@ class SmoothPhase:
     def names(self) -> tuple:
         return self._names
 
+    #: the phase's branch, set up on the first determinate evaluation (:class:`~lcp.events.modes.PhaseBranch`)
+    _branch = None
+
     def accel(self, data):
         """(qdd, N, f) of the phase's modes at a state (its data)."""
+        if not self.indeterminate:
+            if self._branch is None:
+                self._branch = PhaseBranch(self.model.m, self.idx, self.slide, self.mu)
+            out = self._branch(data)
+            if out is None:
+                raise FloatingPointError("singular contact branch in a smooth phase")
+            return out
         acc = AccelProblem(data, self.idx, self.slide, self.mu)
-        if self.indeterminate:
-            bf = branch_forces(acc.pb, acc.check_modes(self.modes), acc.branch_modes(self.modes))
-            p = None if bf is None else bf.p  # not admissible past the phase's end: its event
-            if bf is not None and not self.choice_moves:
-                self.choice_moves = null_space_moves(acc, bf.Z)
-        else:
-            p = acc.pb.solve_branch(acc.branch_modes(self.modes))
+        bf = branch_forces(acc.pb, acc.check_modes(self.modes), acc.branch_modes(self.modes))
+        p = None if bf is None else bf.p  # not admissible past the phase's end: its event
+        if bf is not None and not self.choice_moves:
+            self.choice_moves = null_space_moves(acc, bf.Z)
         if p is None:
             raise FloatingPointError("singular contact branch in a smooth phase")
         N, f = acc.forces(p)

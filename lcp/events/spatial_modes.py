@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from lcp.contact.problem import OPEN, SLIDE, SLIDE_NEG, SLIDE_POS, STICK
-from lcp.events.model import ContactKinematics, accel_function
+from lcp.events.model import ContactKinematics, accel_arrays
 
 __all__ = ["AccelDisk", "DiskSolution", "Frame", "SpatialModel", "impact_impulse"]
 
@@ -83,7 +83,6 @@ class SpatialModel(ContactKinematics):
         self.mu = system.mu.copy()
         self.e = system.e.copy()
         self.constant = bool(system.mass_is_constant and system.kinematics_is_constant)
-        self.fn = accel_function(system)
         self.affine_force = bool(system.force_is_affine and not system.force_depends_on_t)
         if self.constant:
             z = np.zeros(n)
@@ -112,7 +111,7 @@ class SpatialModel(ContactKinematics):
 
     def _evaluate(self, t, q, v):
         n, nb = self.n, self.nb
-        A, F, G, zeta, H, Hdv, gap = (np.array(x, dtype=float) for x in self.fn(t, q, v))
+        A, F, G, zeta, H, Hdv, gap = accel_arrays(self.sys, t, q, v)
         return (A.reshape(n, n), F.ravel(), G.reshape(nb, n), zeta.ravel(), H.reshape(-1, n), Hdv.ravel(),
                 gap.ravel())
 
