@@ -9,7 +9,6 @@ of the horizon) chosen by its event simulation's distance from the terminal cons
 """
 from __future__ import annotations
 
-import re
 from types import SimpleNamespace
 
 import casadi as ca
