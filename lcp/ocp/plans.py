@@ -17,14 +17,13 @@ Plans come from four places:
 
 :func:`plan_keys` picks the independent rows of each segment's modes along a plan.
 
-Imports CasADi (for IPOPT's iteration callback), NumPy, the contact mode codes, the phase dynamics and the event replay; it must not import
+Imports NumPy, the contact mode codes, the phase dynamics and the event replay; it must not import
 the shooting, the solve or the problem (they call it).
 """
 from __future__ import annotations
 
 from types import SimpleNamespace
 
-import casadi as ca
 import numpy as np
 
 from lcp.contact.modes import OPEN, SLIDE_NEG, SLIDE_POS, STICK
@@ -39,7 +38,7 @@ from lcp.ocp.phase_dynamics import (
 )
 from lcp.ocp.replay import event_pieces
 
-__all__ = ["MODE_CODES", "PRUNE_PATIENCE", "PRUNE_TOL", "PruneWatch", "check_plan", "hybrid_plan", "iterate_of", "phase_plan", "plan_keys",
+__all__ = ["MODE_CODES", "PRUNE_TOL", "check_plan", "hybrid_plan", "iterate_of", "phase_plan", "plan_keys",
            "plan_of_modes", "pruned_plan", "pruned_start"]
 
 #: the event method's mode names -> codes
@@ -177,55 +176,6 @@ def pruned_plan(tr, x):
     except NotShootable:
         return None
     return plan, removed
-
-
-#: consecutive IPOPT iterates of a first solve of a shooting NLP that shrink segments to zero
-#: (:func:`pruned_plan` finds some to remove), after which :class:`PruneWatch` stops the solve, to be
-#: solved again on the pruned plan. Measured on the two discs at N = 60: the second round's iterates
-#: kept two or three segments at zero from iteration 87 on while IPOPT crawled to its limit (500
-#: iterations, 62 s); the pruned plan then solved in 15. The first round, which converged in 233
-#: iterations, had one such segment over its last 33
-PRUNE_PATIENCE = 100
-
-
-class PruneWatch(ca.Callback):
-    """IPOPT's iteration callback on the NLP of a shooting ``tr``: asks IPOPT to stop (its status is
-    then User_Requested_Stop) after :data:`PRUNE_PATIENCE` consecutive iterates that shrink segments
-    to zero; :meth:`reset` before each solve. Keep it alive as long as the solver that calls it."""
-
-    def __init__(self, tr, nx: int, ng: int, npar: int):
-        ca.Callback.__init__(self)
-        self.tr, self.sizes = tr, {"x": nx, "lam_x": nx, "g": ng, "lam_g": ng, "lam_p": npar, "f": 1}
-        self.run = self.stopped_at = 0
-        self.iterations = 0
-        self.construct("prune_watch", {})
-
-    def reset(self) -> None:
-        self.run = self.iterations = self.stopped_at = 0
-
-    def get_n_in(self):
-        return ca.nlpsol_n_out()
-
-    def get_n_out(self):
-        return 1
-
-    def get_name_in(self, i):
-        return ca.nlpsol_out(i)
-
-    def get_name_out(self, i):
-        return "stop"
-
-    def get_sparsity_in(self, i):
-        return ca.Sparsity.dense(self.sizes[ca.nlpsol_out(i)], 1)
-
-    def eval(self, arg):
-        self.iterations += 1
-        shrunk = pruned_plan(self.tr, np.array(arg[0], dtype=float).ravel()) is not None
-        self.run = self.run + 1 if shrunk else 0
-        if self.run >= PRUNE_PATIENCE:
-            self.stopped_at = self.iterations
-            return [1]
-        return [0]
 
 
 def pruned_start(pb, tr, x):

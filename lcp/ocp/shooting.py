@@ -78,7 +78,7 @@ from lcp.ocp.phase_dynamics import (
     mode_dynamics,
     segment_integrator,
 )
-from lcp.ocp.plans import PruneWatch, phase_plan, plan_keys, plan_of_modes, pruned_start
+from lcp.ocp.plans import phase_plan, plan_keys, plan_of_modes, pruned_start
 from lcp.ocp.transcription import Transcription, grid_variables, step_terms
 
 __all__ = ["CHECK_TOL", "INTEGRATOR_TOL", "NotShootable", "PhaseShooting", "impact_law", "initial_point", "phase_plan", "plan_keys", "plan_of_modes",
@@ -625,14 +625,9 @@ def solve_shooting(pb, result, start: str = "replay", defect_tol: float = 1e-9, 
         for _ in range(CORRECTIONS + 1):
             for key in (("warm", "near") if warm else ("near" if solved else "cold",)):
                 if key not in solvers:
-                    opts = {"print_time": False, "show_eval_warnings": False,
-                            "ipopt": {"warm": warm_ip, "near": near_ip, "cold": ip}[key]}
-                    if key == "cold":  # a first solve: stopped where its iterates keep segments at zero
-                        watch = PruneWatch(tr, tr.nlp["x"].numel(), tr.nlp["g"].numel(), tr.nlp["p"].numel())
-                        opts["iteration_callback"] = watch
-                    solvers[key] = ca.nlpsol("shooting", "ipopt", tr.nlp, opts)
-                if key == "cold":
-                    watch.reset()
+                    solvers[key] = ca.nlpsol("shooting", "ipopt", tr.nlp,
+                                             {"print_time": False, "show_eval_warnings": False,
+                                              "ipopt": {"warm": warm_ip, "near": near_ip, "cold": ip}[key]})
                 solver = solvers[key]
                 sol = solver(x0=np.clip(x, tr.lbx, tr.ubx), lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg,
                              p=tr.params(C), **(warm if key == "warm" else {}))
