@@ -315,9 +315,11 @@ def node_objective(result: OCPResult, q, v) -> float:
 
     Examples
     --------
+    On the theta transcription's own nodes the rule is its cost:
+
     >>> from studies.optimal_control import rest_to_rest_problem
     >>> res = rest_to_rest_problem(10, "effort", "constant", "uniform").solve()
-    >>> float(node_objective(res, res.q, res.v)) == float(node_objective(res, res.q.copy(), res.v.copy()))
+    >>> abs(node_objective(res, res.q, res.v) - res.cost) <= 1e-12 * res.cost
     True
     """
     pb = result.problem

@@ -161,7 +161,7 @@ def polished(problem, res, t0) -> OCPResult:
     if far > FAR_REPLAY:
         # the replay is another trajectory: the transcription's states first (the cart-pole at
         # N = 40: a first round from the replay, whose objective is 143 times the transcription's,
-        # ran into IPOPT's iteration limit, 90 s; from the states and one hybrid plan, 20 s)
+        # ran into IPOPT's iteration limit, 90 s; the whole solve took 112 s, 29 s in this order)
         queue = [("result", 0)] + queue[:-1]
         first = (f" (The objective on the event replay's nodes is {far:.3g} times the transcription's: the "
                  "shooting started from the transcription's states, before the replay's phases.)")
