@@ -139,7 +139,7 @@ class PhaseBranch:
     contacts), whose forces come from :func:`~lcp.events.indeterminate.branch_forces`."""
 
     def __init__(self, m: int, idx, slide, mu):
-        self.idx = idx = np.asarray(idx, dtype=int)
+        idx = np.asarray(idx, dtype=int)
         self.slide = slide = np.asarray(slide, dtype=float)
         self.k = k = idx.size
         self.rows = np.concatenate([idx, m + idx])

@@ -36,7 +36,7 @@ from lcp.ocp.phase_dynamics import (
     mode_dynamics,
     segment_integrator,
 )
-from lcp.ocp.replay import event_pieces
+from lcp.ocp.replay import event_pieces, piece_nodes
 
 __all__ = ["MODE_CODES", "PRUNE_TOL", "check_plan", "hybrid_plan", "iterate_of", "phase_plan", "plan_keys",
            "plan_of_modes", "pruned_plan", "pruned_start"]
@@ -110,10 +110,8 @@ def hybrid_plan(result, own, near: float):
     touched zero between two check points), then missed by 5.1 at the end; on the hybrid plan the
     shooting swung up at cost 621.81, its joins 3.6e-12."""
     rp = phase_plan(result)
-    pieces = result.replay.pieces
-    err = [max(np.max(np.abs(p.q[0] - result.q[k])), np.max(np.abs(p.v[0] - result.v[k])))
-           for k, p in enumerate(pieces)]
-    err.append(max(np.max(np.abs(pieces[-1].q[-1] - result.q[-1])), np.max(np.abs(pieces[-1].v[-1] - result.v[-1]))))
+    q, v = piece_nodes(result.replay.pieces)
+    err = np.maximum(np.max(np.abs(q - result.q), axis=1), np.max(np.abs(v - result.v), axis=1))
     plan = [rp[k] if max(err[k], err[k + 1]) <= near else list(own[k]) for k in range(len(own))]
     # the same NLP again where every interval has own's modes in the same order and no impacts
     # (the durations are variables: they start elsewhere, but the solve would repeat the last one)

@@ -27,8 +27,8 @@ from lcp.model.control import ControlSchedule
 from lcp.ocp.pairs import pair_violation
 from lcp.ocp.results import OCPResult, ReplayCheck, ReplayResult
 
-__all__ = ["AMPLIFICATION_EVENTS", "PERTURBATION", "amplification", "event_pieces", "node_objective", "replay",
-           "replay_check"]
+__all__ = ["AMPLIFICATION_EVENTS", "PERTURBATION", "amplification", "event_pieces", "node_objective", "piece_nodes",
+           "replay", "replay_check"]
 
 #: the start-state change (relative to the start state's size, at least 1) by which an event replay
 #: that misses measures how much it amplifies errors (:func:`amplification`)
@@ -305,6 +305,14 @@ def _numbers(val) -> np.ndarray:
     if isinstance(val, ca.SX):
         val = ca.evalf(val)
     return np.array(val, dtype=float).ravel()
+
+
+def piece_nodes(pieces) -> tuple[np.ndarray, np.ndarray]:
+    """(q, v) at the nodes of an event replay from its per-interval pieces (each piece's start, and
+    the last piece's end)."""
+    q = np.array([p.q[0] for p in pieces] + [pieces[-1].q[-1]])
+    v = np.array([p.v[0] for p in pieces] + [pieces[-1].v[-1]])
+    return q, v
 
 
 def node_objective(result: OCPResult, q, v) -> float:

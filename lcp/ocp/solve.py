@@ -19,7 +19,7 @@ from lcp.ocp.guess import event_guess, resample, screened_start, x0_from_guess
 from lcp.ocp.landing import landable, landed
 from lcp.ocp.options import OCP_STATUS_MESSAGES, HomotopyOptions, check_shooting
 from lcp.ocp.plans import hybrid_plan
-from lcp.ocp.replay import node_objective, replay_check
+from lcp.ocp.replay import node_objective, piece_nodes, replay_check
 from lcp.ocp.results import HomotopyStage, OCPGuess, OCPResult
 from lcp.ocp.shooting import CHECK_TOL, MODE_TOL, NotShootable, refuse, solve_shooting
 from lcp.ocp.spatial import SpatialTranscription
@@ -252,8 +252,7 @@ def replay_objective_ratio(res) -> float:
     rc = res.replay
     if rc is None or not rc.pieces:
         return float("nan")
-    q = np.array([p.q[0] for p in rc.pieces] + [rc.pieces[-1].q[-1]])
-    v = np.array([p.v[0] for p in rc.pieces] + [rc.pieces[-1].v[-1]])
+    q, v = piece_nodes(rc.pieces)
     own = node_objective(res, res.q, res.v)
     return node_objective(res, q, v) / own if own > 0 else float("nan")
 
