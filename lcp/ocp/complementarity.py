@@ -113,10 +113,32 @@ def ipopt_solver(tr, options: HomotopyOptions, warm: bool, cache: dict, regulari
     return cache[key]
 
 
+#: a relaxation stage in the first half of the schedule (sigma above the geometric mean of sigma0
+#: and sigma_min) that IPOPT ends infeasible or in a failed step (:data:`RETRIED`) is solved again
+#: from the last converged stage at the geometric midpoint of the two relaxations, at most this
+#: many times per stage. Measured on the hopper at N = 40 under OpenBLAS's AVX-512 kernels (the
+#: start from sigma0 = 1): the stage at sigma = 0.01 ended infeasible, the homotopy stopped at 0.1,
+#: and four exact-phase shootings from there ran into their iteration limit (381 s; success False,
+#: replay miss 3.3). With the retry the stage at 10^-1.5 converged, the homotopy went on to
+#: 10^-4.5, and the shooting from there succeeded (cost 39.167, replay 6.0e-10). Not retried:
+#:
+#: - a stage that runs into the iteration limit: IPOPT was crawling, not lost, and another 3000
+#:   iterations cost tens of seconds (the same hopper: 35 to 56 s per such retry);
+#: - a stage in the second half: the relaxation is then small, and the polishing solve and the
+#:   exact-phase shooting finish from the last converged stage. Retried there, the hopper at N = 20
+#:   (AVX-512 kernels) spent 60 s more in four retries for the same result (cost 14.1927), and at
+#:   N = 40 (AVX2 kernels) 27 s more in one, for the same cost 38.7916.
+STAGE_RETRIES = 2
+#: IPOPT's return statuses after which a stage is retried (:data:`STAGE_RETRIES`)
+RETRIED = ("Infeasible_Problem_Detected", "Error_In_Step_Computation", "Restoration_Failed")
+
+
 def run_homotopy(tr, x0, P0, options: HomotopyOptions, cache: dict, regularized: bool = True):
     """The relaxation stages and the polishing solve. Returns (x, cost, diag, status, message, history).
     On free steps every stage carries the step penalty (:func:`step_penalty`; the costs reported
-    are without it) unless not ``regularized``."""
+    are without it) unless not ``regularized``. A failed stage early in the schedule is retried at
+    a smaller step of the relaxation (:data:`STAGE_RETRIES`); every solve, failed or not, is in the
+    history."""
     pen = step_penalty(tr, cache) if regularized else None
     reg = pen is not None
     cold, warm = ipopt_solver(tr, options, False, cache, reg), ipopt_solver(tr, options, True, cache, reg)
@@ -124,7 +146,8 @@ def run_homotopy(tr, x0, P0, options: HomotopyOptions, cache: dict, regularized:
     history, best = [], None
     status, message = -2, OCP_STATUS_MESSAGES[-2]
     sigma = float(options.sigma0)
-    for i in range(options.n_stages):
+    prev, retries, i = None, 0, 0
+    while i < options.n_stages:
         P0[0] = sigma
         args = {"x0": x, "lbx": tr.lbx, "ubx": tr.ubx, "lbg": tr.lbg, "ubg": tr.ubg, "p": P0}
         t0 = time.perf_counter()
@@ -138,16 +161,24 @@ def run_homotopy(tr, x0, P0, options: HomotopyOptions, cache: dict, regularized:
         f = float(sol["f"]) - (float(pen(xs)) if reg else 0.0)
         history.append(HomotopyStage(sigma, int(st["iter_count"]), diag["residual"], diag["max_product"],
                                      f, st["return_status"], ok, dt))
+        if not ok and prev is not None and retries < STAGE_RETRIES and st["return_status"] in RETRIED \
+                and sigma * sigma > (1 + 1e-6) * options.sigma0 * options.sigma_min:  # (rounding of 0.1^k)
+            retries += 1  # (the failed solve stays in the history)
+            sigma = float(np.sqrt(prev * sigma))
+            continue
         if not ok:
             status = -1
+            again = (f" (after {retries} smaller relaxation step{'s' if retries > 1 else ''} from sigma = "
+                     f"{prev:.3g})" if retries else "")
             message = (f"{OCP_STATUS_MESSAGES[-1]} Stage {i} (sigma = {sigma:.3g}): IPOPT returned "
-                       f"{st['return_status']}{_at(diag)}.")
+                       f"{st['return_status']}{again}{_at(diag)}.")
             break
         x, lam_x, lam_g = xs, np.array(sol["lam_x"]).ravel(), np.array(sol["lam_g"]).ravel()
         best = (x, f, diag)
         if _within_tol(diag, options.tol):
             status, message = 0, OCP_STATUS_MESSAGES[0]
             break
+        prev, retries, i = sigma, 0, i + 1
         sigma = max(sigma * options.factor, options.sigma_min)
     if best is not None and status == -2:
         message = (f"{OCP_STATUS_MESSAGES[-2]} Residual {best[2]['residual']:.3g} > tol = {options.tol:.3g} "
