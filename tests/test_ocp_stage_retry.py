@@ -47,11 +47,11 @@ def solve(motor_problem, fail, status, polish=True):
     pb, tr, x0 = motor_problem
     opts = HomotopyOptions(polish=polish)
     cache = {}
-    for warm in (False, True):  # the real solvers, built and cached as run_homotopy asks for them
-        ipopt_solver(tr, opts, warm, cache, False)
+    # the real solvers, built and cached as run_homotopy asks for them, each replaced in the cache by its wrapper
+    built = {id(ipopt_solver(tr, opts, warm, cache, False)) for warm in (False, True)}
     wrapped = {}
     for key, solver in list(cache.items()):
-        if isinstance(key, tuple) and len(key) == 5:
+        if id(solver) in built:
             cache[key] = wrapped[key] = Failing(solver, fail, status, tr)
     P0 = np.concatenate([[0.0], pb.q0, pb.v0])
     out = run_homotopy(tr, x0.copy(), P0, opts, cache, regularized=False)
