@@ -18,10 +18,11 @@ an edge, and a ball (e = 0.5) bounced to a target height. For each, at N control
   and time (building and solving, replay check included; the modules it imports on first use,
   :data:`OURS_IMPORTS`, are imported before the clock starts, as nosnoc's import is before its own);
 - nosnoc (optional peer, :mod:`studies._nosnoc_examples`, nosnoc_py's own model and options where it
-  has the example, run like ours with CasADi's OpenBLAS on one thread, :mod:`lcp.ocp.blas`, unless
-  ``--peer-blas default``): its status, its time (building and solving), and the replay miss of
-  its control through the package's event method (one integration over the horizon, Moreau-Jean at T / 20000 if the event method
-  fails), measured on the coordinates both models share;
+  has the example, run like ours with CasADi's OpenBLAS on one thread, :mod:`lcp.ocp.blas`, and the
+  C heap keeping the linear solver's workspace, :mod:`lcp.ocp.heap`, unless ``--peer-blas
+  default``): its status, its time (building and solving), and the replay miss of its control
+  through the package's event method (one integration over the horizon, Moreau-Jean at T / 20000
+  if the event method fails), measured on the coordinates both models share;
 - both controls scored by one measure, ``J_replay``: the example's continuous cost integrated
   (midpoint rule, 200 subintervals per control interval, the states at the midpoints from the event
   method's replay of the control over the horizon, or, where it fails, interpolated from a
@@ -74,6 +75,7 @@ import numpy as np
 
 import lcp
 from lcp.ocp.blas import one_blas_thread
+from lcp.ocp.heap import kept_heap
 from studies import _nosnoc_examples as peers
 from studies._common import out_dir, parse_args, save, write_csv
 from studies._ocp_models import EXAMPLES
@@ -165,8 +167,10 @@ def _nosnoc(ex, N, blas: str = "one"):
         return {**empty, "nosnoc_note": peers.NO_PEER.get(ex.name, "no peer")}, None
     if not peers.available():
         return {**empty, "nosnoc_note": "nosnoc is not installed (optional peer)"}, None
-    # on the BLAS thread count ours solves with (lcp.ocp.blas), unless asked for the library's default
-    with one_blas_thread() if blas == "one" else contextlib.nullcontext():
+    # on the BLAS thread count and the heap ours solves with (lcp.ocp.blas, lcp.ocp.heap: both gain
+    # alike, the seven blocks 23-26 % from the heap), unless asked for the libraries' defaults
+    ours = blas == "one"
+    with one_blas_thread() if ours else contextlib.nullcontext(), kept_heap() if ours else contextlib.nullcontext():
         pr = peers.solve_peer(ex.name, N)
     try:
         qf, vf, method = replay_control(ex, pr.control)
@@ -227,9 +231,10 @@ def run(out=None, quick: bool = False, examples=None, sizes: dict | None = None,
     """Solve every example (ours and nosnoc's), replay both, write the CSV and figures.
 
     ``examples``: names (all, or the quick six, by default); ``sizes``: name -> the N to run (the
-    example's own by default); ``peer_blas``: "one" runs nosnoc with CasADi's OpenBLAS on one thread,
-    as ours solves (:mod:`lcp.ocp.blas`: the same library and setting for both), "default" leaves
-    nosnoc on the library's default thread count (``nosnoc_blas`` in the CSV says which).
+    example's own by default); ``peer_blas``: "one" runs nosnoc with CasADi's OpenBLAS on one thread
+    and the C heap kept between factorizations, as ours solves (:mod:`lcp.ocp.blas`,
+    :mod:`lcp.ocp.heap`: the same libraries and settings for both), "default" leaves nosnoc on the
+    libraries' defaults (``nosnoc_blas`` in the CSV says which).
     Returns ``rows`` (one dict per example and N), ``nosnoc`` (whether the peer ran) and ``files``.
     """
     if peer_blas not in ("one", "default"):
@@ -278,7 +283,8 @@ def _extra(parser):
     parser.add_argument("--examples", nargs="+", metavar="NAME[:N,...]",
                         help="only these examples (and these N), e.g. motor:30 block_chain2:20")
     parser.add_argument("--peer-blas", choices=("one", "default"), default="one",
-                        help="nosnoc's OpenBLAS threads: one, as ours (default), or the library's default")
+                        help="nosnoc's OpenBLAS threads and C heap: as ours (one thread, the heap kept; "
+                             "default), or the libraries' defaults")
 
 
 def main(argv=None):

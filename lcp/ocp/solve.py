@@ -13,6 +13,7 @@ from dataclasses import replace
 import numpy as np
 
 from lcp.ocp.blas import one_blas_thread
+from lcp.ocp.heap import kept_heap
 from lcp.ocp.collocation import RadauTranscription
 from lcp.ocp.complementarity import run_homotopy, run_phases
 from lcp.ocp.guess import event_guess, resample, screened_start, x0_from_guess
@@ -569,9 +570,10 @@ def solve_defaults(problem, guess, options, method, option_kw, shooting) -> OCPR
     the uniform solution replays to 9e-11, so nothing flags it) and 3.4e-4 (minimum effort: a
     piecewise-constant control on a ramp) above their optima, after the exact-phase shooting too.
 
-    CasADi's OpenBLAS runs on one thread meanwhile (:func:`lcp.ocp.blas.one_blas_thread`)."""
+    CasADi's OpenBLAS runs on one thread meanwhile (:func:`lcp.ocp.blas.one_blas_thread`), and the
+    C heap keeps the linear solver's workspace between factorizations (:func:`lcp.ocp.heap.kept_heap`)."""
     check_shooting(shooting)
-    with one_blas_thread():
+    with one_blas_thread(), kept_heap():
         res = solve_problem(problem, guess, options, method, option_kw, shooting)
         if problem.hold == "affine" and first_pass_route(problem, guess, method):
             res = affine_first_pass(problem, res, options, option_kw, shooting)
