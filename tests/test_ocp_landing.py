@@ -159,3 +159,26 @@ def test_a_replay_from_a_later_node_repeats_the_restarted_replay(unstable):
         event_pieces(res, restart=True, first=3, n_eval=2)
     with pytest.raises(ValueError, match="restarted"):
         event_pieces(res, first=3, start=(q[3], v[3]), n_eval=2)
+
+
+def test_differences_swamped_by_the_replays_errors_are_taken_again_at_a_larger_step(unstable, monkeypatch):
+    """A step so small that the replay's own errors swamp the differences does not land; the
+    next step of FD_STEPS then does, on the same control. (This replay is smooth to rounding: its
+    errors are emulated by rounding its states to 1e-9.)"""
+    import lcp.ocp.landing as landing
+
+    pb, res = unstable
+    u = 1e-7 * np.sin(1.0 + np.arange(pb.control_rows))[:, None]
+    out = _exact(pb, res, u)
+    real = landing._replay
+
+    def rounded(*args, **kw):
+        q, v = real(*args, **kw)
+        return np.round(q, 9), np.round(v, 9)
+
+    monkeypatch.setattr(landing, "_replay", rounded)
+    monkeypatch.setattr(landing, "FD_STEPS", (1e-16,))
+    assert land(out, 1e-6) is None
+    monkeypatch.setattr(landing, "FD_STEPS", (1e-16, 1e-6))
+    ld = land(out, 1e-6)
+    assert ld is not None and ld.miss_after <= 1e-8 and ld.change < 1e-4

@@ -11,7 +11,10 @@ Newton steps on it, the final state's derivatives taken by finite differences of
 at a tight tolerance (:data:`LANDING_RTOL`), until that replay lands on the optimizer's final
 state. The controls are taken from the last interval backwards (a late control's effect is
 amplified least, and the trajectory before it is untouched) until the linear model can remove the
-miss by a small change; controls at their bounds are kept. The landed result is checked again by
+miss by a small change; controls at their bounds are kept. Where those Newton steps do not land,
+the differences are taken again at a larger step (:data:`FD_STEPS`): the replay's own errors,
+divided by a small step, can swamp a direction the controls move only weakly. The landed result is
+checked again by
 the event replay at that tolerance, whose own error is estimated by one more replay at
 :data:`ESTIMATE_RTOL` and counted in the check (:func:`lcp.ocp.replay.replay_check`).
 
@@ -46,12 +49,20 @@ ESTIMATE_RTOL = 1e-13
 #: IPOPT's constraint tolerance (a miss larger than this many times the amplification is not a
 #: conditioning error but another trajectory)
 JOIN_ERROR = 1e-9
-#: the finite-difference step, relative to the control's range (1 where unbounded)
-FD_STEP = 1e-6
+#: the finite-difference steps, relative to the control's range (1 where unbounded): the first,
+#: then, where its Newton steps do not land, the second. On the two discs at N = 60 (under
+#: OpenBLAS's AVX-512 kernels: shooting miss 8.2e-6, amplification 6.9e4) disc 2's final state
+#: answers weakly to the controls (the smallest singular value of the differences 2.7e-6), and
+#: the replay's own errors divided by the first step swamped that direction: its chord first
+#: overshot (4.2e-5), then gained a factor 7.5 per step (1.1e-7 after four). The differences at the
+#: second step differed from those by 10 %, and the chord landed in three steps (4.3e-12)
+FD_STEPS = (1e-6, 1e-4)
 #: the largest control change a landing may make, relative to the control's range
 MAX_CHANGE = 1e-3
-#: at most this many controls are differenced, and this many Newton steps taken
-MAX_COLUMNS = 40
+#: at most this many controls are differenced, and this many Newton steps taken. The two discs at
+#: N = 60 needed 58: after the strike disc 2 moves on its own and the controls of the strike sit at
+#: their bounds, so disc 2's final state answers only to the controls before it
+MAX_COLUMNS = 120
 NEWTON_STEPS = 4
 
 
@@ -101,61 +112,69 @@ def _interval_of(pb, row: int) -> int:
 
 def land(result, tol: float) -> Landing | None:
     """Correct ``result``'s control so that its event replay at :data:`LANDING_RTOL` ends within
-    ``tol`` / 100 of the optimizer's final state (module docstring); None where the differenced
-    controls cannot remove the miss by a change below :data:`MAX_CHANGE` of their range, or the
-    Newton steps do not converge. A replay that fails raises RuntimeError."""
+    ``tol`` / 100 of the optimizer's final state (module docstring), with the differences at each
+    step of :data:`FD_STEPS` in turn; None where the differenced controls cannot remove the miss by
+    a change below :data:`MAX_CHANGE` of their range, or the Newton steps do not converge. A replay
+    that fails raises RuntimeError."""
     t0 = time.perf_counter()
-    pb = result.problem
     target = np.concatenate([result.q[-1], result.v[-1]])
     u0 = np.array(result.u, dtype=float)
+    qb, vb = _replay(result, u0)
+    r0 = np.concatenate([qb[-1], vb[-1]]) - target
+    before, goal, replays = float(np.max(np.abs(r0))), tol / 100.0, 1
+    for fd in FD_STEPS:
+        J, idx, alpha, n = _differences(result, u0, (qb, vb), r0, fd, goal)
+        replays += n
+        if alpha is None:
+            continue
+        u, r = u0.copy(), r0
+        for steps in range(1, NEWTON_STEPS + 1):
+            for (k, j), d in zip(idx, alpha):
+                u[k, j] += d
+            q1, v1 = _replay(result, u)
+            r = np.concatenate([q1[-1], v1[-1]]) - target
+            replays += 1
+            if np.max(np.abs(r)) <= goal:
+                return Landing(u=u, replays=replays, columns=len(idx), steps=steps,
+                               change=float(np.max(np.abs(u - u0))), miss_before=before,
+                               miss_after=float(np.max(np.abs(r))), time=time.perf_counter() - t0)
+            alpha = -np.linalg.lstsq(J, r, rcond=1e-12)[0]  # (the chord: the same differences)
+    return None
+
+
+def _differences(result, u0, base, r, fd: float, goal: float):
+    """(J, idx, alpha, replays): the final state's differences with respect to the controls
+    ``idx`` ((row, component) pairs, from the last interval backwards, those at their bounds
+    skipped), at the step ``fd`` of each control's range, taken until the least-squares change
+    ``alpha`` removes the miss ``r`` to ``goal`` in the linear model with every change below
+    :data:`MAX_CHANGE` of its range (alpha None where :data:`MAX_COLUMNS` controls do not)."""
+    pb = result.problem
+    qb, vb = base
+    f0 = np.concatenate([qb[-1], vb[-1]])
     lo, hi = np.broadcast_to(pb.u_min, u0.shape[1:]), np.broadcast_to(pb.u_max, u0.shape[1:])
     span = np.where(np.isfinite(hi - lo), hi - lo, 1.0)
-    qb, vb = _replay(result, u0)
-    f0 = np.concatenate([qb[-1], vb[-1]])
-    r = f0 - target
-    before = float(np.max(np.abs(r)))
-    goal = tol / 100.0
-    cols, idx, replays, alpha = [], [], 1, None
+    cols, idx, J = [], [], None
     for k in range(u0.shape[0] - 1, -1, -1):
         for j in range(u0.shape[1]):
             room = min(u0[k, j] - lo[j], hi[j] - u0[k, j])
             if room <= MAX_CHANGE * span[j]:
                 continue  # at (or next to) a bound: kept
-            eps = FD_STEP * span[j]
+            eps = fd * span[j]
             up = u0.copy()
             up[k, j] += eps
             k0 = _interval_of(pb, k)  # (the replay before that interval is unchanged)
             q1, v1 = _replay(result, up, k0, (qb[k0], vb[k0]))
             cols.append((np.concatenate([q1[-1], v1[-1]]) - f0) / eps)
             idx.append((k, j))
-            replays += 1
         if not cols:
             continue
         J = np.array(cols).T
         a = -np.linalg.lstsq(J, r, rcond=1e-12)[0]
-        small = np.all(np.abs(a) <= MAX_CHANGE * span[[j for _, j in idx]])
-        if small and np.max(np.abs(J @ a + r)) <= goal:
-            alpha = a
-            break
+        if np.all(np.abs(a) <= MAX_CHANGE * span[[j for _, j in idx]]) and np.max(np.abs(J @ a + r)) <= goal:
+            return J, idx, a, len(cols)
         if len(cols) >= MAX_COLUMNS:
             break
-    if alpha is None:
-        return None
-    u, steps = u0.copy(), 0
-    for _ in range(NEWTON_STEPS):
-        for (k, j), d in zip(idx, alpha):
-            u[k, j] += d
-        q1, v1 = _replay(result, u)
-        r = np.concatenate([q1[-1], v1[-1]]) - target
-        replays, steps = replays + 1, steps + 1
-        if np.max(np.abs(r)) <= goal:
-            break
-        alpha = -np.linalg.lstsq(J, r, rcond=1e-12)[0]  # (the chord: the same differences)
-    after = float(np.max(np.abs(r)))
-    if after > goal:
-        return None
-    return Landing(u=u, replays=replays, columns=len(cols), steps=steps, change=float(np.max(np.abs(u - u0))),
-                   miss_before=before, miss_after=after, time=time.perf_counter() - t0)
+    return J, idx, None, len(cols)
 
 
 def landed(result, rc, tol: float):
