@@ -1,8 +1,8 @@
 """The C heap kept across IPOPT's factorizations while an optimal control problem is solved.
 
 IPOPT's linear solver (MUMPS, in CasADi's wheels) allocates its workspace afresh for every
-factorization of the KKT matrix and frees it after. IPOPT asks MUMPS for ten times the workspace
-MUMPS estimates (``mumps_mem_percent`` = 1000), so on the larger transcriptions the block is tens of
+factorization of the KKT matrix and frees it after. IPOPT asks MUMPS for 1000 % more workspace
+than MUMPS estimates (``mumps_mem_percent``), so on the larger transcriptions the block is tens of
 megabytes: on nosnoc's seven friction blocks (Radau, N = 50, 8450 variables) 56 MB, allocated
 twice per IPOPT iteration. glibc's allocator serves blocks above its mmap threshold (at most 32 MB)
 with a fresh ``mmap`` and returns them with ``munmap``, so every factorization faults in the pages
