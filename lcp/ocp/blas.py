@@ -16,7 +16,7 @@ alone where the user chose the count (``OPENBLAS_NUM_THREADS`` or ``OMP_NUM_THRE
 CasADi's folder has no OpenBLAS with ``openblas_set_num_threads`` (another build): then nothing
 changes. NumPy's own BLAS is another library and is not touched.
 
-Imports CasADi (to find its folder) and the standard library; nothing of the package.
+Imports CasADi (to find its folder), the standard library and :mod:`lcp.ocp.held`.
 """
 from __future__ import annotations
 
@@ -26,13 +26,12 @@ import functools
 import glob
 import os
 import re
-import threading
 from collections.abc import Iterator
+
+from lcp.ocp.held import Held
 
 __all__ = ["casadi_openblas", "one_blas_thread"]
 
-_LOCK = threading.Lock()
-_STATE = {"depth": 0, "saved": None}
 
 
 @functools.lru_cache(maxsize=1)
@@ -77,23 +76,27 @@ def _user_chose() -> bool:
     return any(os.environ.get(v) for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"))
 
 
+def _one_thread():
+    lib = casadi_openblas()
+    saved = int(lib.openblas_get_num_threads())
+    if saved != 1:
+        lib.openblas_set_num_threads(1)
+    return saved
+
+
+def _restore(saved) -> None:
+    if saved != 1:
+        casadi_openblas().openblas_set_num_threads(saved)
+
+
+_HELD = Held(_one_thread, _restore)
+
+
 @contextlib.contextmanager
 def one_blas_thread() -> Iterator[None]:
     """CasADi's OpenBLAS on one thread inside the block, its count restored after (module docstring)."""
-    lib = None if _user_chose() else casadi_openblas()
-    if lib is None:
+    if _user_chose() or casadi_openblas() is None:
         yield
         return
-    with _LOCK:
-        if _STATE["depth"] == 0:
-            _STATE["saved"] = int(lib.openblas_get_num_threads())
-            if _STATE["saved"] != 1:
-                lib.openblas_set_num_threads(1)
-        _STATE["depth"] += 1
-    try:
+    with _HELD():
         yield
-    finally:
-        with _LOCK:
-            _STATE["depth"] -= 1
-            if _STATE["depth"] == 0 and _STATE["saved"] not in (None, 1):
-                lib.openblas_set_num_threads(_STATE["saved"])

@@ -22,7 +22,7 @@ Nothing changes where the C library is not glibc, or where the user tuned the al
 (``MALLOC_MMAP_MAX_``, ``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``, ``MALLOC_TOP_PAD_``,
 or ``glibc.malloc`` tunables in ``GLIBC_TUNABLES``).
 
-Imports the standard library only.
+Imports the standard library and :mod:`lcp.ocp.held`.
 """
 from __future__ import annotations
 
@@ -32,8 +32,9 @@ import ctypes.util
 import functools
 import os
 import sys
-import threading
 from collections.abc import Iterator
+
+from lcp.ocp.held import Held
 
 __all__ = ["glibc", "kept_heap"]
 
@@ -44,8 +45,6 @@ DEFAULT_TRIM_THRESHOLD, DEFAULT_MMAP_MAX = 128 * 1024, 65536
 #: the trim threshold inside the block (mallopt takes an int)
 KEPT_TRIM_THRESHOLD = 2**31 - 1
 
-_LOCK = threading.Lock()
-_STATE = {"depth": 0}
 _USER_VARS = ("MALLOC_MMAP_MAX_", "MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_TOP_PAD_")
 
 
@@ -71,25 +70,28 @@ def _user_chose() -> bool:
     return any(os.environ.get(v) for v in _USER_VARS) or "glibc.malloc" in os.environ.get("GLIBC_TUNABLES", "")
 
 
+def _keep() -> None:
+    lib = glibc()
+    lib.mallopt(M_MMAP_MAX, 0)
+    lib.mallopt(M_TRIM_THRESHOLD, KEPT_TRIM_THRESHOLD)
+
+
+def _give_back(_) -> None:
+    lib = glibc()
+    lib.mallopt(M_MMAP_MAX, DEFAULT_MMAP_MAX)
+    lib.mallopt(M_TRIM_THRESHOLD, DEFAULT_TRIM_THRESHOLD)
+    lib.malloc_trim(0)
+
+
+_HELD = Held(_keep, _give_back)
+
+
 @contextlib.contextmanager
 def kept_heap() -> Iterator[None]:
     """Large blocks from the heap, and the heap's free top kept, inside the block (module
     docstring); the allocator's defaults set again after, and the kept memory given back."""
-    lib = None if _user_chose() else glibc()
-    if lib is None:
+    if _user_chose() or glibc() is None:
         yield
         return
-    with _LOCK:
-        if _STATE["depth"] == 0:
-            lib.mallopt(M_MMAP_MAX, 0)
-            lib.mallopt(M_TRIM_THRESHOLD, KEPT_TRIM_THRESHOLD)
-        _STATE["depth"] += 1
-    try:
+    with _HELD():
         yield
-    finally:
-        with _LOCK:
-            _STATE["depth"] -= 1
-            if _STATE["depth"] == 0:
-                lib.mallopt(M_MMAP_MAX, DEFAULT_MMAP_MAX)
-                lib.mallopt(M_TRIM_THRESHOLD, DEFAULT_TRIM_THRESHOLD)
-                lib.malloc_trim(0)
