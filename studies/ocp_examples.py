@@ -74,8 +74,7 @@ import time
 import numpy as np
 
 import lcp
-from lcp.ocp.blas import one_blas_thread
-from lcp.ocp.heap import kept_heap
+from lcp.ocp.solve import solver_settings
 from studies import _nosnoc_examples as peers
 from studies._common import out_dir, parse_args, save, write_csv
 from studies._ocp_models import EXAMPLES
@@ -167,10 +166,9 @@ def _nosnoc(ex, N, blas: str = "one"):
         return {**empty, "nosnoc_note": peers.NO_PEER.get(ex.name, "no peer")}, None
     if not peers.available():
         return {**empty, "nosnoc_note": "nosnoc is not installed (optional peer)"}, None
-    # on the BLAS thread count and the heap ours solves with (lcp.ocp.blas, lcp.ocp.heap: both gain
-    # alike, the seven blocks 23-26 % from the heap), unless asked for the libraries' defaults
-    ours = blas == "one"
-    with one_blas_thread() if ours else contextlib.nullcontext(), kept_heap() if ours else contextlib.nullcontext():
+    # under the settings ours solves with (lcp.ocp.solve.solver_settings: both gain alike, the seven
+    # blocks 23-26 % from the heap), unless asked for the libraries' defaults
+    with solver_settings() if blas == "one" else contextlib.nullcontext():
         pr = peers.solve_peer(ex.name, N)
     try:
         qf, vf, method = replay_control(ex, pr.control)

@@ -33,7 +33,6 @@ from lcp.ocp.held import Held
 __all__ = ["casadi_openblas", "one_blas_thread"]
 
 
-
 @functools.lru_cache(maxsize=1)
 def casadi_openblas():
     """CasADi's OpenBLAS as a ctypes library with ``openblas_get_num_threads`` and

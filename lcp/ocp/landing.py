@@ -55,7 +55,7 @@ JOIN_ERROR = 1e-9
 #: answers weakly to the controls (the smallest singular value of the differences 2.7e-6), and
 #: the replay's own errors divided by the first step swamped that direction: its chord first
 #: overshot (4.2e-5), then gained a factor 7.5 per step (1.1e-7 after four). The differences at the
-#: second step differed from those by 10 %, and the chord landed in three steps (4.3e-12)
+#: second step differed from those by 10 %, and the chord landed in two steps (6.1e-10)
 FD_STEPS = (1e-6, 1e-4)
 #: the largest control change a landing may make, relative to the control's range
 MAX_CHANGE = 1e-3

@@ -6,8 +6,10 @@ other :mod:`lcp.ocp` modules below the problem (complementarity, guesses, replay
 """
 from __future__ import annotations
 
+import contextlib
 import copy
 import time
+from collections.abc import Iterator
 from dataclasses import replace
 
 import numpy as np
@@ -29,7 +31,8 @@ from lcp.ocp.transcription import Transcription
 __all__ = ["bound_steps_note", "default_starts", "first_pass", "guess_from", "piecewise_uniform", "polished",
            "result_of", "same_guess",
            "finished", "solve_problem", "stuck_at_start", "unbounded_note", "uniform_fallback", "unstuck",
-           "affine_first_pass", "first_pass_route", "solve_defaults", "replay_objective_ratio", "FAR_REPLAY"]
+           "affine_first_pass", "first_pass_route", "solve_defaults", "solver_settings", "replay_objective_ratio",
+           "FAR_REPLAY"]
 
 
 def solve_problem(problem, guess, options, method, option_kw, shooting: bool = True,
@@ -559,6 +562,15 @@ def affine_first_pass(problem, res, options, option_kw, shooting) -> OCPResult:
     return res
 
 
+@contextlib.contextmanager
+def solver_settings() -> Iterator[None]:
+    """The process settings every solve runs under, for IPOPT's linear solver: CasADi's OpenBLAS on
+    one thread (:func:`lcp.ocp.blas.one_blas_thread`) and its workspace kept on the C heap
+    (:func:`lcp.ocp.heap.kept_heap`); each restored at the last exit."""
+    with one_blas_thread(), kept_heap():
+        yield
+
+
 def solve_defaults(problem, guess, options, method, option_kw, shooting) -> OCPResult:
     """:func:`solve_problem`, then what the defaults add. An affine problem on free steps solved by
     fixed phases from its own first pass is solved again from the affine hold's first pass
@@ -570,10 +582,10 @@ def solve_defaults(problem, guess, options, method, option_kw, shooting) -> OCPR
     the uniform solution replays to 9e-11, so nothing flags it) and 3.4e-4 (minimum effort: a
     piecewise-constant control on a ramp) above their optima, after the exact-phase shooting too.
 
-    CasADi's OpenBLAS runs on one thread meanwhile (:func:`lcp.ocp.blas.one_blas_thread`), and the
-    C heap keeps the linear solver's workspace between factorizations (:func:`lcp.ocp.heap.kept_heap`)."""
+    It runs under :func:`solver_settings` (one BLAS thread, the linear solver's workspace kept on
+    the C heap)."""
     check_shooting(shooting)
-    with one_blas_thread(), kept_heap():
+    with solver_settings():
         res = solve_problem(problem, guess, options, method, option_kw, shooting)
         if problem.hold == "affine" and first_pass_route(problem, guess, method):
             res = affine_first_pass(problem, res, options, option_kw, shooting)
