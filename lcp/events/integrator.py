@@ -139,7 +139,7 @@ class Integrator:
             if len(groups) == 1:
                 group = groups[0]
                 sol = group[0] if len(group) == 1 else self.selector.lookahead(t, q, v, closed, slide, group)
-                return q, v, closed, sol, acc
+                return q, v, closed, self.selector.leaving(t, q, v, closed, slide, sol, acc), acc
             self.stats.ambiguous_steps += int(len(groups) > 1)
             why = ("no consistent contact mode (Painleve: no solution)" if not groups else
                    f"{len(groups)} consistent contact modes (Painleve: non-uniqueness)")

@@ -10,13 +10,15 @@ import casadi as ca
 import numpy as np
 
 from lcp.contact.problem import ContactProblem
+from lcp.events.compiled_branch import branch_rhs_function
 from lcp.events.event_location import event_functions, first_terminal_event
 from lcp.events.kinematic_ode import normalising_method
 from lcp.events.indeterminate import admissibility_rows, branch_forces
-from lcp.events.model import mass_projection
+from lcp.events.model import all_finite, mass_projection
 from lcp.events.modes import AccelProblem
 from lcp.events.options import EventOptions
 from lcp.events.phases import SmoothPhase
+from lcp.numerics.casadi_eval import evaluate_kept
 
 __all__ = ["OdePhase"]
 
@@ -35,6 +37,9 @@ class OdePhase(SmoothPhase):
         self.linear = self.model.constant and not indeterminate
         if self.linear:
             self._build_linear()
+        # the state derivative as one compiled evaluation (lcp.events.compiled_branch); None: NumPy
+        self.compiled = None if self.linear or indeterminate else branch_rhs_function(
+            self.model.sys, self.model.m, self.idx_t, tuple(self.slide.tolist()), self.mu)
 
     # --- dynamics
     def _build_linear(self):
@@ -129,6 +134,18 @@ class OdePhase(SmoothPhase):
         return qdd - mass_projection(data.A, J, r) if J.shape[0] and r.any() else qdd
 
     def _rhs(self, t, y):
+        """The integrator's y' = (qdot, qdd, N, f): the compiled evaluation where there is one and
+        its values are finite, else :meth:`evaluate`'s. The event functions, the end acceleration and
+        the reported forces use :meth:`evaluate`, the NumPy path the mode decisions use too: a
+        force's root is then located where the decision at the event sees it (a ball lifting off a
+        table located one rounding earlier by the compiled forces was decided to stick again)."""
+        if self.compiled is not None:
+            nq, n = self.model.nq, self.model.n
+            yd = np.empty(y.size)
+            evaluate_kept(self.compiled, (np.array([min(t, self.t_left)]), np.ascontiguousarray(y[:nq]),
+                                          np.ascontiguousarray(y[nq:nq + n])), [yd])
+            if all_finite(yd):
+                return yd
         return self.evaluate(t, y)[0]
 
     # --- events
