@@ -29,7 +29,7 @@ __all__ = ["MAX_SIZE", "branch_function", "branch_rhs_function", "lu_solve"]
 #: the largest n + n_bilateral (and 2 x closed contacts) compiled; above it the NumPy path
 MAX_SIZE = 12
 
-#: system -> {(closed contacts, slide signs, friction coefficients): Function or None}
+#: system -> {(closed contacts, slide signs, friction coefficients): Function}
 _FUNCTIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
@@ -38,18 +38,16 @@ def branch_rhs_function(system, m: int, idx: tuple, slide: tuple, mu) -> ca.Func
     ``idx`` with slide signs ``slide`` (0: sticking), built once per system and branch; None where
     the system is too large to compile (:data:`MAX_SIZE`)."""
     k = len(idx)
+    if system.n + system.n_bilateral > MAX_SIZE or 2 * k > MAX_SIZE:
+        return None
     mu_c = tuple(float(mu[j]) for j in idx)
     key = (tuple(idx), tuple(slide), mu_c)
     per = _FUNCTIONS.get(system)
     if per is None:
         per = _FUNCTIONS[system] = {}
-    if key in per:
-        return per[key]
-    n, nb = system.n, system.n_bilateral
-    fn = None
-    if n + nb <= MAX_SIZE and 2 * k <= MAX_SIZE:
-        fn = _build(system, m, list(idx), list(slide), list(mu_c))
-    per[key] = fn
+    fn = per.get(key)
+    if fn is None:
+        fn = per[key] = _build(system, m, list(idx), list(slide), list(mu_c))
     return fn
 
 
