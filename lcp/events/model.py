@@ -64,6 +64,15 @@ def accel_function(system) -> ca.Function:
     fn = ACCEL_FUNCTIONS.get(system)
     if fn is None and getattr(system, "has_kinematics", False):
         fn = ACCEL_FUNCTIONS[system] = _kinematic_accel_function(system)
+    if fn is None and _scheduled(system):
+        # a controlled system with its control fixed to a schedule (System.with_control): the
+        # controlled system's function, its free force plus B(t, q) u(t). The derivatives are
+        # taken once for the controlled system, not again for each schedule (an optimal control's
+        # replay restarted at every node fixes a schedule per interval: 2.8 ms each on the cart-pole)
+        drift, t, q, v = system.control_drift, system.t_sym, system.q_sym, system.v_sym
+        outs = list(accel_function(drift)(t, q, v))
+        outs[1] = outs[1] + ca.mtimes(drift.control_matrix_expr, system.control_schedule.expression(t))
+        fn = ACCEL_FUNCTIONS[system] = ca.Function("event_accel_data", [t, q, v], outs)
     if fn is None:
         t, q, v = system.t_sym, system.q_sym, system.v_sym
         c = system.constraints_expr
@@ -83,6 +92,15 @@ def accel_function(system) -> ca.Function:
                          [system.mass_expr, system.force_expr, G, zeta, H, Hdv, system.gap_expr])
         ACCEL_FUNCTIONS[system] = fn
     return fn
+
+
+def _scheduled(system) -> bool:
+    """Whether ``system`` is a controlled system's ``with_control`` (its symbols, contacts and
+    constraints, its force the free force plus the control's), without kinematics."""
+    drift = getattr(system, "control_drift", None)
+    return (drift is not None and getattr(system, "control_schedule", None) is not None
+            and drift.q_sym is system.q_sym and drift.v_sym is system.v_sym and drift.t_sym is system.t_sym
+            and not getattr(drift, "has_kinematics", False))
 
 
 DENSE_ACCEL: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
