@@ -154,3 +154,28 @@ def test_simulations_agree_far_inside_the_integration_error():
     differ = np.max(np.abs(np.hstack([a.q - b.q, a.v - b.v])))
     error = np.max(np.abs(np.hstack([c.q - b.q, c.v - b.v])))
     assert differ < 0.1 * error
+
+
+def test_the_rhs_option_selects_the_numpy_path_and_is_validated():
+    sc = slider_crank()
+    t = np.linspace(0.0, sc.t_end, 21)
+    a = lcp.simulate(sc, method="event", t_eval=t, rhs="numpy")
+    with mock.patch.object(compiled_branch, "MAX_SIZE", 0):
+        b = lcp.simulate(sc, method="event", t_eval=t)
+    assert np.array_equal(a.q, b.q) and np.array_equal(a.v, b.v)
+    with pytest.raises(ValueError, match="rhs must be 'compiled' or 'numpy'"):
+        lcp.simulate(sc, method="event", rhs="fast")
+
+
+def test_the_optimal_controls_event_starts_keep_the_numpy_path():
+    # IPOPT's path follows the rounding of its start: the package's own event starts are the NumPy
+    # path's, bit for bit (lcp.ocp.replay.REPLAY_RHS)
+    from lcp.ocp.guess import event_guess
+
+    ex = EXAMPLES["cart_pole"]()
+    pb = ex.make(10)
+    u = np.full((pb.N, 1), 5.0)
+    a = event_guess(pb, u, pb.T)
+    with mock.patch.object(compiled_branch, "MAX_SIZE", 0):
+        b = event_guess(pb, u, pb.T)
+    assert np.array_equal(a.q, b.q) and np.array_equal(a.v, b.v)

@@ -38,7 +38,7 @@ class OdePhase(SmoothPhase):
         if self.linear:
             self._build_linear()
         # the state derivative as one compiled evaluation (lcp.events.compiled_branch); None: NumPy
-        self.compiled = None if self.linear or indeterminate else branch_rhs_function(
+        self.compiled = None if self.linear or indeterminate or options.rhs != "compiled" else branch_rhs_function(
             self.model.sys, self.model.m, self.idx_t, tuple(self.slide.tolist()), self.mu)
 
     # --- dynamics

@@ -165,6 +165,8 @@ def pruned_plan(tr, x):
                 return None
             kept.append((modes, float(d), here))
             carried = ()
+        if not kept:  # every segment of the interval shrunk (an iterate far from feasible)
+            return None
         total = sum(sg[1] for sg in kept)
         plan.append([(md, d * hs[k] / total, at) for md, d, at in kept])
     if carried or not removed:  # (an impact at the horizon's end stays)
