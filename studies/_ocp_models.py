@@ -426,7 +426,6 @@ def discs_start(pb):
 
     from lcp.model.control import ControlSchedule
     from lcp.ocp.guess import event_guess
-    from lcp.ocp.replay import REPLAY_RHS
 
     p = DISCS
     t_s, V = DISCS_STRIKE
@@ -450,9 +449,8 @@ def discs_start(pb):
         drag = p["cv"] * v1 / np.linalg.norm(v1 + p["eps"])
         u[k] = np.clip(p["m1"] * a + drag, pb.u_min, pb.u_max)
         try:
-            # (the NumPy right-hand side, as the package's own event starts: lcp.ocp.replay.REPLAY_RHS)
             sim = lcp.simulate(pb.system, h, method="event", control=ControlSchedule(np.array([0.0, h]), u[k:k + 1]),
-                               q0=q, v0=v, t_eval=np.array([0.0, h]), rhs=REPLAY_RHS)
+                               q0=q, v0=v, t_eval=np.array([0.0, h]))
         except (ValueError, RuntimeError):
             return None
         if not sim.success:

@@ -37,7 +37,7 @@ import time
 
 import numpy as np
 
-from lcp.ocp.replay import FAST_RHS, event_pieces, replay_check
+from lcp.ocp.replay import event_pieces, replay_check
 
 __all__ = ["ESTIMATE_RTOL", "JOIN_ERROR", "LANDING_RTOL", "Landing", "land", "landable"]
 
@@ -96,7 +96,7 @@ def _replay(result, u, first: int = 0, start=None):
     """The nodes (q, v) from node ``first`` of the event replay of control ``u``, restarted at every
     node (from ``start`` at node ``first``)."""
     res = dataclasses.replace(result, u=u, control=result.problem.schedule(result.t, u))
-    q, v, _ = event_pieces(res, restart=True, first=first, start=start, n_eval=2, rtol=LANDING_RTOL, rhs=FAST_RHS)
+    q, v, _ = event_pieces(res, restart=True, first=first, start=start, n_eval=2, rtol=LANDING_RTOL)
     return q, v
 
 

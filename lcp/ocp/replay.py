@@ -27,7 +27,7 @@ from lcp.model.control import ControlSchedule
 from lcp.ocp.pairs import pair_violation
 from lcp.ocp.results import OCPResult, ReplayCheck, ReplayResult
 
-__all__ = ["AMPLIFICATION_EVENTS", "FAST_RHS", "PERTURBATION", "REPLAY_RHS", "amplification", "event_pieces", "node_objective", "piece_nodes",
+__all__ = ["AMPLIFICATION_EVENTS", "PERTURBATION", "amplification", "event_pieces", "node_objective", "piece_nodes",
            "replay", "replay_check"]
 
 #: the start-state change (relative to the start state's size, at least 1) by which an event replay
@@ -57,19 +57,6 @@ def _lift(system, q, tol=1e-12):
     return q - HN.T @ np.linalg.solve(HN @ HN.T, gap[neg])
 
 
-#: the event method's right-hand side (``EventOptions.rhs``) in the replays whose pieces feed IPOPT
-#: again (the replay check's, whose phases and states start the exact-phase shooting) and in the
-#: event starts (:func:`lcp.ocp.guess.event_guess`): the NumPy one. IPOPT's path through these
-#: non-convex problems follows the rounding of its start: the compiled right-hand side moved the
-#: event start of a point steered over a circle by 3e-15, and its solve then failed (status -1 after
-#: 330 s, against a success in 38 s). The landing's Newton replays and the amplification's, whose
-#: results IPOPT never sees, take the compiled one (:data:`FAST_RHS`).
-REPLAY_RHS = "numpy"
-#: the right-hand side of the replays that only measure (:func:`amplification`,
-#: :func:`lcp.ocp.landing.landed`)
-FAST_RHS = "compiled"
-
-
 def _whole_schedule_system(result: OCPResult, options: dict):
     """The problem's System under the solution's whole control schedule, for one event integration
     over [0, T], when only ``n_eval`` (and ``max_events``, ``rtol``) are asked for and the contacts are planar;
@@ -79,7 +66,7 @@ def _whole_schedule_system(result: OCPResult, options: dict):
     (N = 30) 0.10 s per replay against 0.05 s in one integration, at the same replay misses. The
     force's time dependence excludes nothing here: the replay check sends such a system to
     Moreau-Jean, and the optimal control refuses contacts that move with t."""
-    if set(options) - {"n_eval", "max_events", "rtol", "rhs"} or result.control is None or result.problem.system.is_spatial:
+    if set(options) - {"n_eval", "max_events", "rtol"} or result.control is None or result.problem.system.is_spatial:
         return None  # (spatial contacts: the spatial event integrator, restarted at the nodes)
     return result.problem.system.with_control(result.control)
 
@@ -151,7 +138,6 @@ def event_pieces(result: OCPResult, restart: bool = False, first: int = 0, start
     there, and the nodes from ``first`` on are returned)."""
     from lcp.simulation import simulate
 
-    options = {"rhs": REPLAY_RHS, **options}
     if first and (not restart or start is None):
         raise ValueError("a replay from node first > 0 is restarted at every node and needs start = (q, v)")
     sysw = None if restart else _whole_schedule_system(result, options)
@@ -396,7 +382,7 @@ def amplification(result: OCPResult, rp, **options) -> float:
     moved.q0, moved.v0 = _lift(sys, q0 + eps / size * dq), v0 + eps / size * dv
     events = sum(len(p.t_events) for p in rp.pieces) if rp.pieces else len(rp.sim.t_events)
     try:
-        q, v, _ = event_pieces(dataclasses.replace(result, problem=moved), n_eval=2, rhs=FAST_RHS,
+        q, v, _ = event_pieces(dataclasses.replace(result, problem=moved), n_eval=2,
                                max_events=AMPLIFICATION_EVENTS * events + 100, **options)
     except RuntimeError:  # (the replay failed, or took too many events)
         return float("nan")
