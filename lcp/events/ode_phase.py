@@ -134,11 +134,11 @@ class OdePhase(SmoothPhase):
         return qdd - mass_projection(data.A, J, r) if J.shape[0] and r.any() else qdd
 
     def _rhs(self, t, y):
-        """The integrator's y' = (qdot, qdd, N, f): the compiled evaluation where there is one and
-        its values are finite, else :meth:`evaluate`'s. The event functions, the end acceleration and
-        the reported forces use :meth:`evaluate`, the NumPy path the mode decisions use too: a
-        force's root is then located where the decision at the event sees it (a ball lifting off a
-        table located one rounding earlier by the compiled forces was decided to stick again)."""
+        """The integrator's y' = (qdot, qdd, N, f): the compiled evaluation (``rhs="compiled"``)
+        where its values are finite, else :meth:`evaluate`'s. The event functions, the end
+        acceleration and the reported forces always use :meth:`evaluate`, the NumPy arithmetic of
+        the mode decisions, so that a force's root is located where the decision at the event sees
+        it."""
         if self.compiled is not None:
             nq, n = self.model.nq, self.model.n
             yd = np.empty(y.size)
