@@ -401,6 +401,11 @@ def test_segments_shrunk_to_zero_are_pruned_with_their_impacts_moved():
         check = PhaseShooting(pb, new, check=True)
         start = initial_point(check, iterate_of(tr, y))
         assert check.diagnose(start)["dynamics"] < 1e-10
+    # an iterate far from feasible that shrinks every segment of an interval: nothing to keep there
+    # (the pruned plan had an empty interval, and PhaseShooting.modes raised IndexError)
+    y = x.copy()
+    y[d0], y[d1] = 1e-9 * hp, 1e-9 * hp
+    assert pruned_plan(tr, y) is None
     # an impact that would move past the horizon's end stays
     last = [list(segs) for segs in plan]
     last[-1] = [(md, 0.5 * hp, ()), (md, 0.5 * hp, at)]
