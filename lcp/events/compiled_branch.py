@@ -42,24 +42,23 @@ def branch_rhs_function(system, m: int, idx: tuple, slide: tuple, mu) -> ca.Func
     k = len(idx)
     if system.n + system.n_bilateral > MAX_SIZE or 2 * k > MAX_SIZE:
         return None
-    mu_c = tuple(float(mu[j]) for j in idx)
-    key = (tuple(idx), tuple(slide), mu_c)
+    key = (tuple(idx), tuple(slide), tuple(float(mu[j]) for j in idx))
     per = _FUNCTIONS.get(system)
     if per is None:
         per = _FUNCTIONS[system] = {}
     fn = per.get(key)
     if fn is None:
-        fn = per[key] = _build(system, m, list(idx), list(slide), list(mu_c))
+        fn = per[key] = _build(system, m, *key)
     return fn
 
 
-def _build(system, m, idx, slide, mu) -> ca.Function:
+def _build(system, m: int, idx: tuple, slide: tuple, mu: tuple) -> ca.Function:
     """The system's data (:func:`~lcp.events.model.accel_function`) fed to the branch's
     (:func:`branch_function`), inlined into one Function of (t, q, v)."""
     n, nq = system.n, system.n_q
     t, q, v = ca.SX.sym("t"), ca.SX.sym("q", nq), ca.SX.sym("v", n)
     A, F, G, zeta, H, Hdv, _ = accel_function(system)(t, q, v)
-    qdd_N_f = branch_function(n, system.n_bilateral, m, tuple(idx), tuple(slide), tuple(mu))(
+    qdd_N_f = branch_function(n, system.n_bilateral, m, idx, slide, mu)(
         ca.densify(A), ca.densify(F), ca.densify(G), ca.densify(zeta), ca.densify(H), ca.densify(Hdv))
     qfn = qdot_function(system)
     qdot = v if qfn is None else qfn(t, q, v)

@@ -528,24 +528,27 @@ class ModeSelector:
 
     def lookahead(self, t, q, v, closed, slide, group):
         """Break a tie (one motion, several mode sets) by the problem a short time later."""
-        qdd = group[0].qdd
-        dt = 1e-6 * self.t_end
-        later = [b for b in self.breakpoints if b > t]
-        if later:  # not past a jump of the forces
-            dt = min(dt, 0.5 * (later[0] - t))
-        if self.model.polynomial:
-            d1 = self.model.data(t + dt, q, v)  # the same at every state
-        else:
-            q1 = self.model.advance(t, q, dt * v + 0.5 * dt * dt * qdd)  # q + T dx (kinematics)
-            v1 = v + dt * qdd
-            d1 = self.model.data(t + dt, q1, v1)
-        groups, _ = self.solve_modes(d1, closed, slide, allowed={s.modes for s in group})
+        groups, _ = self.solve_modes(self._later(t, q, v, group[0].qdd), closed, slide,
+                                     allowed={s.modes for s in group})
         if len(groups) == 1 and len(groups[0]) >= 1:
             group = groups[0]
         # Still a tie: prefer the contacts closed. A contact at rest with a zero normal force and
         # zero normal acceleration may be called open as well, but an open contact at zero gap
         # would end its phase at once (a table's legs, a box's corners).
         return min(group, key=lambda s: sum(md == OPEN for md in s.modes))
+
+    def _later(self, t, q, v, qdd):
+        """The state data a short time after t (1e-6 of the horizon, and not past the next jump of
+        the forces), the state advanced with the accelerations qdd: where :meth:`lookahead` and
+        :meth:`leaving` read the problem that follows a decision."""
+        dt = 1e-6 * self.t_end
+        later = [b for b in self.breakpoints if b > t]
+        if later:  # not past a jump of the forces
+            dt = min(dt, 0.5 * (later[0] - t))
+        if self.model.polynomial:
+            return self.model.data(t + dt, q, v)  # the same at every state
+        q1 = self.model.advance(t, q, dt * v + 0.5 * dt * dt * qdd)  # q + T dx (kinematics)
+        return self.model.data(t + dt, q1, v + dt * qdd)
 
     def leaving(self, t, q, v, closed, slide, sol, acc):
         """``sol``, or its variant with contacts opened that it keeps closed under a normal force at
@@ -562,12 +565,7 @@ class ModeSelector:
         low = {jj for jj, md in enumerate(sol.modes) if md != OPEN and sol.p[jj] <= ftol}
         if not low:
             return sol
-        dt = 1e-6 * self.t_end
-        later = [b for b in self.breakpoints if b > t]
-        if later:
-            dt = min(dt, 0.5 * (later[0] - t))
-        q1 = self.model.advance(t, q, dt * v + 0.5 * dt * dt * sol.qdd)
-        groups, _ = self.solve_modes(self.model.data(t + dt, q1, v + dt * sol.qdd), closed, slide)
+        groups, _ = self.solve_modes(self._later(t, q, v, sol.qdd), closed, slide)
         if len(groups) != 1:
             return sol
         modes = min(groups[0], key=lambda s: sum(md == OPEN for md in s.modes)).modes
