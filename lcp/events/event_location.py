@@ -122,7 +122,7 @@ def first_descent(c, T: float) -> float:
     return math.inf
 
 
-def event_functions(phase, t0, y0, force_tol: float = 0.0):
+def event_functions(phase, t0, y0, force_tol: float = 0.0, vel_tol: float = 0.0):
     """Terminal event functions of a SciPy phase (an :class:`~lcp.events.ode_phase.OdePhase`)
     starting at (t0, y0): (functions, (kind, contact) per function). Each decreases through zero
     at its event.
@@ -135,6 +135,12 @@ def event_functions(phase, t0, y0, force_tol: float = 0.0):
     friction bound, a normal force exactly zero, that the mode decision found consistent) is
     moved to g = -force_tol: rounding-level crossings of a force held on its bound do not end
     the phase, a real departure is located within force_tol.
+
+    A slide that starts from rest (a slip: s u_t(t0) <= 1e-3 ``vel_tol``) starts its stop function
+    at zero with a zero derivative when the decided slip acceleration is at rounding level, and a
+    first step whose rounding dips the velocity below zero would end the phase where it began, to
+    be decided again the same way, without end. Its stop is a fall below -1e-3 ``vel_tol`` (a
+    thousandth of the zero test that decided the slip), as for a spatial slide from rest.
     """
     n, m = phase.model.n, phase.model.m
     model, evaluate = phase.model, phase.evaluate
@@ -153,7 +159,10 @@ def event_functions(phase, t0, y0, force_tol: float = 0.0):
     for jj, j in enumerate(phase.idx):
         s = phase.slide[jj]
         if s != 0:
-            make(lambda t, y, j=j, s=s: s * float(_local_velocity(model, t, y, n)[m + j]), "stop", j)
+            off = 1e-3 * vel_tol
+            if s * float(_local_velocity(model, t0, y0, n)[m + j]) > off:
+                off = 0.0
+            make(lambda t, y, j=j, s=s, off=off: s * float(_local_velocity(model, t, y, n)[m + j]) + off, "stop", j)
         if phase.indeterminate:
             continue
         make(lambda t, y, j=j: float(evaluate(t, y)[1][j]), "lift-off", j, force=True)

@@ -160,7 +160,8 @@ class OdePhase(SmoothPhase):
             self.t_left = float(np.nextafter(t_stop, -np.inf))
         n, nq = self.model.n, self.model.nq
         y0 = np.concatenate([self.q0, self.v0, self.P0])
-        evs, meta = event_functions(self, self.t0, y0, self.options.tol * self.scales.get("F", 0.0))
+        evs, meta = event_functions(self, self.t0, y0, self.options.tol * self.scales.get("F", 0.0),
+                                    self.options.tol * self.scales.get("V", 0.0))
         o = self.options
         atol = np.concatenate([np.full(nq, o.atol * self.scales["L"]), np.full(n, o.atol * self.scales["V"]),
                                np.full(self.P0.size, o.atol * self.scales["P"])])
