@@ -146,8 +146,8 @@ def test_simulations_agree_far_inside_the_integration_error():
     sc = slider_crank()
     t = np.linspace(0.0, sc.t_end, 101)
     a = lcp.simulate(sc, method="event", t_eval=t, rhs="compiled")
-    b = lcp.simulate(sc, method="event", t_eval=t)
-    c = lcp.simulate(sc, method="event", t_eval=t, rtol=1e-13)
+    b = lcp.simulate(sc, method="event", t_eval=t, rhs="numpy")
+    c = lcp.simulate(sc, method="event", t_eval=t, rtol=1e-13, rhs="numpy")
     assert a.success and b.success
     assert [(e.kind, e.contact) for e in a.events] == [(e.kind, e.contact) for e in b.events]
     differ = np.max(np.abs(np.hstack([a.q - b.q, a.v - b.v])))
@@ -155,15 +155,47 @@ def test_simulations_agree_far_inside_the_integration_error():
     assert 0 < differ < 0.1 * error
 
 
-def test_the_numpy_path_is_the_default_and_the_option_is_validated():
+def test_the_compiled_path_is_the_default_and_the_option_is_validated():
     sc = slider_crank()
     t = np.linspace(0.0, sc.t_end, 21)
-    a = lcp.simulate(sc, method="event", t_eval=t)
+    a = lcp.simulate(sc, method="event", t_eval=t, rhs="numpy")
     with mock.patch.object(compiled_branch, "MAX_SIZE", 0):
-        b = lcp.simulate(sc, method="event", t_eval=t, rhs="compiled")  # too large: the NumPy path
+        b = lcp.simulate(sc, method="event", t_eval=t)  # too large: the NumPy path
     assert np.array_equal(a.q, b.q) and np.array_equal(a.v, b.v)
-    with pytest.raises(ValueError, match="rhs must be 'numpy' or 'compiled'"):
+    c = lcp.simulate(sc, method="event", t_eval=t)
+    assert not np.array_equal(a.q, c.q)  # (rounding apart: the compiled path ran)
+    assert np.max(np.abs(a.q - c.q)) < 1e-9
+    with pytest.raises(ValueError, match="rhs must be 'compiled' or 'numpy'"):
         lcp.simulate(sc, method="event", rhs="fast")
+
+
+def test_the_optimal_controls_starting_replays_take_the_numpy_path():
+    # the replays whose phases and states start IPOPT (lcp.ocp.options.START_RHS): the event guess
+    # and the replay check's replay; the amplification takes the default
+    import lcp.simulation
+    from lcp.ocp.guess import event_guess
+    from lcp.ocp.options import START_RHS
+    from lcp.ocp.replay import replay_check
+    from studies.optimal_control import rest_to_rest_problem
+
+    assert START_RHS == "numpy"
+    seen, real = [], lcp.simulation.simulate
+
+    def spy(*a, **k):
+        seen.append(k.get("rhs", "default"))
+        return real(*a, **k)
+
+    ex = EXAMPLES["cart_pole"]()
+    pb = ex.make(10)
+    with mock.patch.object(lcp.simulation, "simulate", spy):
+        assert event_guess(pb, np.full((pb.N, pb.system.nu), 3.0), pb.T) is not None
+    assert seen == ["numpy"]
+    res = rest_to_rest_problem(10, "time", "constant", "uniform").solve()
+    seen.clear()
+    with mock.patch.object(lcp.simulation, "simulate", spy):
+        rc = replay_check(res, 0.0)  # (a zero tolerance: the amplification is measured)
+    assert np.isfinite(rc.amplification)
+    assert seen == ["numpy", "default"]
 
 
 def test_a_slip_at_rounding_level_acceleration_does_not_chatter():

@@ -6,9 +6,9 @@ Jacobians), then the branch of its fixed modes (:class:`~lcp.events.modes.PhaseB
 dense solves and a small branch system, a few dozen NumPy calls. For small systems those calls
 cost far more than the arithmetic (measured on the cart-pole: about 90 us per evaluation). Here
 the same equations are written once symbolically, per system and branch, and the state derivative
-(qdot, qdd, N, f) is one evaluation of one Function (about 5 us). Used with the event option
-``rhs="compiled"``; not the default, since the decisions keep the NumPy arithmetic and, at a phase
-that starts on a mode boundary, the compiled rounding can contradict them (:class:`~lcp.events.options.EventOptions`).
+(qdot, qdd, N, f) is one evaluation of one Function (about 5 us). Used under the event option
+``rhs="compiled"``, the default (:class:`~lcp.events.options.EventOptions`); the decisions, the
+event functions and the reported forces keep the NumPy arithmetic.
 
 The linear solves are Gaussian elimination with partial pivoting written out symbolically
 (:func:`lu_solve`), as LAPACK's LU solves them in the NumPy path, not CasADi's own symbolic

@@ -134,8 +134,8 @@ class OdePhase(SmoothPhase):
         return qdd - mass_projection(data.A, J, r) if J.shape[0] and r.any() else qdd
 
     def _rhs(self, t, y):
-        """The integrator's y' = (qdot, qdd, N, f): the compiled evaluation (``rhs="compiled"``)
-        where its values are finite, else :meth:`evaluate`'s. The event functions, the end
+        """The integrator's y' = (qdot, qdd, N, f): the compiled evaluation (``rhs="compiled"``, the
+        default) where its values are finite, else :meth:`evaluate`'s. The event functions, the end
         acceleration and the reported forces always use :meth:`evaluate`, the NumPy arithmetic of
         the mode decisions, so that a force's root is located where the decision at the event sees
         it."""

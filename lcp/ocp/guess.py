@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lcp.ocp.options import HomotopyOptions, check_shooting
+from lcp.ocp.options import START_RHS, HomotopyOptions, check_shooting
 from lcp.ocp.results import OCPGuess
 
 __all__ = ["control_values", "event_guess", "multistart", "pulse_controls", "resample", "screened_start", "simulate_guess",
@@ -175,7 +175,8 @@ def event_guess(pb, u, T: float) -> OCPGuess | None:
     un = control_values(pb, u, T)
     t = np.linspace(0.0, T, pb.N + 1)
     try:
-        sim = simulate(pb.system, T, method="event", control=pb.schedule(t, un), q0=pb.q0, v0=pb.v0, t_eval=t)
+        sim = simulate(pb.system, T, method="event", control=pb.schedule(t, un), q0=pb.q0, v0=pb.v0, t_eval=t,
+                       rhs=START_RHS)
     except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError):
         return None
     if not sim.success or len(sim.t) != pb.N + 1 or not np.all(np.isfinite(sim.q)):

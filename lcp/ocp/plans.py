@@ -36,6 +36,7 @@ from lcp.ocp.phase_dynamics import (
     mode_dynamics,
     segment_integrator,
 )
+from lcp.ocp.options import START_RHS
 from lcp.ocp.replay import event_pieces, piece_nodes
 
 __all__ = ["MODE_CODES", "PRUNE_TOL", "check_plan", "hybrid_plan", "iterate_of", "phase_plan", "plan_keys",
@@ -58,7 +59,7 @@ def phase_plan(result):
         # one integration (not restarted at the nodes, which would integrate a force of t from
         # t = 0 in every interval: the check has no pieces exactly when it replayed such a force
         # by Moreau-Jean)
-        pieces = event_pieces(result, n_eval=2)[2]
+        pieces = event_pieces(result, n_eval=2, rhs=START_RHS)[2]
     mu = np.asarray(result.problem.system.mu, dtype=float)
     plan, carried = [], []
     for k, sim in enumerate(pieces):

@@ -24,6 +24,7 @@ import casadi as ca
 import numpy as np
 
 from lcp.model.control import ControlSchedule
+from lcp.ocp.options import START_RHS
 from lcp.ocp.pairs import pair_violation
 from lcp.ocp.results import OCPResult, ReplayCheck, ReplayResult
 
@@ -59,14 +60,14 @@ def _lift(system, q, tol=1e-12):
 
 def _whole_schedule_system(result: OCPResult, options: dict):
     """The problem's System under the solution's whole control schedule, for one event integration
-    over [0, T], when only ``n_eval`` (and ``max_events``, ``rtol``) are asked for and the contacts are planar;
+    over [0, T], when only ``n_eval`` (and ``max_events``, ``rtol``, ``rhs``) are asked for and the contacts are planar;
     else None.
 
     Restarting at every node built a System and an event model per interval, and cost the motor
     (N = 30) 0.10 s per replay against 0.05 s in one integration, at the same replay misses. The
     force's time dependence excludes nothing here: the replay check sends such a system to
     Moreau-Jean, and the optimal control refuses contacts that move with t."""
-    if set(options) - {"n_eval", "max_events", "rtol"} or result.control is None or result.problem.system.is_spatial:
+    if set(options) - {"n_eval", "max_events", "rtol", "rhs"} or result.control is None or result.problem.system.is_spatial:
         return None  # (spatial contacts: the spatial event integrator, restarted at the nodes)
     return result.problem.system.with_control(result.control)
 
@@ -255,7 +256,7 @@ def replay_check(result: OCPResult, tol: float, refine: int = 50, rtol: float | 
     tight = ({} if rtol is None else {"rtol": float(rtol)}) | ({"restart": True} if restart else {})
     err = float("nan")
     if result.hold in ("constant", "affine") and _event_available() and not pb.system.force_depends_on_t:
-        rp = replay(result, method="event", n_eval=2, **tight)  # the nodes only: no dense output to evaluate
+        rp = replay(result, method="event", n_eval=2, rhs=START_RHS, **tight)  # (the nodes only: no dense output)
         method = ("event" + ("" if rtol is None else f" rtol={rtol:.0e}")
                   + (", restarted at every node" if restart else ""))
         if estimate_rtol is not None:
