@@ -3,9 +3,9 @@
     python benchmarks/event_compiled_rhs.py [--quick] [--out DIR]
 
 Systems whose mass matrix, gaps or contacts depend on q (or t) integrate their smooth phases with
-DOP853, which evaluates the phase's right-hand side at every stage of every step: by default the
-system's data, then :class:`lcp.events.modes.PhaseBranch` by NumPy; with ``rhs="compiled"`` one
-compiled CasADi function per system and branch (:mod:`lcp.events.compiled_branch`). Each scene is simulated by both, in
+DOP853, which evaluates the phase's right-hand side at every stage of every step: by default one
+compiled CasADi function per system and branch (:mod:`lcp.events.compiled_branch`); with
+``rhs="numpy"`` the system's data, then :class:`lcp.events.modes.PhaseBranch` by NumPy. Each scene is simulated by both, in
 alternating rounds (a change of load hits both alike); the table gives the median time per
 simulation, the speed-up, the right-hand sides evaluated, and the largest difference of the
 states at the output times between the two paths, against the difference of the NumPy path from

@@ -3,6 +3,8 @@ NumPy path (the system's data, then PhaseBranch) to rounding on every non-singul
 symbolic pivoted elimination is as accurate as LAPACK's LU, a value that is not finite falls back
 to the NumPy path, and whole simulations agree far inside their integration error."""
 import itertools
+import json
+from pathlib import Path
 from unittest import mock
 
 import casadi as ca
@@ -204,9 +206,6 @@ def test_a_slip_at_rounding_level_acceleration_does_not_chatter():
     # rounding dipped the sliding velocity below zero: the slide ended where it began, was decided
     # again the same way, 92 events at one instant and a failure. Its stop is now a fall below a
     # thousandth of the velocity zero test: both paths take the same 46 events.
-    import json
-    from pathlib import Path
-
     data = json.loads((Path(__file__).parent / "data" / "hopper_slip_control.json").read_text())
     ex = EXAMPLES["hopper"]()
     control = ControlSchedule(data["times"], np.array(data["values"]), hold=data["hold"])

@@ -145,6 +145,7 @@ def event_functions(phase, t0, y0, force_tol: float = 0.0, vel_tol: float = 0.0)
     n, m = phase.model.n, phase.model.m
     model, evaluate = phase.model, phase.evaluate
     evs, meta = [], []
+    u0 = None  # the local velocities at the start (where a contact slides)
 
     def make(fun, kind, j, force=False):
         if force and force_tol > 0 and abs(fun(t0, y0)) <= force_tol:
@@ -159,9 +160,9 @@ def event_functions(phase, t0, y0, force_tol: float = 0.0, vel_tol: float = 0.0)
     for jj, j in enumerate(phase.idx):
         s = phase.slide[jj]
         if s != 0:
-            off = 1e-3 * vel_tol
-            if s * float(_local_velocity(model, t0, y0, n)[m + j]) > off:
-                off = 0.0
+            if u0 is None:
+                u0 = _local_velocity(model, t0, y0, n)
+            off = 0.0 if s * float(u0[m + j]) > 1e-3 * vel_tol else 1e-3 * vel_tol  # (from rest)
             make(lambda t, y, j=j, s=s, off=off: s * float(_local_velocity(model, t, y, n)[m + j]) + off, "stop", j)
         if phase.indeterminate:
             continue
